@@ -1,0 +1,3 @@
+find_package(GTest CONFIG REQUIRED)
+include(GoogleTest)
+message(STATUS "GoogleTest ${GTest_VERSION}")

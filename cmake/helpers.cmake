@@ -1,0 +1,31 @@
+# Helper functions that keep target lists short.
+
+# Warning flags for every target of ours.
+function(tigerlod_warnings target)
+  target_compile_options(${target} PRIVATE -Wall -Wextra -Wpedantic -Wshadow
+                                           -Wconversion -Wno-sign-conversion)
+  if(TIGERLOD_WERROR)
+    target_compile_options(${target} PRIVATE -Werror)
+  endif()
+endfunction()
+
+# tigerlod_add_stage(NAME lib_target [SOURCES ...]): builds tigerlod-NAME from
+# stages/NAME/main.cpp over the stage library `lib_target`.
+function(tigerlod_add_stage name lib)
+  add_executable(tigerlod-${name} ${CMAKE_CURRENT_SOURCE_DIR}/main.cpp)
+  target_link_libraries(tigerlod-${name} PRIVATE ${lib})
+  tigerlod_warnings(tigerlod-${name})
+endfunction()
+
+# tigerlod_add_test(NAME SOURCES ... LIBS ...): one GoogleTest binary, its tests
+# discovered by CTest.
+function(tigerlod_add_test name)
+  cmake_parse_arguments(T "" "" "SOURCES;LIBS" ${ARGN})
+  add_executable(${name} ${T_SOURCES})
+  target_link_libraries(${name} PRIVATE ${T_LIBS} GTest::gtest_main)
+  target_compile_definitions(
+    ${name} PRIVATE TIGERLOD_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
+                    TIGERLOD_BIN_DIR="${CMAKE_RUNTIME_OUTPUT_DIRECTORY}")
+  tigerlod_warnings(${name})
+  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES TIMEOUT 900)
+endfunction()

@@ -1,0 +1,2 @@
+find_package(yaml-cpp CONFIG REQUIRED)
+message(STATUS "yaml-cpp ${yaml-cpp_VERSION}")

@@ -1,0 +1,148 @@
+#include "core/digest.hpp"
+
+#include "core/errors.hpp"
+
+#include <bit>
+#include <cstdio>
+#include <fstream>
+#include <vector>
+
+namespace tigerlod {
+
+namespace {
+
+constexpr std::array<uint32_t, 256> make_crc_table() noexcept
+{
+    std::array<uint32_t, 256> t{};
+    for (uint32_t i = 0; i < 256; ++i) {
+        uint32_t c = i;
+        for (int k = 0; k < 8; ++k) {
+            c = (c & 1U) ? 0xEDB88320U ^ (c >> 1) : c >> 1;
+        }
+        t[i] = c;
+    }
+    return t;
+}
+
+constexpr std::array<uint32_t, 256> crc_table = make_crc_table();
+
+constexpr std::array<uint32_t, 64> sha_k = {
+    0x428a2f98, 0x71374491, 0xb5c0fbcf, 0xe9b5dba5, 0x3956c25b, 0x59f111f1, 0x923f82a4, 0xab1c5ed5,
+    0xd807aa98, 0x12835b01, 0x243185be, 0x550c7dc3, 0x72be5d74, 0x80deb1fe, 0x9bdc06a7, 0xc19bf174,
+    0xe49b69c1, 0xefbe4786, 0x0fc19dc6, 0x240ca1cc, 0x2de92c6f, 0x4a7484aa, 0x5cb0a9dc, 0x76f988da,
+    0x983e5152, 0xa831c66d, 0xb00327c8, 0xbf597fc7, 0xc6e00bf3, 0xd5a79147, 0x06ca6351, 0x14292967,
+    0x27b70a85, 0x2e1b2138, 0x4d2c6dfc, 0x53380d13, 0x650a7354, 0x766a0abb, 0x81c2c92e, 0x92722c85,
+    0xa2bfe8a1, 0xa81a664b, 0xc24b8b70, 0xc76c51a3, 0xd192e819, 0xd6990624, 0xf40e3585, 0x106aa070,
+    0x19a4c116, 0x1e376c08, 0x2748774c, 0x34b0bcb5, 0x391c0cb3, 0x4ed8aa4a, 0x5b9cca4f, 0x682e6ff3,
+    0x748f82ee, 0x78a5636f, 0x84c87814, 0x8cc70208, 0x90befffa, 0xa4506ceb, 0xbef9a3f7, 0xc67178f2};
+
+} // namespace
+
+uint32_t crc32(std::span<const std::byte> data, uint32_t crc) noexcept
+{
+    crc = ~crc;
+    for (std::byte b : data) {
+        crc = crc_table[(crc ^ static_cast<uint32_t>(b)) & 0xFFU] ^ (crc >> 8);
+    }
+    return ~crc;
+}
+
+Sha256::Sha256() noexcept
+    : m_h{0x6a09e667, 0xbb67ae85, 0x3c6ef372, 0xa54ff53a, 0x510e527f, 0x9b05688c, 0x1f83d9ab, 0x5be0cd19}
+{
+}
+
+void Sha256::block(const uint8_t* p) noexcept
+{
+    std::array<uint32_t, 64> w{};
+    for (size_t i = 0; i < 16; ++i) {
+        w[i] = (uint32_t{p[4 * i]} << 24) | (uint32_t{p[4 * i + 1]} << 16) | (uint32_t{p[4 * i + 2]} << 8) |
+               uint32_t{p[4 * i + 3]};
+    }
+    for (size_t i = 16; i < 64; ++i) {
+        const uint32_t s0 = std::rotr(w[i - 15], 7) ^ std::rotr(w[i - 15], 18) ^ (w[i - 15] >> 3);
+        const uint32_t s1 = std::rotr(w[i - 2], 17) ^ std::rotr(w[i - 2], 19) ^ (w[i - 2] >> 10);
+        w[i] = w[i - 16] + s0 + w[i - 7] + s1;
+    }
+    uint32_t a = m_h[0], b = m_h[1], c = m_h[2], d = m_h[3], e = m_h[4], f = m_h[5], g = m_h[6], h = m_h[7];
+    for (size_t i = 0; i < 64; ++i) {
+        const uint32_t s1 = std::rotr(e, 6) ^ std::rotr(e, 11) ^ std::rotr(e, 25);
+        const uint32_t ch = (e & f) ^ (~e & g);
+        const uint32_t t1 = h + s1 + ch + sha_k[i] + w[i];
+        const uint32_t s0 = std::rotr(a, 2) ^ std::rotr(a, 13) ^ std::rotr(a, 22);
+        const uint32_t maj = (a & b) ^ (a & c) ^ (b & c);
+        const uint32_t t2 = s0 + maj;
+        h = g;
+        g = f;
+        f = e;
+        e = d + t1;
+        d = c;
+        c = b;
+        b = a;
+        a = t1 + t2;
+    }
+    m_h[0] += a;
+    m_h[1] += b;
+    m_h[2] += c;
+    m_h[3] += d;
+    m_h[4] += e;
+    m_h[5] += f;
+    m_h[6] += g;
+    m_h[7] += h;
+}
+
+void Sha256::update(std::span<const std::byte> data) noexcept
+{
+    m_total += data.size();
+    for (std::byte byte : data) {
+        m_buf[m_buf_len++] = static_cast<uint8_t>(byte);
+        if (m_buf_len == 64) {
+            block(m_buf.data());
+            m_buf_len = 0;
+        }
+    }
+}
+
+std::string Sha256::hex_digest()
+{
+    const uint64_t bits = m_total * 8;
+    const std::byte pad{0x80};
+    update(std::span(&pad, 1));
+    const std::byte zero{0};
+    while (m_buf_len != 56) {
+        update(std::span(&zero, 1));
+    }
+    for (int i = 7; i >= 0; --i) {
+        m_buf[m_buf_len++] = static_cast<uint8_t>(bits >> (8 * i));
+    }
+    block(m_buf.data());
+    m_buf_len = 0;
+    std::string out;
+    char hex[9];
+    for (uint32_t v : m_h) {
+        std::snprintf(hex, sizeof hex, "%08x", v);
+        out += hex;
+    }
+    return out;
+}
+
+std::string sha256_file(const std::filesystem::path& path)
+{
+    std::ifstream in(path, std::ios::binary);
+    if (!in) {
+        throw environment_error(path.string() + ": cannot open for reading");
+    }
+    Sha256 sha;
+    std::vector<char> buf(1 << 20);
+    while (in) {
+        in.read(buf.data(), static_cast<std::streamsize>(buf.size()));
+        const auto n = static_cast<size_t>(in.gcount());
+        sha.update(std::as_bytes(std::span(buf.data(), n)));
+    }
+    if (in.bad()) {
+        throw environment_error(path.string() + ": read failed");
+    }
+    return sha.hex_digest();
+}
+
+} // namespace tigerlod

@@ -1,0 +1,97 @@
+#include "core/fs.hpp"
+
+#include "core/errors.hpp"
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <system_error>
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+
+namespace tigerlod {
+
+namespace {
+
+fs::path temp_sibling(const fs::path& path, const char* tag)
+{
+    return path.parent_path() / (path.filename().string() + tag + std::to_string(::getpid()));
+}
+
+} // namespace
+
+void write_file_atomic(const fs::path& path, std::string_view data)
+{
+    const fs::path tmp = temp_sibling(path, ".tmp-");
+    std::FILE* f = std::fopen(tmp.c_str(), "wb");
+    if (f == nullptr) {
+        throw environment_error(path.string() + ": cannot create: " + std::strerror(errno));
+    }
+    const bool ok = std::fwrite(data.data(), 1, data.size(), f) == data.size();
+    const bool closed = std::fclose(f) == 0;
+    std::error_code ec;
+    if (!ok || !closed) {
+        fs::remove(tmp, ec);
+        throw environment_error(path.string() + ": write failed (disk full?)");
+    }
+    fs::rename(tmp, path, ec);
+    if (ec) {
+        fs::remove(tmp, ec);
+        throw environment_error(path.string() + ": cannot rename into place: " + ec.message());
+    }
+}
+
+OutputDir::OutputDir(fs::path final_path, bool overwrite) : m_final(std::move(final_path))
+{
+    if (m_final.filename().empty()) {
+        m_final = m_final.parent_path();
+    }
+    if (fs::exists(m_final) && !overwrite) {
+        throw usage_error(m_final.string() + " exists. Use --overwrite to replace it.");
+    }
+    m_tmp = temp_sibling(m_final, ".tmp-");
+    std::error_code ec;
+    fs::remove_all(m_tmp, ec);
+    fs::create_directories(m_tmp, ec);
+    if (ec) {
+        throw environment_error(m_tmp.string() + ": cannot create folder: " + ec.message());
+    }
+}
+
+OutputDir::~OutputDir()
+{
+    if (!m_committed) {
+        std::error_code ec;
+        fs::remove_all(m_tmp, ec);
+    }
+}
+
+void OutputDir::commit()
+{
+    std::error_code ec;
+    fs::path old;
+    if (fs::exists(m_final)) {
+        old = temp_sibling(m_final, ".old-");
+        fs::remove_all(old, ec);
+        fs::rename(m_final, old, ec);
+        if (ec) {
+            throw environment_error(m_final.string() + ": cannot move the old output aside: " + ec.message());
+        }
+    }
+    fs::rename(m_tmp, m_final, ec);
+    if (ec) {
+        if (!old.empty()) {
+            std::error_code ignored;
+            fs::rename(old, m_final, ignored);
+        }
+        throw environment_error(m_final.string() + ": cannot rename into place: " + ec.message());
+    }
+    m_committed = true;
+    if (!old.empty()) {
+        fs::remove_all(old, ec);
+    }
+}
+
+} // namespace tigerlod

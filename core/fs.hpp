@@ -1,0 +1,39 @@
+#pragma once
+/// @file fs.hpp
+/// Writing outputs so that nothing is ever half-written: every file and
+/// every output folder is written under a temporary name beside its final
+/// place and renamed on success.
+
+#include <filesystem>
+#include <string_view>
+
+namespace tigerlod {
+
+/// Write `data` to `path` through a temporary file and rename. Throws
+/// environment_error on any I/O failure; the temporary is removed then.
+void write_file_atomic(const std::filesystem::path& path, std::string_view data);
+
+/// An output folder built under a temporary name and renamed into place by
+/// commit(). Destroyed without commit(), it removes what it wrote.
+class OutputDir {
+  public:
+    /// Prepare `final_path`. Throws usage_error if it exists and `overwrite` is
+    /// false ("Use --overwrite to replace it."), environment_error if the
+    /// temporary folder cannot be made.
+    OutputDir(std::filesystem::path final_path, bool overwrite);
+    OutputDir(const OutputDir&) = delete;
+    OutputDir& operator=(const OutputDir&) = delete;
+    ~OutputDir();
+
+    /// The folder to write into (temporary until commit()).
+    const std::filesystem::path& path() const noexcept { return m_tmp; }
+    /// Move the temporary folder into place, replacing an old one.
+    void commit();
+
+  private:
+    std::filesystem::path m_final;
+    std::filesystem::path m_tmp;
+    bool m_committed = false;
+}; // class OutputDir
+
+} // namespace tigerlod

@@ -1,0 +1,176 @@
+#include "core/projection.hpp"
+
+#include "core/errors.hpp"
+
+#include <GeographicLib/AlbersEqualArea.hpp>
+#include <GeographicLib/LambertConformalConic.hpp>
+#include <GeographicLib/Math.hpp>
+#include <GeographicLib/TransverseMercator.hpp>
+
+#include <cmath>
+#include <cstdio>
+#include <variant>
+
+namespace tigerlod {
+
+const char* projection_kind_name(ProjectionParams::Kind kind) noexcept
+{
+    switch (kind) {
+    case ProjectionParams::Kind::albers:
+        return "albers";
+    case ProjectionParams::Kind::lcc:
+        return "lcc";
+    case ProjectionParams::Kind::tm:
+        return "tm";
+    case ProjectionParams::Kind::utm:
+        return "utm";
+    }
+    return "?";
+}
+
+std::optional<ProjectionParams::Kind> parse_projection_kind(const std::string& name) noexcept
+{
+    for (auto k : {ProjectionParams::Kind::albers, ProjectionParams::Kind::lcc, ProjectionParams::Kind::tm,
+                   ProjectionParams::Kind::utm}) {
+        if (name == projection_kind_name(k)) {
+            return k;
+        }
+    }
+    return std::nullopt;
+}
+
+struct Projection::Impl {
+    ProjectionParams p;
+    std::variant<GeographicLib::AlbersEqualArea, GeographicLib::LambertConformalConic,
+                 GeographicLib::TransverseMercator>
+        proj;
+    double lon0 = 0, x0 = 0, y0 = 0; // subtracted after the forward projection
+    bool transverse = false;
+
+    static decltype(proj) make(const ProjectionParams& p)
+    {
+        using K = ProjectionParams::Kind;
+        switch (p.kind) {
+        case K::albers:
+            return GeographicLib::AlbersEqualArea(p.a_m, p.f, p.stdlat1_deg, p.stdlat2_deg, p.k0);
+        case K::lcc:
+            return GeographicLib::LambertConformalConic(p.a_m, p.f, p.stdlat1_deg, p.stdlat2_deg, p.k0);
+        case K::tm:
+            return GeographicLib::TransverseMercator(p.a_m, p.f, p.k0);
+        case K::utm:
+            return GeographicLib::TransverseMercator(p.a_m, p.f, 0.9996);
+        }
+        throw config_error("unknown projection kind");
+    }
+
+    explicit Impl(const ProjectionParams& params) : p(params), proj(make(params))
+    {
+        using K = ProjectionParams::Kind;
+        transverse = p.kind == K::tm || p.kind == K::utm;
+        lon0 = p.lon0_deg;
+        double lat0 = p.lat0_deg;
+        if (p.kind == K::utm) {
+            lon0 = p.utm_zone * 6.0 - 183.0;
+            lat0 = 0.0;
+            p.false_easting_m = 500000.0;
+            p.false_northing_m = p.utm_north ? 0.0 : 10000000.0;
+        }
+        double x = 0, y = 0;
+        raw_forward(lat0, lon0, x, y);
+        x0 = x - p.false_easting_m;
+        y0 = y - p.false_northing_m;
+    }
+
+    void raw_forward(double lat, double lon, double& x, double& y) const
+    {
+        double gamma = 0, k = 0;
+        std::visit([&](const auto& pr) { pr.Forward(lon0, lat, lon, x, y, gamma, k); }, proj);
+    }
+};
+
+Projection::Projection(const ProjectionParams& params)
+{
+    using K = ProjectionParams::Kind;
+    if (!(params.grid_m > 0) || !std::isfinite(params.grid_m)) {
+        throw config_error("projection: 'grid_m' must be > 0");
+    }
+    if (params.kind == K::albers || params.kind == K::lcc) {
+        for (double lat : {params.stdlat1_deg, params.stdlat2_deg}) {
+            if (!(std::fabs(lat) < 90)) {
+                throw config_error("projection: standard parallels must lie in (-90, 90)");
+            }
+        }
+    }
+    if (params.kind == K::utm && (params.utm_zone < 1 || params.utm_zone > 60)) {
+        throw config_error("projection: 'utm_zone' must be in 1..60");
+    }
+    if (!(std::fabs(params.lat0_deg) < 90) || !(std::fabs(params.lon0_deg) <= 180)) {
+        throw config_error("projection: 'lat0' must lie in (-90, 90) and 'lon0' in [-180, 180]");
+    }
+    try {
+        m_impl = std::make_unique<Impl>(params);
+    } catch (const GeographicLib::GeographicErr& e) {
+        throw config_error(std::string("projection: ") + e.what());
+    }
+}
+
+Projection::~Projection() = default;
+Projection::Projection(Projection&&) noexcept = default;
+Projection& Projection::operator=(Projection&&) noexcept = default;
+
+const ProjectionParams& Projection::params() const noexcept
+{
+    return m_impl->p;
+}
+
+std::optional<GridPoint> Projection::to_grid(double lon_deg, double lat_deg) const noexcept
+{
+    if (!std::isfinite(lon_deg) || !std::isfinite(lat_deg) || std::fabs(lon_deg) > 180 || std::fabs(lat_deg) > 90) {
+        return std::nullopt;
+    }
+    if (m_impl->transverse && std::fabs(GeographicLib::Math::AngDiff(m_impl->lon0, lon_deg)) > 30) {
+        return std::nullopt;
+    }
+    double x = 0, y = 0;
+    m_impl->raw_forward(lat_deg, lon_deg, x, y);
+    const double gx = std::nearbyint((x - m_impl->x0) / m_impl->p.grid_m);
+    const double gy = std::nearbyint((y - m_impl->y0) / m_impl->p.grid_m);
+    constexpr double limit = 2147483647.0;
+    if (!std::isfinite(gx) || !std::isfinite(gy) || std::fabs(gx) > limit || std::fabs(gy) > limit) {
+        return std::nullopt;
+    }
+    return GridPoint{static_cast<int32_t>(gx), static_cast<int32_t>(gy)};
+}
+
+void Projection::to_lonlat(double gx, double gy, double& lon_deg, double& lat_deg) const noexcept
+{
+    const double x = gx * m_impl->p.grid_m + m_impl->x0;
+    const double y = gy * m_impl->p.grid_m + m_impl->y0;
+    double gamma = 0, k = 0;
+    std::visit([&](const auto& pr) { pr.Reverse(m_impl->lon0, x, y, lat_deg, lon_deg, gamma, k); }, m_impl->proj);
+}
+
+double Projection::scale(double lon_deg, double lat_deg) const noexcept
+{
+    double x = 0, y = 0, gamma = 0, k = 0;
+    std::visit([&](const auto& pr) { pr.Forward(m_impl->lon0, lat_deg, lon_deg, x, y, gamma, k); }, m_impl->proj);
+    return k;
+}
+
+std::string Projection::describe() const
+{
+    const auto& p = m_impl->p;
+    char buf[256];
+    using K = ProjectionParams::Kind;
+    if (p.kind == K::utm) {
+        std::snprintf(buf, sizeof buf, "utm zone=%d%s grid=%gm", p.utm_zone, p.utm_north ? "N" : "S", p.grid_m);
+    } else if (p.kind == K::tm) {
+        std::snprintf(buf, sizeof buf, "tm lon0=%g lat0=%g k0=%g grid=%gm", p.lon0_deg, p.lat0_deg, p.k0, p.grid_m);
+    } else {
+        std::snprintf(buf, sizeof buf, "%s lon0=%g lat0=%g stdlat=%g,%g grid=%gm", projection_kind_name(p.kind),
+                      p.lon0_deg, p.lat0_deg, p.stdlat1_deg, p.stdlat2_deg, p.grid_m);
+    }
+    return buf;
+}
+
+} // namespace tigerlod

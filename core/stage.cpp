@@ -1,0 +1,209 @@
+#include "core/stage.hpp"
+
+#include <algorithm>
+#include <charconv>
+#include <cstdio>
+#include <exception>
+#include <iostream>
+#include <new>
+#include <sstream>
+
+namespace tigerlod {
+
+const char* tigerlod_version() noexcept
+{
+    return "0.1.0";
+}
+
+void ArgSet::group(std::string heading)
+{
+    m_group = std::move(heading);
+}
+
+void ArgSet::add(std::string name, Target target, std::string help, std::string value_name)
+{
+    std::string def = std::visit(
+        [](auto* p) -> std::string {
+            using T = std::remove_pointer_t<decltype(p)>;
+            if constexpr (std::is_same_v<T, bool>) {
+                return "";
+            } else if constexpr (std::is_same_v<T, std::string>) {
+                return *p;
+            } else {
+                std::ostringstream s;
+                s << *p;
+                return s.str();
+            }
+        },
+        target);
+    m_options.push_back({std::move(name), std::move(help), std::move(value_name), m_group, target, def});
+}
+
+void ArgSet::positional(std::string name, std::string* target, std::string help)
+{
+    m_positionals.push_back({std::move(name), std::move(help), target});
+}
+
+namespace {
+
+template <class T> T parse_number(const std::string& stage, const std::string& option, const std::string& text)
+{
+    T value{};
+    const char* end = text.data() + text.size();
+    auto [ptr, ec] = std::from_chars(text.data(), end, value);
+    if (ec != std::errc{} || ptr != end) {
+        throw usage_error(stage + ": option '--" + option + "' needs a number, got '" + text + "'");
+    }
+    return value;
+}
+
+} // namespace
+
+void ArgSet::parse(const std::string& stage, const std::vector<std::string>& args)
+{
+    size_t next_positional = 0;
+    for (size_t i = 0; i < args.size(); ++i) {
+        const std::string& arg = args[i];
+        if (arg.size() > 1 && arg[0] == '-') {
+            std::string name = arg.substr(arg[1] == '-' ? 2 : 1);
+            std::string value;
+            bool has_value = false;
+            if (auto eq = name.find('='); eq != std::string::npos) {
+                value = name.substr(eq + 1);
+                name.resize(eq);
+                has_value = true;
+            }
+            auto it = std::find_if(m_options.begin(), m_options.end(), [&](const Option& o) { return o.name == name; });
+            if (it == m_options.end()) {
+                throw usage_error(stage + ": unknown option '" + arg + "'. Try --help.");
+            }
+            if (std::holds_alternative<bool*>(it->target)) {
+                if (has_value) {
+                    throw usage_error(stage + ": option '--" + name + "' takes no value");
+                }
+                *std::get<bool*>(it->target) = true;
+                continue;
+            }
+            if (!has_value) {
+                if (i + 1 >= args.size()) {
+                    throw usage_error(stage + ": option '--" + name + "' needs a value");
+                }
+                value = args[++i];
+            }
+            std::visit(
+                [&](auto* p) {
+                    using T = std::remove_pointer_t<decltype(p)>;
+                    if constexpr (std::is_same_v<T, std::string>) {
+                        *p = value;
+                    } else if constexpr (!std::is_same_v<T, bool>) {
+                        *p = parse_number<T>(stage, name, value);
+                    }
+                },
+                it->target);
+        } else {
+            if (next_positional >= m_positionals.size()) {
+                throw usage_error(stage + ": unexpected argument '" + arg + "'. Try --help.");
+            }
+            *m_positionals[next_positional++].target = arg;
+        }
+    }
+    if (next_positional < m_positionals.size()) {
+        throw usage_error(stage + ": missing argument " + m_positionals[next_positional].name + ". Try --help.");
+    }
+}
+
+std::string ArgSet::help_text(const std::string& program, const std::string& description) const
+{
+    std::ostringstream out;
+    out << "Usage: " << program << " [OPTIONS]";
+    for (const auto& p : m_positionals) {
+        out << ' ' << p.name;
+    }
+    out << "\n\n" << description << "\n";
+    if (!m_positionals.empty()) {
+        out << "\nArguments:\n";
+        for (const auto& p : m_positionals) {
+            out << "  " << p.name << "\n      " << p.help << "\n";
+        }
+    }
+    std::string group;
+    for (const auto& o : m_options) {
+        if (o.group != group) {
+            group = o.group;
+            out << "\n" << group << ":\n";
+        }
+        out << "  --" << o.name;
+        if (!o.value_name.empty()) {
+            out << ' ' << o.value_name;
+        }
+        out << "\n      " << o.help;
+        if (!o.default_text.empty()) {
+            out << " (default: " << o.default_text << ")";
+        }
+        out << "\n";
+    }
+    return out.str();
+}
+
+namespace detail {
+
+int run_stage_impl(Stage& stage, const char* name, const char* description, int argc, char** argv)
+{
+    const std::string program = std::string("tigerlod-") + name;
+    try {
+        ArgSet args;
+        bool help = false, version = false, verbose = false;
+        args.group("General");
+        args.add("help", &help, "print this help and exit");
+        args.add("version", &version, "print versions of tigerlod and its libraries and exit");
+        args.add("verbose", &verbose, "log progress to stderr, each line with the elapsed time");
+        stage.add_args(args);
+        std::vector<std::string> argv_list(argv + 1, argv + argc);
+        for (auto& a : argv_list) { // -h and -v as short forms
+            if (a == "-h") {
+                a = "--help";
+            } else if (a == "-v") {
+                a = "--verbose";
+            }
+        }
+        // --help and --version win over missing positionals.
+        for (const auto& a : argv_list) {
+            help = help || a == "--help";
+            version = version || a == "--version";
+        }
+        if (help) {
+            std::cout << args.help_text(program, description) << stage.help_notes()
+                      << "\nDiagnostics:\n"
+                         "  Exit codes: 0 done; 1 the stage ran but the data failed (bad or corrupt\n"
+                         "  input, problems over budget); 2 usage or config error; 3 environment\n"
+                         "  problem (I/O, GL context), worth retrying. Messages name the file, the\n"
+                         "  place and the fault.\n";
+            return exit_ok;
+        }
+        if (version) {
+            std::cout << program << ' ' << tigerlod_version() << '\n';
+            for (const auto& line : stage.versions()) {
+                std::cout << "  " << line << '\n';
+            }
+            return exit_ok;
+        }
+        args.parse(name, argv_list);
+        stage.initialize();
+        Log log;
+        log.set_verbose(verbose);
+        StageContext ctx{log};
+        return stage.run(ctx);
+    } catch (const Error& e) {
+        std::cerr << program << ": " << e.what() << '\n';
+        return e.exit_code();
+    } catch (const std::bad_alloc&) {
+        std::cerr << program << ": out of memory\n";
+        return exit_environment;
+    } catch (const std::exception& e) {
+        std::cerr << program << ": internal error: " << e.what() << '\n';
+        return exit_environment;
+    }
+}
+
+} // namespace detail
+} // namespace tigerlod

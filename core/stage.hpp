@@ -1,0 +1,86 @@
+#pragma once
+/// @file stage.hpp
+/// The frame every tigerlod executable shares: one option table that gives
+/// both parsing and --help, validation before any data is touched, and one
+/// place where exceptions become exit codes.
+///
+/// A stage's main.cpp is one line: `return tigerlod::run_stage<MyStage>(argc, argv);`
+
+#include "core/errors.hpp"
+#include "core/log.hpp"
+
+#include <string>
+#include <variant>
+#include <vector>
+
+namespace tigerlod {
+
+/// The options and positional arguments of one stage.
+class ArgSet {
+  public:
+    using Target = std::variant<bool*, int*, double*, std::string*>;
+
+    /// Start a new heading in --help.
+    void group(std::string heading);
+    /// Declare `--name` bound to `target`; its current value is the default.
+    /// bool options are flags and take no value.
+    void add(std::string name, Target target, std::string help, std::string value_name = "");
+    /// Declare a positional argument (all are required, in order).
+    void positional(std::string name, std::string* target, std::string help);
+
+    /// Parse argv; throws usage_error for anything unknown, missing or malformed.
+    /// Returns false if --help or --version was given (already handled by the caller).
+    void parse(const std::string& stage, const std::vector<std::string>& args);
+    std::string help_text(const std::string& program, const std::string& description) const;
+
+  private:
+    struct Option {
+        std::string name, help, value_name, group;
+        Target target;
+        std::string default_text;
+    };
+    struct Positional {
+        std::string name, help;
+        std::string* target;
+    };
+    std::vector<Option> m_options;
+    std::vector<Positional> m_positionals;
+    std::string m_group = "Options";
+}; // class ArgSet
+
+/// What run_stage gives a stage's run().
+struct StageContext {
+    Log& log;
+};
+
+/// A stage: declares its options, validates them, then runs.
+class Stage {
+  public:
+    virtual ~Stage() = default;
+    /// Declare options and positionals.
+    virtual void add_args(ArgSet& args) = 0;
+    /// Validate options; open nothing. Throws usage_error.
+    virtual void initialize() {}
+    /// Do the work. Returns the exit code: exit_ok, or exit_data when the data failed.
+    virtual int run(const StageContext& ctx) = 0;
+    /// Extra lines for --version (dependency versions).
+    virtual std::vector<std::string> versions() const { return {}; }
+    /// Extra text for --help after the options (e.g. notes on outputs).
+    virtual std::string help_notes() const { return {}; }
+}; // class Stage
+
+namespace detail {
+int run_stage_impl(Stage& stage, const char* name, const char* description, int argc, char** argv);
+} // namespace detail
+
+/// Parse, validate, run and map exceptions to exit codes (see ExitCode).
+template <class S> int run_stage(int argc, char** argv)
+{
+    S stage;
+    return detail::run_stage_impl(stage, S::name, S::description, argc, argv);
+}
+
+/// The tigerlod version string.
+const char* tigerlod_version() noexcept;
+
+} // namespace tigerlod

@@ -1,0 +1,107 @@
+#pragma once
+/// @file chain_store.hpp
+/// The chain store: the map of one semantic level within one partition, in
+/// memory and on disk. The byte layout is in SPEC.md beside this file; no
+/// other code knows it.
+
+#include "core/geometry.hpp"
+#include "core/projection.hpp"
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <span>
+#include <string>
+#include <string_view>
+#include <unordered_map>
+#include <vector>
+
+namespace tigerlod::chains {
+
+constexpr uint16_t major_version = 1;
+constexpr uint16_t minor_version = 0;
+
+/// Bits of ChainInfo::flags.
+enum ChainFlags : uint32_t {
+    chain_closed = 1U << 0,  ///< first point equals last
+    chain_halo = 1U << 1,    ///< read-only context owned by another partition
+    chain_problem = 1U << 2, ///< takes part in a crossing, overlap or touch found by ingest
+    chain_known_flags = chain_closed | chain_halo | chain_problem
+};
+
+/// One chain; its points are ChainStore::points[first, first + count).
+struct ChainInfo {
+    uint64_t id = 0;
+    uint32_t left = 0;          ///< string index of the unit code on the left
+    uint32_t right = 0;         ///< string index of the unit code on the right
+    uint32_t feature_class = 0; ///< string index of the feature class
+    uint32_t flags = 0;         ///< ChainFlags
+    uint64_t first = 0;
+    uint32_t count = 0;
+};
+
+/// A chain end whose degree in the level's boundary graph is not 2.
+struct Junction {
+    uint64_t id = 0; ///< packed snapped lon/lat, see SPEC.md
+    GridPoint p;
+    uint32_t degree = 0;
+};
+
+/// Kinds of constraint points.
+enum ConstraintKind : uint32_t { constraint_internal = 0, constraint_user = 1 };
+
+/// A point that must stay on its side of the chains: inside its unit.
+struct ConstraintPoint {
+    uint32_t unit = 0; ///< string index of the unit code
+    uint32_t kind = constraint_internal;
+    GridPoint p;
+};
+
+/// The map of one level within one partition.
+struct ChainStore {
+    uint32_t level_index = 0;
+    uint32_t level_count = 1;
+    std::string level_name;
+    std::string partition;
+    ProjectionParams projection;
+    double halo_m = 0.0;
+    std::vector<std::string> strings{""}; ///< entry 0 is "" (no unit)
+    std::vector<ChainInfo> chains;
+    std::vector<GridPoint> points;
+    std::vector<Junction> junctions;
+    std::vector<ConstraintPoint> constraints;
+
+    std::span<const GridPoint> chain_points(const ChainInfo& c) const noexcept
+    {
+        return {points.data() + c.first, c.count};
+    }
+    /// Index of `s` in the string table, adding it if new.
+    uint32_t intern(std::string_view s);
+    /// Append a chain with the given points; sets first and count.
+    void add_chain(ChainInfo info, std::span<const GridPoint> pts);
+    /// Sort chains by (halo, id), junctions by id, constraints by (code, kind, x, y),
+    /// and compact points into that order. Writers call this; it makes output canonical.
+    void canonicalize();
+
+  private:
+    std::unordered_map<std::string, uint32_t> m_index;
+}; // struct ChainStore
+
+/// Encode as the bytes of a version 1.0 file.
+std::string encode(const ChainStore& store);
+
+/// Decode and validate the bytes of a file; `name` is used in messages.
+/// Throws format_error naming `name` and the fault.
+ChainStore decode(std::span<const std::byte> bytes, const std::string& name);
+
+/// Write atomically (temporary name, then rename). Throws environment_error.
+void write(const std::filesystem::path& path, const ChainStore& store);
+
+/// Read and validate. Throws environment_error if the file cannot be read,
+/// format_error if it is not a valid chain store.
+ChainStore read(const std::filesystem::path& path);
+
+/// Canonical sorted text of a store, one item per line, for diffs and goldens.
+std::string to_text(const ChainStore& store);
+
+} // namespace tigerlod::chains

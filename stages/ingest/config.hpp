@@ -1,0 +1,52 @@
+#pragma once
+/// @file config.hpp
+/// The parts of a tigerlod config (YAML) that ingest reads: `name`,
+/// `dataset`, `levels`, `projection`, `ingest`. Every key is documented in
+/// configs/README.md; unknown keys are errors.
+
+#include "core/projection.hpp"
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace tigerlod::ingest {
+
+/// How one semantic level derives a unit's code: exactly one of the three.
+struct LevelSpec {
+    std::string name;
+    std::string code;                ///< a constant code (one unit, e.g. the nation)
+    std::vector<std::string> fields; ///< attributes concatenated (TIGER FACES: STATEFP20, COUNTYFP20, ...)
+    int prefix = -1;                 ///< the first N characters of dataset.code_field
+};
+
+struct DatasetSpec {
+    enum class Kind { tiger, polygons, lines };
+    Kind kind = Kind::tiger;
+    std::vector<std::filesystem::path> edges, faces, inputs; ///< resolved paths
+    std::string layer;                                       ///< layer name when a source holds several
+    std::string code_field;                                  ///< polygons: the finest unit code (e.g. GEOID10)
+    std::string class_field;                                 ///< feature class attribute (TIGER: MTFCC)
+    std::string intpt_lat_field, intpt_lon_field;            ///< internal point attributes
+};
+
+struct IngestConfig {
+    std::filesystem::path file; ///< the config file itself
+    std::string name;
+    DatasetSpec dataset;
+    std::vector<LevelSpec> levels;
+    ProjectionParams projection;
+    double halo_m = 1000.0;
+    unsigned threads = 0; ///< 0: all cores
+};
+
+/// Load and validate. Relative paths are resolved against the config file's
+/// folder. Throws config_error naming the file, line and key; a missing input
+/// file is a config_error too.
+IngestConfig load_config(const std::filesystem::path& file);
+
+/// The default levels for TIGER FACES with 2020 codes:
+/// state > county > tract > block_group > block.
+std::vector<LevelSpec> default_tiger_levels();
+
+} // namespace tigerlod::ingest

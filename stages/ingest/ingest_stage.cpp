@@ -1,0 +1,247 @@
+#include "stages/ingest/ingest_stage.hpp"
+
+#include "core/digest.hpp"
+#include "core/errors.hpp"
+#include "core/fs.hpp"
+#include "formats/chains/chain_store.hpp"
+#include "stages/ingest/config.hpp"
+#include "stages/ingest/map_builder.hpp"
+#include "stages/ingest/sources.hpp"
+
+#include <GeographicLib/Config.h>
+#include <nlohmann/json.hpp>
+#include <yaml-cpp/yaml.h>
+
+#include <cstdio>
+#include <iostream>
+#include <set>
+#include <sys/resource.h>
+#include <thread>
+
+namespace fs = std::filesystem;
+using json = nlohmann::ordered_json;
+
+namespace tigerlod::ingest {
+
+namespace {
+
+/// A partition code as a file name: letters, digits, '_' and '-' pass, anything else is %XX.
+std::string file_name(const std::string& code)
+{
+    std::string out;
+    for (unsigned char ch : code) {
+        if (std::isalnum(ch) || ch == '_' || ch == '-') {
+            out += static_cast<char>(ch);
+        } else {
+            char buf[4];
+            std::snprintf(buf, sizeof buf, "%%%02X", ch);
+            out += buf;
+        }
+    }
+    return out.empty() ? "%" : out;
+}
+
+double peak_rss_mb()
+{
+    rusage ru{};
+    getrusage(RUSAGE_SELF, &ru);
+    return static_cast<double>(ru.ru_maxrss) / 1024.0;
+}
+
+json level_spec_json(const LevelSpec& l)
+{
+    json j;
+    j["name"] = l.name;
+    if (!l.code.empty()) {
+        j["code"] = l.code;
+    }
+    if (!l.fields.empty()) {
+        j["fields"] = l.fields;
+    }
+    if (l.prefix > 0) {
+        j["prefix"] = l.prefix;
+    }
+    return j;
+}
+
+} // namespace
+
+void IngestStage::add_args(ArgSet& args)
+{
+    args.positional("CONFIG", &m_config, "the config file (YAML; keys in configs/README.md)");
+    args.positional("OUTPUT", &m_output, "the output folder, written under a temporary name and renamed on success");
+    args.group("Ingest");
+    args.add("overwrite", &m_overwrite, "replace OUTPUT if it exists");
+    args.add("halo-m", &m_halo_m, "halo distance in metres (overrides ingest.halo_m; default 1000)", "M");
+    args.add("threads", &m_threads, "worker threads, 0 for all cores (overrides ingest.threads)", "N");
+    args.add("max-problem-samples", &m_max_problem_samples, "problems listed with their location in the report", "N");
+}
+
+void IngestStage::initialize()
+{
+    if (m_halo_m != -1.0 && !(m_halo_m >= 0)) {
+        throw usage_error("ingest: option '--halo-m' must be >= 0");
+    }
+    if (m_threads < -1 || m_threads > 256) {
+        throw usage_error("ingest: option '--threads' must be in 0..256");
+    }
+    if (m_max_problem_samples < 0) {
+        throw usage_error("ingest: option '--max-problem-samples' must be >= 0");
+    }
+}
+
+std::vector<std::string> IngestStage::versions() const
+{
+    return {gdal_version(), std::string("GeographicLib ") + GEOGRAPHICLIB_VERSION_STRING,
+            std::string("chain store format ") + std::to_string(chains::major_version) + "." +
+                std::to_string(chains::minor_version)};
+}
+
+std::string IngestStage::help_notes() const
+{
+    return "\nOutputs (in OUTPUT):\n"
+           "  <level>/<partition>.tlc  chain stores (formats/chains/SPEC.md)\n"
+           "  ingest-report.json       counts per level and problems by kind (deterministic)\n"
+           "  manifest.json            inputs with SHA-256, resolved options, version (deterministic)\n"
+           "  ingest-timings.json      seconds, vertices per second, peak memory (varies by run)\n"
+           "A summary goes to stdout. Problems found in the data (crossings, overlaps, repaired\n"
+           "spikes...) are counted and located in the report; chains involved carry the problem flag.\n";
+}
+
+int IngestStage::run(const StageContext& ctx)
+{
+    IngestConfig cfg = load_config(m_config);
+    if (m_halo_m >= 0) {
+        cfg.halo_m = m_halo_m;
+    }
+    if (m_threads >= 0) {
+        cfg.threads = static_cast<unsigned>(m_threads);
+    }
+    const unsigned threads = cfg.threads == 0 ? std::max(1U, std::thread::hardware_concurrency()) : cfg.threads;
+    const Projection projection(cfg.projection);
+    ctx.log.info("config " + cfg.file.string() + ": " + projection.describe());
+
+    const double t0 = ctx.log.elapsed_s();
+    RawMap raw = read_dataset(cfg, ctx.log);
+    const double t_read = ctx.log.elapsed_s();
+    const uint64_t points_read = raw.points_read;
+    ctx.log.info("read " + std::to_string(points_read) + " points, " + std::to_string(raw.polyline_count()) +
+                 " polylines, " + std::to_string(raw.units.size()) + " units");
+
+    OutputDir out(m_output, m_overwrite);
+    std::set<std::string> made;
+    uint64_t stores = 0;
+    BuildOptions options;
+    options.halo_m = cfg.halo_m;
+    options.threads = threads;
+    options.max_problem_samples = static_cast<size_t>(m_max_problem_samples);
+    const BuildResult result = build_map(std::move(raw), projection, options, [&](const chains::ChainStore& s) {
+        const fs::path dir = out.path() / s.level_name;
+        if (made.insert(s.level_name).second) {
+            fs::create_directories(dir);
+        }
+        chains::write(dir / (file_name(s.partition) + ".tlc"), s);
+        ++stores;
+    });
+    const double t_build = ctx.log.elapsed_s();
+
+    json report;
+    report["schema"] = "tigerlod.ingest-report/1";
+    report["config"] = cfg.name;
+    report["projection"] = projection.describe();
+    report["input_vertices"] = result.input_vertices;
+    report["unique_vertices"] = result.unique_vertices;
+    report["edges"] = result.edges;
+    report["stores"] = stores;
+    json levels = json::array();
+    for (const auto& l : result.levels) {
+        levels.push_back({{"name", l.name},
+                          {"units", l.units},
+                          {"chains", l.chains},
+                          {"rings", l.rings},
+                          {"vertices", l.vertices},
+                          {"junctions", l.junctions},
+                          {"partitions", l.partitions},
+                          {"halo_chains", l.halo_chains},
+                          {"constraint_points", l.constraint_points},
+                          {"computed_internal_points", l.computed_internal_points}});
+    }
+    report["levels"] = levels;
+    json problems = json::object();
+    for (const auto& [k, v] : result.problems) {
+        problems[k] = v;
+    }
+    report["problems"] = problems;
+    json samples = json::array();
+    for (const auto& s : result.samples) {
+        samples.push_back({{"kind", s.kind}, {"lon", s.lon_deg}, {"lat", s.lat_deg}, {"where", s.where}});
+    }
+    report["problem_samples"] = samples;
+    write_file_atomic(out.path() / "ingest-report.json", report.dump(2) + "\n");
+
+    json manifest;
+    manifest["schema"] = "tigerlod.manifest/1";
+    manifest["stage"] = "ingest";
+    manifest["version"] = tigerlod_version();
+    manifest["libraries"] = versions();
+    json inputs = json::array();
+    auto add_input = [&](const fs::path& p, const char* role) {
+        inputs.push_back({{"role", role},
+                          {"path", p.lexically_relative(cfg.file.parent_path()).string()},
+                          {"bytes", fs::file_size(p)},
+                          {"sha256", sha256_file(p)}});
+    };
+    add_input(cfg.file, "config");
+    for (const auto& p : cfg.dataset.faces) {
+        add_input(p, "faces");
+    }
+    for (const auto& p : cfg.dataset.edges) {
+        add_input(p, "edges");
+    }
+    for (const auto& p : cfg.dataset.inputs) {
+        add_input(p, "input");
+    }
+    manifest["inputs"] = inputs;
+    json levels_spec = json::array();
+    for (const auto& l : cfg.levels) {
+        levels_spec.push_back(level_spec_json(l));
+    }
+    manifest["options"] = {{"levels", levels_spec},
+                           {"projection", projection.describe()},
+                           {"halo_m", cfg.halo_m},
+                           {"max_problem_samples", m_max_problem_samples}};
+    write_file_atomic(out.path() / "manifest.json", manifest.dump(2) + "\n");
+
+    const double seconds = t_build - t0;
+    json timings = {{"read_s", t_read - t0},
+                    {"build_s", t_build - t_read},
+                    {"total_s", seconds},
+                    {"threads", threads},
+                    {"vertices_per_s", seconds > 0 ? static_cast<double>(points_read) / seconds : 0.0},
+                    {"peak_rss_mb", peak_rss_mb()}};
+    write_file_atomic(out.path() / "ingest-timings.json", timings.dump(2) + "\n");
+    out.commit();
+
+    std::printf("ingest %s: %llu input vertices in %.2f s (%.2f M/s), %llu stores in %s\n", cfg.name.c_str(),
+                static_cast<unsigned long long>(points_read), seconds,
+                seconds > 0 ? static_cast<double>(points_read) / seconds / 1e6 : 0.0,
+                static_cast<unsigned long long>(stores), m_output.c_str());
+    std::printf("  %-12s %8s %8s %7s %10s %9s %6s\n", "level", "units", "chains", "rings", "vertices", "junctions",
+                "parts");
+    for (const auto& l : result.levels) {
+        std::printf("  %-12s %8llu %8llu %7llu %10llu %9llu %6llu\n", l.name.c_str(),
+                    static_cast<unsigned long long>(l.units), static_cast<unsigned long long>(l.chains),
+                    static_cast<unsigned long long>(l.rings), static_cast<unsigned long long>(l.vertices),
+                    static_cast<unsigned long long>(l.junctions), static_cast<unsigned long long>(l.partitions));
+    }
+    std::string found;
+    for (const auto& [k, v] : result.problems) {
+        if (v != 0) {
+            found += " " + k + "=" + std::to_string(v);
+        }
+    }
+    std::printf("  problems:%s\n", found.empty() ? " none" : found.c_str());
+    return exit_ok;
+}
+
+} // namespace tigerlod::ingest

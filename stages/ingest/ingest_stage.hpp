@@ -1,0 +1,32 @@
+#pragma once
+/// @file ingest_stage.hpp
+/// tigerlod-ingest: raw TIGER/Line (or any polygon or line layer) to chain
+/// stores, one per (semantic level, partition), with a report and manifest.
+
+#include "core/stage.hpp"
+
+#include <string>
+
+namespace tigerlod::ingest {
+
+class IngestStage final : public Stage {
+  public:
+    static constexpr const char* name = "ingest";
+    static constexpr const char* description =
+        "Read TIGER/Line EDGES+FACES, polygon layers or line layers named by a config, snap, project,\n"
+        "check the planar map with exact predicates, and write one chain store per (level, partition).";
+    void add_args(ArgSet& args) override;
+    void initialize() override;
+    int run(const StageContext& ctx) override;
+    std::vector<std::string> versions() const override;
+    std::string help_notes() const override;
+
+  private:
+    std::string m_config, m_output;
+    bool m_overwrite = false;
+    double m_halo_m = -1.0;
+    int m_threads = -1;
+    int m_max_problem_samples = 200;
+}; // class IngestStage
+
+} // namespace tigerlod::ingest

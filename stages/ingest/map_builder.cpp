@@ -1,0 +1,866 @@
+#include "stages/ingest/map_builder.hpp"
+
+#include "core/errors.hpp"
+#include "stages/ingest/segment_grid.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <thread>
+#include <unordered_map>
+
+namespace tigerlod::ingest {
+
+namespace {
+
+constexpr uint32_t none = UINT32_MAX;
+
+const std::vector<std::string> kinds = {"crossings",
+                                        "touches",
+                                        "overlaps",
+                                        "overlapping_polygons",
+                                        "duplicate_points",
+                                        "spikes",
+                                        "merged_vertices",
+                                        "degenerate_polylines",
+                                        "non_nesting_units",
+                                        "unreferenced_units",
+                                        "internal_points_replaced",
+                                        "missing_internal_points",
+                                        "empty_geometries"};
+
+uint64_t splitmix(uint64_t x) noexcept
+{
+    x += 0x9E3779B97F4A7C15ULL;
+    x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
+    return x ^ (x >> 31);
+}
+
+/// Everything the levels share: interned vertices and cleaned edges.
+struct Graph {
+    std::vector<uint64_t> keys;  // vertex id -> packed lon/lat
+    std::vector<GridPoint> grid; // vertex id -> grid point
+    std::vector<uint32_t> verts; // edge i is verts[off[i], off[i+1])
+    std::vector<uint64_t> off{0};
+    std::vector<uint32_t> left, right, cls;
+    std::vector<uint64_t> sid;
+    std::vector<SourceRef> src;
+    size_t edge_count() const noexcept { return left.size(); }
+    std::span<const uint32_t> edge(size_t i) const noexcept { return {verts.data() + off[i], off[i + 1] - off[i]}; }
+};
+
+class Problems {
+  public:
+    Problems(BuildResult& r, const RawMap& raw, const Projection& proj, size_t max_samples)
+        : m_r(r), m_raw(raw), m_proj(proj), m_max(max_samples)
+    {
+        for (const auto& k : kinds) {
+            m_r.problems[k] = 0;
+        }
+    }
+    void count(const std::string& kind, uint64_t n = 1) { m_r.problems[kind] += n; }
+    void add(const std::string& kind, double gx, double gy, std::string where)
+    {
+        count(kind);
+        if (m_r.samples.size() < m_max) {
+            ProblemSample s{kind, 0, 0, std::move(where)};
+            m_proj.to_lonlat(gx, gy, s.lon_deg, s.lat_deg);
+            m_r.samples.push_back(std::move(s));
+        }
+    }
+    void add_lonlat(const std::string& kind, LonLatE6 p, std::string where)
+    {
+        count(kind);
+        if (m_r.samples.size() < m_max) {
+            m_r.samples.push_back({kind, p.lon * 1e-6, p.lat * 1e-6, std::move(where)});
+        }
+    }
+    const RawMap& raw() const noexcept { return m_raw; }
+
+  private:
+    BuildResult& m_r;
+    const RawMap& m_raw;
+    const Projection& m_proj;
+    size_t m_max;
+};
+
+template <class F> void parallel_for(size_t n, unsigned threads, F&& f)
+{
+    threads = std::max(1U, std::min<unsigned>(threads, static_cast<unsigned>(std::max<size_t>(1, n / 4096))));
+    if (threads == 1) {
+        f(size_t{0}, n);
+        return;
+    }
+    std::vector<std::thread> pool;
+    const size_t chunk = (n + threads - 1) / threads;
+    for (unsigned t = 0; t < threads; ++t) {
+        const size_t b = std::min(n, t * chunk), e = std::min(n, b + chunk);
+        pool.emplace_back([&f, b, e] { f(b, e); });
+    }
+    for (auto& th : pool) {
+        th.join();
+    }
+}
+
+/// Intern and project the vertices, then clean every polyline.
+Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems& problems)
+{
+    Graph g;
+    std::vector<uint64_t> occ(raw.coords.size());
+    for (size_t i = 0; i < occ.size(); ++i) {
+        occ[i] = pack_key(raw.coords[i]);
+    }
+    g.keys = occ;
+    std::sort(g.keys.begin(), g.keys.end());
+    g.keys.erase(std::unique(g.keys.begin(), g.keys.end()), g.keys.end());
+    std::vector<uint32_t> id(occ.size());
+    parallel_for(occ.size(), threads, [&](size_t b, size_t e) {
+        for (size_t i = b; i < e; ++i) {
+            id[i] = static_cast<uint32_t>(std::lower_bound(g.keys.begin(), g.keys.end(), occ[i]) - g.keys.begin());
+        }
+    });
+    occ = {};
+    g.grid.resize(g.keys.size());
+    std::vector<uint8_t> bad(g.keys.size(), 0);
+    parallel_for(g.keys.size(), threads, [&](size_t b, size_t e) {
+        for (size_t v = b; v < e; ++v) {
+            const LonLatE6 ll = unpack_key(g.keys[v]);
+            auto gp = proj.to_grid(ll.lon * 1e-6, ll.lat * 1e-6);
+            if (gp) {
+                g.grid[v] = *gp;
+            } else {
+                bad[v] = 1;
+            }
+        }
+    });
+    if (auto it = std::find(bad.begin(), bad.end(), 1); it != bad.end()) {
+        const auto v = static_cast<uint32_t>(it - bad.begin());
+        const LonLatE6 ll = unpack_key(g.keys[v]);
+        std::string where = "an input";
+        for (size_t p = 0; p < raw.polyline_count(); ++p) {
+            bool found = false;
+            for (uint64_t k = raw.offsets[p]; k < raw.offsets[p + 1] && !found; ++k) {
+                found = id[k] == v;
+            }
+            if (found) {
+                where = raw.where(raw.source[p]);
+                break;
+            }
+        }
+        char buf[160];
+        std::snprintf(buf, sizeof buf, "coordinate (%.6f, %.6f) is outside the domain of projection ", ll.lon * 1e-6,
+                      ll.lat * 1e-6);
+        throw input_error(where + ": " + buf + proj.describe());
+    }
+    // Distinct snapped points that round onto one grid point become one vertex.
+    std::vector<uint32_t> remap(g.keys.size());
+    std::iota(remap.begin(), remap.end(), 0U);
+    {
+        std::vector<uint32_t> order(g.keys.size());
+        std::iota(order.begin(), order.end(), 0U);
+        std::sort(order.begin(), order.end(),
+                  [&](uint32_t a, uint32_t b) { return g.grid[a] != g.grid[b] ? g.grid[a] < g.grid[b] : a < b; });
+        for (size_t i = 1; i < order.size(); ++i) {
+            if (g.grid[order[i]] == g.grid[order[i - 1]]) {
+                remap[order[i]] = remap[order[i - 1]];
+                problems.add("merged_vertices", g.grid[order[i]].x, g.grid[order[i]].y, "");
+            }
+        }
+    }
+    // Clean each polyline: repeated points, then p-q-p spikes.
+    std::vector<uint32_t> buf;
+    for (size_t p = 0; p < raw.polyline_count(); ++p) {
+        buf.clear();
+        for (uint64_t k = raw.offsets[p]; k < raw.offsets[p + 1]; ++k) {
+            const uint32_t v = remap[id[k]];
+            if (!buf.empty() && buf.back() == v) {
+                if (raw.kind != RawMap::Kind::polygon_segments) {
+                    problems.add("duplicate_points", g.grid[v].x, g.grid[v].y, raw.where(raw.source[p]));
+                } else {
+                    problems.count("duplicate_points");
+                }
+                continue;
+            }
+            buf.push_back(v);
+            while (buf.size() >= 3 && buf[buf.size() - 1] == buf[buf.size() - 3]) {
+                const uint32_t q = buf[buf.size() - 2];
+                problems.add("spikes", g.grid[q].x, g.grid[q].y, raw.where(raw.source[p]));
+                buf.resize(buf.size() - 2);
+            }
+        }
+        while (buf.size() >= 4 && buf.front() == buf.back() && buf[1] == buf[buf.size() - 2]) {
+            problems.add("spikes", g.grid[buf.front()].x, g.grid[buf.front()].y, raw.where(raw.source[p]));
+            buf.erase(buf.begin());
+            buf.pop_back();
+        }
+        if (buf.size() < 2 || (buf.size() < 4 && buf.front() == buf.back())) {
+            if (raw.kind != RawMap::Kind::polygon_segments) {
+                const LonLatE6 at = raw.coords[raw.offsets[p]];
+                problems.add_lonlat("degenerate_polylines", at, raw.where(raw.source[p]));
+            }
+            continue;
+        }
+        g.verts.insert(g.verts.end(), buf.begin(), buf.end());
+        g.off.push_back(g.verts.size());
+        g.left.push_back(raw.left[p]);
+        g.right.push_back(raw.right[p]);
+        g.cls.push_back(raw.feature_class[p]);
+        g.sid.push_back(raw.source_id[p]);
+        g.src.push_back(raw.source[p]);
+    }
+    raw.coords = {};
+    raw.offsets = {};
+    return g;
+}
+
+/// Merge two-point polygon segments that neighbouring polygons share.
+void merge_segments(Graph& g, const RawMap& raw, Problems& problems)
+{
+    struct Rec {
+        uint32_t a, b; // a < b
+        uint32_t unit;
+        bool unit_left; // the unit lies left of a->b
+        uint32_t edge;
+    };
+    std::vector<Rec> recs;
+    recs.reserve(g.edge_count());
+    for (uint32_t i = 0; i < g.edge_count(); ++i) {
+        const auto e = g.edge(i);
+        const uint32_t u = g.left[i] != no_unit ? g.left[i] : g.right[i];
+        const bool on_left_of_given = g.left[i] != no_unit;
+        const bool forward = e[0] < e[1];
+        recs.push_back({std::min(e[0], e[1]), std::max(e[0], e[1]), u, forward == on_left_of_given, i});
+    }
+    std::sort(recs.begin(), recs.end(), [](const Rec& x, const Rec& y) {
+        return x.a != y.a ? x.a < y.a : (x.b != y.b ? x.b < y.b : x.edge < y.edge);
+    });
+    Graph out;
+    out.keys = std::move(g.keys);
+    out.grid = std::move(g.grid);
+    for (size_t i = 0; i < recs.size();) {
+        size_t j = i;
+        uint32_t l = no_unit, r = no_unit;
+        bool conflict = false;
+        while (j < recs.size() && recs[j].a == recs[i].a && recs[j].b == recs[i].b) {
+            uint32_t& slot = recs[j].unit_left ? l : r;
+            if (slot == no_unit) {
+                slot = recs[j].unit;
+            } else {
+                conflict = true;
+            }
+            ++j;
+        }
+        const Rec& first = recs[i];
+        const GridPoint pa = out.grid[first.a], pb = out.grid[first.b];
+        if (conflict) {
+            std::string where;
+            for (size_t k = i; k < j; ++k) {
+                where += (where.empty() ? "" : " ") + raw.where(g.src[recs[k].edge]);
+            }
+            problems.add("overlapping_polygons", (pa.x + 0.5 * (pb.x - pa.x)), (pa.y + 0.5 * (pb.y - pa.y)), where);
+        }
+        if (l != no_unit && l == r) {
+            // The same polygon on both sides: a slit or spike in its ring, never a boundary.
+            problems.add("spikes", pa.x, pa.y, raw.where(g.src[first.edge]));
+        } else {
+            out.verts.push_back(first.a);
+            out.verts.push_back(first.b);
+            out.off.push_back(out.verts.size());
+            out.left.push_back(l);
+            out.right.push_back(r);
+            out.cls.push_back(g.cls[first.edge]);
+            out.sid.push_back(0);
+            out.src.push_back(g.src[first.edge]);
+        }
+        i = j;
+    }
+    g = std::move(out);
+}
+
+/// Codes of every finest unit at one level, as ids into a sorted code list.
+struct LevelCodes {
+    std::vector<std::string> codes; // sorted
+    std::vector<uint32_t> of_unit;  // finest unit -> code id
+    std::vector<uint32_t> parent;   // code id -> parent code id at the level above (none at level 0)
+    uint32_t side(uint32_t unit) const noexcept { return unit == no_unit ? none : of_unit[unit]; }
+};
+
+std::vector<LevelCodes> level_codes(const RawMap& raw, Problems& problems)
+{
+    const size_t nlev = raw.level_names.size();
+    std::vector<LevelCodes> out(nlev);
+    for (size_t L = 0; L < nlev; ++L) {
+        auto& lc = out[L];
+        for (const auto& u : raw.units) {
+            lc.codes.push_back(u.codes[L]);
+        }
+        std::sort(lc.codes.begin(), lc.codes.end());
+        lc.codes.erase(std::unique(lc.codes.begin(), lc.codes.end()), lc.codes.end());
+        lc.of_unit.reserve(raw.units.size());
+        for (const auto& u : raw.units) {
+            lc.of_unit.push_back(static_cast<uint32_t>(std::lower_bound(lc.codes.begin(), lc.codes.end(), u.codes[L]) -
+                                                       lc.codes.begin()));
+        }
+        lc.parent.assign(lc.codes.size(), none);
+        if (L > 0) {
+            for (size_t u = 0; u < raw.units.size(); ++u) {
+                uint32_t& p = lc.parent[lc.of_unit[u]];
+                const uint32_t want = out[L - 1].of_unit[u];
+                if (p == none) {
+                    p = want;
+                } else if (p != want) {
+                    problems.add_lonlat("non_nesting_units", raw.units[u].intpt.value_or(LonLatE6{}),
+                                        raw.where(raw.units[u].source) + " (" + raw.level_names[L] + " " +
+                                            lc.codes[lc.of_unit[u]] + ")");
+                }
+            }
+        }
+    }
+    return out;
+}
+
+/// A chain of one level, over graph vertex ids.
+struct LevelChain {
+    uint64_t first = 0;
+    uint32_t count = 0;
+    uint32_t left = none, right = none; // code ids
+    uint32_t cls = 0;
+    uint64_t id = 0;
+    bool ring = false; // a cycle without junctions
+    bool problem = false;
+    uint32_t owner = none; // partition: parent code id (level > 0) or 0
+};
+
+struct Level {
+    std::vector<LevelChain> chains;
+    std::vector<uint32_t> verts;
+    std::vector<uint32_t> junctions; // vertex ids
+    std::vector<uint32_t> junction_degree;
+    std::vector<uint32_t> chain_of_edge; // edge -> chain, none if not a boundary
+    std::span<const uint32_t> chain(const LevelChain& c) const noexcept { return {verts.data() + c.first, c.count}; }
+};
+
+Level build_level(const Graph& g, const RawMap& raw, const std::vector<LevelCodes>& lcs, size_t L)
+{
+    const auto& lc = lcs[L];
+    const bool lines = raw.kind == RawMap::Kind::lines;
+    auto is_boundary = [&](size_t e) { return lines || lc.side(g.left[e]) != lc.side(g.right[e]); };
+    const size_t nv = g.keys.size();
+    // Incidences of edge ends at vertices (CSR).
+    std::vector<uint32_t> deg(nv, 0);
+    std::vector<uint8_t> boundary(g.edge_count(), 0);
+    for (size_t e = 0; e < g.edge_count(); ++e) {
+        if (is_boundary(e)) {
+            boundary[e] = 1;
+            const auto ev = g.edge(e);
+            ++deg[ev.front()];
+            ++deg[ev.back()];
+        }
+    }
+    std::vector<uint64_t> start(nv + 1, 0);
+    for (size_t v = 0; v < nv; ++v) {
+        start[v + 1] = start[v] + deg[v];
+    }
+    std::vector<uint32_t> inc(start[nv]); // edge * 2 + (0: starts here, 1: ends here)
+    {
+        std::vector<uint64_t> fill(start.begin(), start.end() - 1);
+        for (size_t e = 0; e < g.edge_count(); ++e) {
+            if (boundary[e]) {
+                const auto ev = g.edge(e);
+                inc[fill[ev.front()]++] = static_cast<uint32_t>(e * 2);
+                inc[fill[ev.back()]++] = static_cast<uint32_t>(e * 2 + 1);
+            }
+        }
+    }
+    // Codes (left, right) of an edge walked away from its end `end`.
+    auto codes_out = [&](uint32_t in) -> std::pair<uint32_t, uint32_t> {
+        const uint32_t e = in / 2;
+        const uint32_t l = lc.side(g.left[e]), r = lc.side(g.right[e]);
+        return (in & 1U) ? std::pair{r, l} : std::pair{l, r};
+    };
+    auto is_junction = [&](uint32_t v) {
+        if (deg[v] != 2) {
+            return true;
+        }
+        const uint32_t a = inc[start[v]], b = inc[start[v] + 1];
+        if (a / 2 == b / 2) {
+            return false; // a closed edge alone
+        }
+        // Walking in along a and out along b must keep the codes on each side.
+        const auto out_b = codes_out(b);
+        const auto out_a = codes_out(a);
+        return !(out_b.first == out_a.second && out_b.second == out_a.first);
+    };
+    Level lev;
+    lev.chain_of_edge.assign(g.edge_count(), none);
+    std::vector<uint8_t> visited(g.edge_count(), 0);
+    std::vector<uint32_t> cv;
+    std::vector<uint32_t> chain_edges;
+
+    auto walk = [&](uint32_t v0, uint32_t first_inc) {
+        cv.assign(1, v0);
+        chain_edges.clear();
+        uint32_t in = first_inc;
+        const auto codes = codes_out(first_inc);
+        while (true) {
+            const uint32_t e = in / 2;
+            visited[e] = 1;
+            chain_edges.push_back(e);
+            const auto ev = g.edge(e);
+            if (in & 1U) {
+                cv.insert(cv.end(), ev.rbegin() + 1, ev.rend());
+            } else {
+                cv.insert(cv.end(), ev.begin() + 1, ev.end());
+            }
+            const uint32_t u = cv.back();
+            if (is_junction(u)) {
+                break;
+            }
+            const uint32_t arrived = in ^ 1U; // the incidence of e at u
+            const uint32_t a = inc[start[u]], b = inc[start[u] + 1];
+            const uint32_t next = a == arrived ? b : a;
+            if (visited[next / 2]) {
+                break; // back at the start of a ring
+            }
+            in = next;
+        }
+        LevelChain c;
+        c.left = codes.first;
+        c.right = codes.second;
+        // Canonical direction and, for rings, start.
+        const bool closed = cv.front() == cv.back();
+        c.ring = closed && !is_junction(cv.front());
+        bool reverse = false;
+        if (c.ring) {
+            const auto mn = std::min_element(cv.begin(), cv.end() - 1);
+            std::rotate(cv.begin(), mn, cv.end() - 1);
+            cv.back() = cv.front();
+            reverse = cv[cv.size() - 2] < cv[1];
+        } else if (!closed) {
+            reverse = cv.back() < cv.front();
+        } else {
+            reverse = cv[cv.size() - 2] < cv[1];
+        }
+        if (reverse) {
+            std::reverse(cv.begin(), cv.end());
+            std::swap(c.left, c.right);
+        }
+        // Dominant feature class by segments; smallest class id on a tie.
+        std::unordered_map<uint32_t, uint64_t> votes;
+        uint64_t min_sid = UINT64_MAX;
+        uint64_t min_seg = UINT64_MAX, min_seg2 = UINT64_MAX;
+        const auto id = static_cast<uint32_t>(lev.chains.size());
+        for (uint32_t e : chain_edges) {
+            votes[g.cls[e]] += g.off[e + 1] - g.off[e] - 1;
+            if (g.sid[e] != 0) {
+                min_sid = std::min(min_sid, g.sid[e]);
+            }
+            lev.chain_of_edge[e] = id;
+        }
+        for (size_t k = 0; k + 1 < cv.size(); ++k) {
+            uint64_t a = g.keys[cv[k]], b = g.keys[cv[k + 1]];
+            if (b < a) {
+                std::swap(a, b);
+            }
+            if (a < min_seg || (a == min_seg && b < min_seg2)) {
+                min_seg = a;
+                min_seg2 = b;
+            }
+        }
+        uint64_t best_votes = 0;
+        for (const auto& [k, n] : votes) {
+            if (n > best_votes || (n == best_votes && k < c.cls)) {
+                best_votes = n;
+                c.cls = k;
+            }
+        }
+        c.id = min_sid != UINT64_MAX ? min_sid : (splitmix(min_seg ^ splitmix(min_seg2)) >> 1);
+        c.first = lev.verts.size();
+        c.count = static_cast<uint32_t>(cv.size());
+        lev.verts.insert(lev.verts.end(), cv.begin(), cv.end());
+        lev.chains.push_back(c);
+    };
+
+    for (uint32_t v = 0; v < nv; ++v) {
+        if (deg[v] == 0 || !is_junction(v)) {
+            continue;
+        }
+        lev.junctions.push_back(v);
+        lev.junction_degree.push_back(deg[v]);
+        for (uint64_t k = start[v]; k < start[v + 1]; ++k) {
+            if (!visited[inc[k] / 2]) {
+                walk(v, inc[k]);
+            }
+        }
+    }
+    for (uint32_t e = 0; e < g.edge_count(); ++e) {
+        if (boundary[e] && !visited[e]) {
+            walk(g.edge(e).front(), e * 2);
+        }
+    }
+    // Ids unique within the level: on a collision take the next free value, in a
+    // deterministic order.
+    std::vector<uint32_t> order(lev.chains.size());
+    std::iota(order.begin(), order.end(), 0U);
+    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
+        const auto& ca = lev.chains[a];
+        const auto& cb = lev.chains[b];
+        if (ca.id != cb.id) {
+            return ca.id < cb.id;
+        }
+        return std::lexicographical_compare(lev.verts.begin() + static_cast<std::ptrdiff_t>(ca.first),
+                                            lev.verts.begin() + static_cast<std::ptrdiff_t>(ca.first + ca.count),
+                                            lev.verts.begin() + static_cast<std::ptrdiff_t>(cb.first),
+                                            lev.verts.begin() + static_cast<std::ptrdiff_t>(cb.first + cb.count));
+    });
+    for (size_t i = 1; i < order.size(); ++i) {
+        auto& prev = lev.chains[order[i - 1]];
+        auto& cur = lev.chains[order[i]];
+        if (cur.id <= prev.id) {
+            cur.id = prev.id + 1;
+        }
+    }
+    return lev;
+}
+
+/// Check every boundary segment against every other; returns the edges involved.
+std::vector<uint32_t> check_planarity(const Graph& g, const std::vector<uint8_t>& checked, Problems& problems,
+                                      const RawMap& raw, unsigned threads)
+{
+    std::vector<Segment> segs;
+    for (uint32_t e = 0; e < g.edge_count(); ++e) {
+        if (!checked[e]) {
+            continue;
+        }
+        const auto ev = g.edge(e);
+        for (size_t k = 0; k + 1 < ev.size(); ++k) {
+            segs.push_back({g.grid[ev[k]], g.grid[ev[k + 1]], e});
+        }
+    }
+    const auto found = find_intersections(segs, threads);
+    std::vector<uint32_t> involved;
+    for (const auto& f : found) {
+        const Segment& s1 = segs[f.first];
+        const Segment& s2 = segs[f.second];
+        const char* kind = f.relation == SegmentRelation::cross     ? "crossings"
+                           : f.relation == SegmentRelation::overlap ? "overlaps"
+                                                                    : "touches";
+        problems.add(kind, f.x, f.y, raw.where(g.src[s1.tag]) + " " + raw.where(g.src[s2.tag]));
+        involved.push_back(s1.tag);
+        involved.push_back(s2.tag);
+    }
+    std::sort(involved.begin(), involved.end());
+    involved.erase(std::unique(involved.begin(), involved.end()), involved.end());
+    return involved;
+}
+
+/// The best point strictly inside a unit, from its boundary segments; std::nullopt if none found.
+std::optional<GridPoint> point_inside(const std::vector<std::pair<GridPoint, GridPoint>>& segs)
+{
+    std::vector<int64_t> ys;
+    for (const auto& [a, b] : segs) {
+        ys.push_back(a.y);
+    }
+    std::sort(ys.begin(), ys.end());
+    ys.erase(std::unique(ys.begin(), ys.end()), ys.end());
+    // Candidate scan lines between consecutive vertex heights, widest gaps first,
+    // preferring the middle of the unit.
+    std::vector<std::pair<int64_t, int64_t>> gaps; // (gap, y)
+    for (size_t i = 0; i + 1 < ys.size(); ++i) {
+        if (ys[i + 1] - ys[i] >= 2) {
+            gaps.push_back({ys[i + 1] - ys[i], ys[i] + (ys[i + 1] - ys[i]) / 2});
+        }
+    }
+    std::sort(gaps.begin(), gaps.end(),
+              [](auto a, auto b) { return a.first != b.first ? a.first > b.first : a.second < b.second; });
+    if (gaps.size() > 24) {
+        gaps.resize(24);
+    }
+    const size_t mid = ys.size() / 2;
+    if (mid + 1 < ys.size() && ys[mid + 1] - ys[mid] >= 2) {
+        gaps.insert(gaps.begin(), {0, ys[mid] + (ys[mid + 1] - ys[mid]) / 2});
+    }
+    std::vector<double> xs;
+    for (const auto& gap : gaps) {
+        const int64_t y = gap.second;
+        xs.clear();
+        for (const auto& [a, b] : segs) {
+            if ((a.y > y) != (b.y > y)) {
+                const double t = static_cast<double>(y - a.y) / static_cast<double>(int64_t{b.y} - a.y);
+                xs.push_back(a.x + t * (static_cast<double>(int64_t{b.x} - a.x)));
+            }
+        }
+        std::sort(xs.begin(), xs.end());
+        double best = 0;
+        std::optional<GridPoint> cand;
+        for (size_t i = 0; i + 1 < xs.size(); i += 2) {
+            if (xs[i + 1] - xs[i] > best) {
+                const double x = std::nearbyint(0.5 * (xs[i] + xs[i + 1]));
+                if (x > xs[i] && x < xs[i + 1]) {
+                    best = xs[i + 1] - xs[i];
+                    cand = GridPoint{static_cast<int32_t>(x), static_cast<int32_t>(y)};
+                }
+            }
+        }
+        if (cand) {
+            PointInPolygon pip(*cand);
+            for (const auto& [a, b] : segs) {
+                pip.add_segment(a, b);
+            }
+            if (pip.location() == PointLocation::inside) {
+                return cand;
+            }
+        }
+    }
+    return std::nullopt;
+}
+
+} // namespace
+
+const std::vector<std::string>& problem_kinds()
+{
+    return kinds;
+}
+
+BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptions& options, const StoreSink& sink)
+{
+    BuildResult result;
+    Problems problems(result, raw, projection, options.max_problem_samples);
+    const size_t nlev = raw.level_names.size();
+    result.input_vertices = raw.points_read;
+    problems.count("empty_geometries", raw.empty_geometries);
+    Graph g = make_graph(raw, projection, options.threads, problems);
+    if (raw.kind == RawMap::Kind::polygon_segments) {
+        merge_segments(g, raw, problems);
+    }
+    result.unique_vertices = g.keys.size();
+    result.edges = g.edge_count();
+    const auto lcs = level_codes(raw, problems);
+    {
+        std::vector<uint8_t> used(raw.units.size(), 0);
+        for (size_t e = 0; e < g.edge_count(); ++e) {
+            for (uint32_t u : {g.left[e], g.right[e]}) {
+                if (u != no_unit) {
+                    used[u] = 1;
+                }
+            }
+        }
+        for (size_t u = 0; u < raw.units.size(); ++u) {
+            if (!used[u]) {
+                problems.add_lonlat("unreferenced_units", raw.units[u].intpt.value_or(LonLatE6{}),
+                                    raw.where(raw.units[u].source));
+            }
+        }
+    }
+    // One planarity check over every edge that bounds something at some level.
+    std::vector<uint8_t> checked(g.edge_count(), 0);
+    for (size_t e = 0; e < g.edge_count(); ++e) {
+        bool b = raw.kind == RawMap::Kind::lines;
+        for (size_t L = 0; L < nlev && !b; ++L) {
+            b = lcs[L].side(g.left[e]) != lcs[L].side(g.right[e]);
+        }
+        checked[e] = b;
+    }
+    const auto bad_edges = check_planarity(g, checked, problems, raw, options.threads);
+    checked = {};
+
+    const double halo_grid = options.halo_m / projection.params().grid_m;
+    for (size_t L = 0; L < nlev; ++L) {
+        Level lev = build_level(g, raw, lcs, L);
+        for (uint32_t e : bad_edges) {
+            if (lev.chain_of_edge[e] != none) {
+                lev.chains[lev.chain_of_edge[e]].problem = true;
+            }
+        }
+        const auto& lc = lcs[L];
+        // Partitions: the parent unit; a chain between two parents belongs to the smaller code.
+        uint32_t npart = 1;
+        std::vector<std::string> part_names{"all"};
+        if (L > 0) {
+            part_names = lcs[L - 1].codes;
+            npart = static_cast<uint32_t>(part_names.size());
+        }
+        auto parent = [&](uint32_t code) { return L == 0 ? 0U : lc.parent[code]; };
+        for (auto& c : lev.chains) {
+            uint32_t o = none;
+            for (uint32_t side : {c.left, c.right}) {
+                if (side != none) {
+                    o = std::min(o, parent(side));
+                }
+            }
+            c.owner = o == none ? 0 : o;
+        }
+        // Halo: chains of other partitions that come within the halo distance of a
+        // partition's own chains, found on cells at least as large as the distance.
+        std::vector<std::vector<uint32_t>> halo(npart);
+        if (npart > 1) {
+            std::vector<SegmentRef> owned;
+            for (uint32_t ci = 0; ci < lev.chains.size(); ++ci) {
+                const auto cv = lev.chain(lev.chains[ci]);
+                for (size_t k = 0; k + 1 < cv.size(); ++k) {
+                    owned.push_back({g.grid[cv[k]], g.grid[cv[k + 1]], ci, lev.chains[ci].owner});
+                }
+            }
+            for (const auto& [chain, part] : find_near(owned, halo_grid)) {
+                halo[part].push_back(chain);
+            }
+        }
+        // Units of each partition and their boundary segments.
+        std::vector<std::vector<uint32_t>> unit_chains(lc.codes.size());
+        for (uint32_t ci = 0; ci < lev.chains.size(); ++ci) {
+            const auto& c = lev.chains[ci];
+            if (c.left != none) {
+                unit_chains[c.left].push_back(ci);
+            }
+            if (c.right != none && c.right != c.left) {
+                unit_chains[c.right].push_back(ci);
+            }
+        }
+        // The representative finest unit of each code: the heaviest with a given point.
+        std::vector<uint32_t> rep(lc.codes.size(), none);
+        for (uint32_t u = 0; u < raw.units.size(); ++u) {
+            if (!raw.units[u].intpt) {
+                continue;
+            }
+            uint32_t& r = rep[lc.of_unit[u]];
+            if (r == none || raw.units[u].weight > raw.units[r].weight) {
+                r = u;
+            }
+        }
+        LevelStats st;
+        st.name = raw.level_names[L];
+        st.units = raw.kind == RawMap::Kind::lines ? 0 : lc.codes.size();
+        st.partitions = npart;
+        std::vector<std::vector<chains::ConstraintPoint>> part_points(npart);
+        std::vector<std::vector<uint32_t>> part_units(npart);
+        std::vector<std::pair<GridPoint, GridPoint>> useg;
+        for (uint32_t code = 0; code < lc.codes.size() && raw.kind != RawMap::Kind::lines; ++code) {
+            useg.clear();
+            for (uint32_t ci : unit_chains[code]) {
+                const auto cv = lev.chain(lev.chains[ci]);
+                for (size_t k = 0; k + 1 < cv.size(); ++k) {
+                    useg.push_back({g.grid[cv[k]], g.grid[cv[k + 1]]});
+                }
+            }
+            std::optional<GridPoint> pt;
+            if (rep[code] != none) {
+                const LonLatE6 ll = *raw.units[rep[code]].intpt;
+                pt = projection.to_grid(ll.lon * 1e-6, ll.lat * 1e-6);
+                if (pt) {
+                    PointInPolygon pip(*pt);
+                    for (const auto& [a, b] : useg) {
+                        pip.add_segment(a, b);
+                    }
+                    if (pip.location() != PointLocation::inside) {
+                        problems.add("internal_points_replaced", pt->x, pt->y,
+                                     raw.where(raw.units[rep[code]].source) + " (" + st.name + " " + lc.codes[code] +
+                                         ")");
+                        pt.reset();
+                    }
+                }
+            }
+            if (!pt) {
+                pt = point_inside(useg);
+                if (pt) {
+                    ++st.computed_internal_points;
+                }
+            }
+            const uint32_t part = parent(code);
+            part_units[part].push_back(code);
+            if (!pt) {
+                const GridPoint at = useg.empty() ? GridPoint{} : useg.front().first;
+                problems.add("missing_internal_points", at.x, at.y, st.name + " " + lc.codes[code]);
+                continue;
+            }
+            part_points[part].push_back({code, chains::constraint_internal, *pt});
+        }
+        // Emit one store per partition.
+        std::vector<std::vector<uint32_t>> own(npart);
+        for (uint32_t ci = 0; ci < lev.chains.size(); ++ci) {
+            own[lev.chains[ci].owner].push_back(ci);
+        }
+        std::vector<GridPoint> pts;
+        for (uint32_t part = 0; part < npart; ++part) {
+            if (own[part].empty() && part_points[part].empty()) {
+                continue;
+            }
+            chains::ChainStore s;
+            s.level_index = static_cast<uint32_t>(L);
+            s.level_count = static_cast<uint32_t>(nlev);
+            s.level_name = st.name;
+            s.partition = part_names[part];
+            s.projection = projection.params();
+            s.halo_m = options.halo_m;
+            std::vector<uint32_t> sidx(lc.codes.size() + 1, none);
+            auto str = [&](uint32_t code) {
+                if (code == none) {
+                    return 0U;
+                }
+                if (sidx[code] == none) {
+                    sidx[code] = s.intern(lc.codes[code]);
+                }
+                return sidx[code];
+            };
+            std::vector<uint32_t> cls_idx(raw.classes.size(), none);
+            auto add = [&](uint32_t ci, bool is_halo) {
+                const auto& c = lev.chains[ci];
+                const auto cv = lev.chain(c);
+                pts.clear();
+                for (uint32_t v : cv) {
+                    pts.push_back(g.grid[v]);
+                }
+                if (cls_idx[c.cls] == none) {
+                    cls_idx[c.cls] = s.intern(raw.classes[c.cls]);
+                }
+                chains::ChainInfo info;
+                info.id = c.id;
+                info.left = str(c.left);
+                info.right = str(c.right);
+                info.feature_class = cls_idx[c.cls];
+                info.flags = (cv.front() == cv.back() ? chains::chain_closed : 0U) |
+                             (is_halo ? chains::chain_halo : 0U) | (c.problem ? chains::chain_problem : 0U);
+                s.add_chain(info, pts);
+            };
+            std::vector<uint8_t> is_end;
+            for (uint32_t ci : own[part]) {
+                add(ci, false);
+                const auto& c = lev.chains[ci];
+                st.chains += 1;
+                st.rings += c.ring ? 1 : 0;
+                st.vertices += c.count;
+            }
+            for (uint32_t ci : halo[part]) {
+                add(ci, true);
+                ++st.halo_chains;
+            }
+            // Junctions at the ends of the partition's own chains.
+            std::vector<uint32_t> ends;
+            for (uint32_t ci : own[part]) {
+                const auto cv = lev.chain(lev.chains[ci]);
+                ends.push_back(cv.front());
+                ends.push_back(cv.back());
+            }
+            std::sort(ends.begin(), ends.end());
+            ends.erase(std::unique(ends.begin(), ends.end()), ends.end());
+            for (uint32_t v : ends) {
+                auto it = std::lower_bound(lev.junctions.begin(), lev.junctions.end(), v);
+                if (it != lev.junctions.end() && *it == v) {
+                    const auto k = static_cast<size_t>(it - lev.junctions.begin());
+                    s.junctions.push_back({g.keys[v], g.grid[v], lev.junction_degree[k]});
+                }
+            }
+            for (const auto& cp : part_points[part]) {
+                s.constraints.push_back({str(cp.unit), cp.kind, cp.p});
+            }
+            st.constraint_points += part_points[part].size();
+            s.canonicalize();
+            sink(s);
+        }
+        st.junctions = lev.junctions.size();
+        result.levels.push_back(st);
+    }
+    return result;
+}
+
+} // namespace tigerlod::ingest

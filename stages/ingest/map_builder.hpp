@@ -1,0 +1,66 @@
+#pragma once
+/// @file map_builder.hpp
+/// Turns a RawMap into chain stores: snapped and projected vertices, repaired
+/// polylines, the exact planarity check, maximal chains per semantic level,
+/// partitions with halos, and the units' internal points.
+///
+/// Method. Vertices are snapped to 1e-6 degrees and interned, then projected
+/// once each onto the integer grid. Two-point polygon segments shared by
+/// neighbouring polygons are merged into one edge with a unit on each side,
+/// as TopoJSON finds arcs. For each level an edge is a boundary when the
+/// level's codes on its two sides differ; boundary edges merge into maximal
+/// chains through vertices of degree 2 (where the codes on each side carry
+/// through) and into closed rings. Every segment that is a boundary at some
+/// level is checked against every other with exact integer predicates
+/// (core/geometry.hpp) on a uniform grid of cells: two segments may meet only
+/// at a shared end point.
+
+#include "core/projection.hpp"
+#include "formats/chains/chain_store.hpp"
+#include "stages/ingest/raw_map.hpp"
+
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace tigerlod::ingest {
+
+struct BuildOptions {
+    double halo_m = 1000.0;           ///< halo distance: neighbouring chains within it go into a store's halo
+    unsigned threads = 1;             ///< worker threads; the output does not depend on it
+    size_t max_problem_samples = 200; ///< problems listed with their location in the report
+};
+
+/// One data problem found (or repaired) by ingest.
+struct ProblemSample {
+    std::string kind;
+    double lon_deg = 0, lat_deg = 0;
+    std::string where; ///< input file and feature(s)
+};
+
+/// Per-level counts for the report.
+struct LevelStats {
+    std::string name;
+    uint64_t units = 0, chains = 0, rings = 0, vertices = 0, junctions = 0, partitions = 0, halo_chains = 0,
+             constraint_points = 0, computed_internal_points = 0;
+};
+
+struct BuildResult {
+    std::vector<LevelStats> levels;
+    std::map<std::string, uint64_t> problems; ///< counts by kind, every kind listed
+    std::vector<ProblemSample> samples;
+    uint64_t input_vertices = 0, unique_vertices = 0, edges = 0;
+};
+
+/// Called once per finished chain store, coarsest level first, partitions in code order.
+using StoreSink = std::function<void(const chains::ChainStore&)>;
+
+/// Build every level's chain stores. Throws input_error (naming file and
+/// feature) for a coordinate outside the projection's domain.
+BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptions& options, const StoreSink& sink);
+
+/// The problem kinds build_map counts, for documentation and reports.
+const std::vector<std::string>& problem_kinds();
+
+} // namespace tigerlod::ingest

@@ -1,0 +1,84 @@
+#pragma once
+/// @file raw_map.hpp
+/// What the input readers produce and the map builder consumes: polylines in
+/// snapped lon/lat with the finest units on their left and right, and those
+/// units with their codes per semantic level. No GDAL here, so tests can
+/// build maps by hand.
+
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace tigerlod::ingest {
+
+/// Marks "no unit": the outside of the map.
+constexpr uint32_t no_unit = UINT32_MAX;
+
+/// A lon/lat snapped to TIGER's published precision, in micro-degrees.
+struct LonLatE6 {
+    int32_t lon = 0;
+    int32_t lat = 0;
+    friend bool operator==(const LonLatE6&, const LonLatE6&) = default;
+};
+
+/// Snap degrees to micro-degrees (round half away from zero).
+LonLatE6 snap_e6(double lon_deg, double lat_deg) noexcept;
+
+/// The packed key of a snapped point; also the id of a junction (SPEC.md).
+inline uint64_t pack_key(LonLatE6 p) noexcept
+{
+    return (uint64_t{static_cast<uint32_t>(p.lon + 180000000)} << 32) | static_cast<uint32_t>(p.lat + 90000000);
+}
+inline LonLatE6 unpack_key(uint64_t k) noexcept
+{
+    return {static_cast<int32_t>(static_cast<int64_t>(k >> 32) - 180000000),
+            static_cast<int32_t>(static_cast<int64_t>(k & 0xFFFFFFFFU) - 90000000)};
+}
+
+/// Where a polyline or unit came from, for messages: file index and feature id.
+struct SourceRef {
+    uint32_t file = 0;
+    int64_t feature = -1;
+};
+
+/// A unit of the finest level (a TIGER face, a tract polygon, a county).
+struct RawUnit {
+    std::vector<std::string> codes; ///< code at each level, coarsest first
+    std::optional<LonLatE6> intpt;  ///< given internal point, if any
+    double weight = 0.0;            ///< area or similar: the largest unit's point represents a coarser unit
+    SourceRef source;
+};
+
+/// The whole input map.
+struct RawMap {
+    enum class Kind {
+        edges,            ///< noded polylines with faces on each side (TIGER EDGES)
+        polygon_segments, ///< two-point polylines with their polygon on the left; shared ones get merged
+        lines             ///< a one-level map: every polyline is a boundary
+    };
+    Kind kind = Kind::edges;
+    std::vector<std::string> level_names;
+    std::vector<std::string> files; ///< input names, for messages
+    std::vector<RawUnit> units;
+    std::vector<std::string> classes{""}; ///< feature classes; 0 is "unknown"
+
+    std::vector<LonLatE6> coords;
+    std::vector<uint64_t> offsets{0}; ///< polyline i is coords[offsets[i], offsets[i+1])
+    std::vector<uint32_t> left, right;
+    std::vector<uint32_t> feature_class;
+    std::vector<uint64_t> source_id; ///< TLID, or 0
+    std::vector<SourceRef> source;
+    uint64_t points_read = 0;      ///< input points, as the files hold them
+    uint64_t empty_geometries = 0; ///< features without geometry, skipped by the reader
+
+    size_t polyline_count() const noexcept { return left.size(); }
+    void add_polyline(std::span<const LonLatE6> pts, uint32_t left_unit, uint32_t right_unit, uint32_t cls,
+                      uint64_t sid, SourceRef src);
+    uint32_t intern_class(const std::string& name);
+    /// "file:feature" for messages.
+    std::string where(SourceRef src) const;
+};
+
+} // namespace tigerlod::ingest

@@ -1,0 +1,220 @@
+#include "stages/ingest/segment_grid.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <thread>
+
+namespace tigerlod::ingest {
+
+namespace {
+
+struct Grid {
+    int64_t ox = 0, oy = 0, c = 1;
+
+    template <class F> void cover(GridPoint a, GridPoint b, int dilate, F&& f) const
+    {
+        const int64_t x0 = std::min<int64_t>(a.x, b.x) - ox, x1 = std::max<int64_t>(a.x, b.x) - ox;
+        const int64_t y0 = std::min<int64_t>(a.y, b.y) - oy, y1 = std::max<int64_t>(a.y, b.y) - oy;
+        const int64_t cx0 = x0 / c, cx1 = x1 / c;
+        auto emit_column = [&](int64_t cx, int64_t lo, int64_t hi) {
+            lo = std::max(lo, y0);
+            hi = std::min(hi, y1);
+            const int64_t cy0 = lo / c, cy1 = hi / c;
+            for (int64_t dx = -dilate; dx <= dilate; ++dx) {
+                for (int64_t cy = cy0 - dilate; cy <= cy1 + dilate; ++cy) {
+                    f(key(cx + dx, cy));
+                }
+            }
+        };
+        if (cx0 == cx1) {
+            emit_column(cx0, y0, y1);
+            return;
+        }
+        const double ax = static_cast<double>(a.x - ox), ay = static_cast<double>(a.y - oy);
+        const double slope = static_cast<double>(int64_t{b.y} - a.y) / static_cast<double>(int64_t{b.x} - a.x);
+        for (int64_t cx = cx0; cx <= cx1; ++cx) {
+            const double xa = static_cast<double>(std::max(x0, cx * c));
+            const double xb = static_cast<double>(std::min(x1, (cx + 1) * c));
+            const double ya = ay + (xa - ax) * slope, yb = ay + (xb - ax) * slope;
+            emit_column(cx, static_cast<int64_t>(std::floor(std::min(ya, yb))) - 1,
+                        static_cast<int64_t>(std::ceil(std::max(ya, yb))) + 1);
+        }
+    }
+    static uint64_t key(int64_t cx, int64_t cy) noexcept
+    {
+        // Cells are offset by one so that a dilation never goes negative.
+        return (static_cast<uint64_t>(cx + 1) << 32) | static_cast<uint64_t>(cy + 1);
+    }
+};
+
+template <class S> Grid make_grid(const std::vector<S>& segs, double min_cell)
+{
+    Grid g;
+    int64_t mx = INT64_MAX, my = INT64_MAX;
+    double total = 0;
+    for (const auto& s : segs) {
+        mx = std::min<int64_t>({mx, s.a.x, s.b.x});
+        my = std::min<int64_t>({my, s.a.y, s.b.y});
+        total += static_cast<double>(std::max(std::abs(int64_t{s.b.x} - s.a.x), std::abs(int64_t{s.b.y} - s.a.y)));
+    }
+    g.ox = segs.empty() ? 0 : mx;
+    g.oy = segs.empty() ? 0 : my;
+    const double mean = segs.empty() ? 1.0 : total / static_cast<double>(segs.size());
+    // Twice the mean segment length keeps about two cells per segment; a cell of
+    // at least 2 grid units keeps cell indices of a 32-bit grid within 31 bits.
+    g.c = static_cast<int64_t>(std::max({2.0 * mean, min_cell, 2.0}));
+    return g;
+}
+
+} // namespace
+
+std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, unsigned threads)
+{
+    if (segs.size() < 2) {
+        return {};
+    }
+    const Grid grid = make_grid(segs, 1.0);
+    std::vector<std::pair<uint64_t, uint32_t>> entries;
+    entries.reserve(segs.size() * 2);
+    for (uint32_t i = 0; i < segs.size(); ++i) {
+        grid.cover(segs[i].a, segs[i].b, 0, [&](uint64_t k) { entries.emplace_back(k, i); });
+    }
+    std::sort(entries.begin(), entries.end());
+    entries.erase(std::unique(entries.begin(), entries.end()), entries.end());
+    std::vector<size_t> group_start;
+    for (size_t i = 0; i < entries.size(); ++i) {
+        if (i == 0 || entries[i].first != entries[i - 1].first) {
+            group_start.push_back(i);
+        }
+    }
+    group_start.push_back(entries.size());
+    const size_t ngroups = group_start.size() - 1;
+    threads = std::max(1U, threads);
+    std::vector<std::vector<Intersection>> found(threads);
+    auto work = [&](unsigned t) {
+        for (size_t gi = t; gi < ngroups; gi += threads) {
+            for (size_t i = group_start[gi]; i < group_start[gi + 1]; ++i) {
+                const Segment& s = segs[entries[i].second];
+                for (size_t j = i + 1; j < group_start[gi + 1]; ++j) {
+                    const Segment& r = segs[entries[j].second];
+                    if (std::max(s.a.x, s.b.x) < std::min(r.a.x, r.b.x) ||
+                        std::max(r.a.x, r.b.x) < std::min(s.a.x, s.b.x) ||
+                        std::max(s.a.y, s.b.y) < std::min(r.a.y, r.b.y) ||
+                        std::max(r.a.y, r.b.y) < std::min(s.a.y, s.b.y)) {
+                        continue;
+                    }
+                    const SegmentRelation rel = segment_relation(s.a, s.b, r.a, r.b);
+                    if (rel == SegmentRelation::disjoint || rel == SegmentRelation::shared_endpoint) {
+                        continue;
+                    }
+                    Intersection x;
+                    x.first = std::min(entries[i].second, entries[j].second);
+                    x.second = std::max(entries[i].second, entries[j].second);
+                    x.relation = rel;
+                    if (rel == SegmentRelation::cross) {
+                        // Only a location for the report: doubles are precise enough.
+                        auto cross = [](GridPoint o, GridPoint p, GridPoint q) {
+                            return static_cast<double>(p.x - int64_t{o.x}) * static_cast<double>(q.y - int64_t{o.y}) -
+                                   static_cast<double>(p.y - int64_t{o.y}) * static_cast<double>(q.x - int64_t{o.x});
+                        };
+                        const double d1 = cross(r.a, r.b, s.a), d2 = cross(r.a, r.b, s.b);
+                        const double along = d1 / (d1 - d2);
+                        x.x = s.a.x + along * (s.b.x - s.a.x);
+                        x.y = s.a.y + along * (s.b.y - s.a.y);
+                    } else {
+                        // A touch or overlap has an end point of one on the other.
+                        GridPoint at = s.a;
+                        for (auto [p, q1, q2] : {std::tuple{s.a, r.a, r.b}, std::tuple{s.b, r.a, r.b},
+                                                 std::tuple{r.a, s.a, s.b}, std::tuple{r.b, s.a, s.b}}) {
+                            if (orientation(q1, q2, p) == 0 && in_span(q1, q2, p) && p != q1 && p != q2) {
+                                at = p;
+                                break;
+                            }
+                        }
+                        x.x = at.x;
+                        x.y = at.y;
+                    }
+                    found[t].push_back(x);
+                }
+            }
+        }
+    };
+    std::vector<std::thread> pool;
+    for (unsigned t = 1; t < threads; ++t) {
+        pool.emplace_back(work, t);
+    }
+    work(0);
+    for (auto& th : pool) {
+        th.join();
+    }
+    std::vector<Intersection> all;
+    for (auto& f : found) {
+        all.insert(all.end(), f.begin(), f.end());
+    }
+    std::sort(all.begin(), all.end(), [](const Intersection& p, const Intersection& q) {
+        return p.first != q.first ? p.first < q.first : p.second < q.second;
+    });
+    all.erase(std::unique(all.begin(), all.end(),
+                          [](const Intersection& p, const Intersection& q) {
+                              return p.first == q.first && p.second == q.second;
+                          }),
+              all.end());
+    return all;
+}
+
+std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRef>& segs, double distance)
+{
+    if (segs.empty()) {
+        return {};
+    }
+    const Grid grid = make_grid(segs, std::max(1.0, distance));
+    // Cells within reach of each part's own segments.
+    std::vector<std::pair<uint64_t, uint32_t>> reach;
+    std::vector<uint64_t> cells;
+    for (size_t i = 0; i < segs.size();) {
+        size_t j = i;
+        cells.clear();
+        while (j < segs.size() && segs[j].chain == segs[i].chain) {
+            grid.cover(segs[j].a, segs[j].b, 1, [&](uint64_t k) { cells.push_back(k); });
+            ++j;
+        }
+        std::sort(cells.begin(), cells.end());
+        cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+        for (uint64_t k : cells) {
+            reach.emplace_back(k, segs[i].part);
+        }
+        i = j;
+    }
+    std::sort(reach.begin(), reach.end());
+    reach.erase(std::unique(reach.begin(), reach.end()), reach.end());
+    std::vector<std::pair<uint32_t, uint32_t>> out; // (part, chain)
+    for (size_t i = 0; i < segs.size();) {
+        size_t j = i;
+        cells.clear();
+        while (j < segs.size() && segs[j].chain == segs[i].chain) {
+            grid.cover(segs[j].a, segs[j].b, 0, [&](uint64_t k) { cells.push_back(k); });
+            ++j;
+        }
+        std::sort(cells.begin(), cells.end());
+        cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+        for (uint64_t k : cells) {
+            auto it = std::lower_bound(reach.begin(), reach.end(), std::pair<uint64_t, uint32_t>{k, 0});
+            for (; it != reach.end() && it->first == k; ++it) {
+                if (it->second != segs[i].part) {
+                    out.emplace_back(it->second, segs[i].chain);
+                }
+            }
+        }
+        i = j;
+    }
+    std::sort(out.begin(), out.end());
+    out.erase(std::unique(out.begin(), out.end()), out.end());
+    std::vector<std::pair<uint32_t, uint32_t>> result;
+    result.reserve(out.size());
+    for (auto [part, chain] : out) {
+        result.emplace_back(chain, part);
+    }
+    return result;
+}
+
+} // namespace tigerlod::ingest

@@ -1,0 +1,45 @@
+#pragma once
+/// @file segment_grid.hpp
+/// Spatial searches over segments on a uniform grid of square cells. Each
+/// segment is entered in every cell its closed extent touches (a supercover,
+/// one grid unit wider to stay conservative), so two segments that meet
+/// always share a cell.
+
+#include "core/geometry.hpp"
+
+#include <cstdint>
+#include <utility>
+#include <vector>
+
+namespace tigerlod::ingest {
+
+struct Segment {
+    GridPoint a, b;
+    uint32_t tag = 0; ///< caller's id (the edge)
+};
+
+/// Two segments that meet other than at a shared end point.
+struct Intersection {
+    uint32_t first = 0, second = 0; ///< indices into the input, first < second
+    SegmentRelation relation = SegmentRelation::disjoint;
+    double x = 0, y = 0; ///< a point where they meet (grid units)
+};
+
+/// All pairs of segments that cross, touch or overlap; shared end points are
+/// allowed. Exact (core/geometry.hpp). The result is sorted and does not
+/// depend on `threads`.
+std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, unsigned threads);
+
+struct SegmentRef {
+    GridPoint a, b;
+    uint32_t chain = 0;
+    uint32_t part = 0;
+};
+
+/// Pairs (chain, part) such that a segment of `chain` (owned by another part)
+/// comes within `distance` grid units of a segment owned by `part`. A
+/// conservative superset: pairs up to about two cells apart may be included.
+/// Sorted by (part, chain).
+std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRef>& segs, double distance);
+
+} // namespace tigerlod::ingest

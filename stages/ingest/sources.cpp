@@ -1,0 +1,442 @@
+#include "stages/ingest/sources.hpp"
+
+#include "core/errors.hpp"
+#include "core/geometry.hpp"
+
+#include <cpl_error.h>
+#include <gdal.h>
+#include <ogr_api.h>
+#include <ogr_srs_api.h>
+
+#include <cmath>
+#include <cstring>
+#include <memory>
+#include <unordered_map>
+
+namespace fs = std::filesystem;
+
+namespace tigerlod::ingest {
+
+namespace {
+
+/// Collects GDAL's error messages while alive, instead of printing them.
+class ErrorCapture {
+  public:
+    ErrorCapture() { CPLPushErrorHandlerEx(&ErrorCapture::handler, this); }
+    ~ErrorCapture() { CPLPopErrorHandler(); }
+    ErrorCapture(const ErrorCapture&) = delete;
+    ErrorCapture& operator=(const ErrorCapture&) = delete;
+    bool failed() const noexcept { return !m_message.empty(); }
+    std::string take()
+    {
+        std::string m = std::move(m_message);
+        m_message.clear();
+        return m;
+    }
+
+  private:
+    static void CPL_STDCALL handler(CPLErr level, CPLErrorNum, const char* msg)
+    {
+        auto* self = static_cast<ErrorCapture*>(CPLGetErrorHandlerUserData());
+        if (level >= CE_Failure && self->m_message.empty()) {
+            self->m_message = msg;
+        }
+    }
+    std::string m_message;
+};
+
+struct DatasetCloser {
+    void operator()(void* ds) const noexcept { GDALClose(ds); }
+};
+struct FeatureDeleter {
+    void operator()(OGRFeatureH f) const noexcept { OGR_F_Destroy(f); }
+};
+using FeaturePtr = std::unique_ptr<std::remove_pointer_t<OGRFeatureH>, FeatureDeleter>;
+
+/// One opened vector source and its chosen layer.
+class Source {
+  public:
+    Source(const fs::path& path, const std::string& layer_name, const char* role) : m_name(path.filename().string())
+    {
+        GDALAllRegister();
+        std::string open = path.string();
+        if (path.extension() == ".zip") {
+            open = "/vsizip/" + open;
+        }
+        ErrorCapture errors;
+        m_ds.reset(GDALOpenEx(open.c_str(), GDAL_OF_VECTOR | GDAL_OF_READONLY, nullptr, nullptr, nullptr));
+        if (!m_ds) {
+            std::string why = errors.take();
+            throw input_error(path.string() + ": cannot open as a vector dataset (" + role + ")" +
+                              (why.empty() ? std::string() : ": " + why));
+        }
+        const int n = GDALDatasetGetLayerCount(m_ds.get());
+        if (!layer_name.empty()) {
+            m_layer = GDALDatasetGetLayerByName(m_ds.get(), layer_name.c_str());
+        } else if (n == 1) {
+            m_layer = GDALDatasetGetLayer(m_ds.get(), 0);
+        }
+        if (m_layer == nullptr) {
+            std::string names;
+            for (int i = 0; i < n; ++i) {
+                names += std::string(i ? ", " : "") + OGR_L_GetName(GDALDatasetGetLayer(m_ds.get(), i));
+            }
+            throw input_error(path.string() + ": " +
+                              (layer_name.empty() ? "holds " + std::to_string(n) + " layers, set dataset.layer"
+                                                  : "no layer '" + layer_name + "'") +
+                              " (" + role + "; layers: " + (names.empty() ? "none" : names) + ")");
+        }
+        m_layer_name = OGR_L_GetName(m_layer);
+        OGRSpatialReferenceH srs = OGR_L_GetSpatialRef(m_layer);
+        if (srs != nullptr && OSRIsProjected(srs)) {
+            throw input_error(where() + ": layer has a projected CRS; tigerlod reads lon/lat (NAD83 or WGS84)");
+        }
+    }
+    std::string where() const { return m_name + " layer '" + m_layer_name + "'"; }
+    const std::string& name() const noexcept { return m_name; }
+    OGRLayerH layer() const noexcept { return m_layer; }
+
+    /// Index of a required field, or input_error naming what it is needed for.
+    int field(const std::string& field_name, const char* needed_for) const
+    {
+        const int i = OGR_FD_GetFieldIndex(OGR_L_GetLayerDefn(m_layer), field_name.c_str());
+        if (i < 0) {
+            throw input_error(where() + ": no field '" + field_name + "' (" + needed_for + ")");
+        }
+        return i;
+    }
+    int optional_field(const std::string& field_name) const
+    {
+        return field_name.empty() ? -1 : OGR_FD_GetFieldIndex(OGR_L_GetLayerDefn(m_layer), field_name.c_str());
+    }
+    /// Check the layer's geometry type against the allowed flat types (wkbUnknown passes).
+    void expect_geometry(std::initializer_list<OGRwkbGeometryType> allowed, const char* what) const
+    {
+        const auto t = wkbFlatten(OGR_L_GetGeomType(m_layer));
+        if (t == wkbUnknown) {
+            return;
+        }
+        for (auto a : allowed) {
+            if (t == a) {
+                return;
+            }
+        }
+        throw input_error(where() + ": geometry type is " + OGRGeometryTypeToName(t) + ", " + what);
+    }
+    /// Visit every feature; GDAL read errors become input_error naming the feature.
+    template <class F> void for_each(F&& f)
+    {
+        ErrorCapture errors;
+        OGR_L_ResetReading(m_layer);
+        int64_t index = 0;
+        while (true) {
+            FeaturePtr feat(OGR_L_GetNextFeature(m_layer));
+            if (errors.failed()) {
+                throw input_error(m_name + ":" + std::to_string(index) + ": " + errors.take() +
+                                  " (truncated or corrupt file?)");
+            }
+            if (!feat) {
+                break;
+            }
+            f(feat.get(), index);
+            ++index;
+        }
+    }
+
+  private:
+    std::string m_name, m_layer_name;
+    std::unique_ptr<void, DatasetCloser> m_ds;
+    OGRLayerH m_layer = nullptr;
+};
+
+/// Snap a whole simple geometry's points; checks lon/lat ranges.
+void snap_points(OGRGeometryH g, std::vector<LonLatE6>& out, const std::string& where)
+{
+    out.clear();
+    const int n = OGR_G_GetPointCount(g);
+    out.reserve(static_cast<size_t>(n));
+    for (int i = 0; i < n; ++i) {
+        const double lon = OGR_G_GetX(g, i), lat = OGR_G_GetY(g, i);
+        if (!std::isfinite(lon) || !std::isfinite(lat) || std::fabs(lon) > 180 || std::fabs(lat) > 90) {
+            char buf[128];
+            std::snprintf(buf, sizeof buf, ": point %d (%.9g, %.9g) is not a lon/lat in degrees", i, lon, lat);
+            throw input_error(where + buf);
+        }
+        out.push_back(snap_e6(lon, lat));
+    }
+}
+
+std::optional<LonLatE6> intpt(OGRFeatureH f, int lat_i, int lon_i)
+{
+    if (lat_i < 0 || lon_i < 0 || !OGR_F_IsFieldSetAndNotNull(f, lat_i) || !OGR_F_IsFieldSetAndNotNull(f, lon_i)) {
+        return std::nullopt;
+    }
+    const double lat = OGR_F_GetFieldAsDouble(f, lat_i), lon = OGR_F_GetFieldAsDouble(f, lon_i);
+    if (!std::isfinite(lat) || !std::isfinite(lon) || std::fabs(lat) > 90 || std::fabs(lon) > 180 ||
+        (lat == 0 && lon == 0)) {
+        return std::nullopt;
+    }
+    return snap_e6(lon, lat);
+}
+
+std::string level_code(const LevelSpec& level, OGRFeatureH f, const std::vector<int>& field_index,
+                       const std::string& code_value)
+{
+    if (!level.code.empty()) {
+        return level.code;
+    }
+    if (level.prefix > 0) {
+        return code_value.substr(0, static_cast<size_t>(level.prefix));
+    }
+    std::string s;
+    for (int i : field_index) {
+        s += OGR_F_GetFieldAsString(f, i);
+    }
+    return s;
+}
+
+std::vector<std::vector<int>> level_fields(const Source& src, const std::vector<LevelSpec>& levels)
+{
+    std::vector<std::vector<int>> out;
+    for (const auto& l : levels) {
+        std::vector<int> idx;
+        for (const auto& name : l.fields) {
+            idx.push_back(src.field(name, ("level '" + l.name + "'").c_str()));
+        }
+        out.push_back(idx);
+    }
+    return out;
+}
+
+void read_tiger(const IngestConfig& cfg, RawMap& raw, const Log& log)
+{
+    std::unordered_map<int64_t, uint32_t> face_unit;
+    for (const auto& path : cfg.dataset.faces) {
+        Source src(path, cfg.dataset.layer, "TIGER FACES");
+        src.expect_geometry({wkbPolygon, wkbMultiPolygon}, "TIGER FACES need polygons");
+        const int tfid = src.field("TFID", "TIGER FACES face id");
+        const auto fields = level_fields(src, cfg.levels);
+        const int lat_i = src.optional_field(cfg.dataset.intpt_lat_field);
+        const int lon_i = src.optional_field(cfg.dataset.intpt_lon_field);
+        const int area_i = src.optional_field("ATOTAL");
+        OGR_L_SetIgnoredFields(src.layer(), std::array<const char*, 2>{"OGR_GEOMETRY", nullptr}.data());
+        const auto file = static_cast<uint32_t>(raw.files.size());
+        raw.files.push_back(src.name());
+        src.for_each([&](OGRFeatureH f, int64_t index) {
+            const int64_t id = OGR_F_GetFieldAsInteger64(f, tfid);
+            if (face_unit.contains(id)) {
+                return; // a face listed by two counties' files
+            }
+            RawUnit u;
+            for (size_t L = 0; L < cfg.levels.size(); ++L) {
+                u.codes.push_back(level_code(cfg.levels[L], f, fields[L], ""));
+            }
+            u.intpt = intpt(f, lat_i, lon_i);
+            u.weight = area_i >= 0 ? OGR_F_GetFieldAsDouble(f, area_i) : 0.0;
+            u.source = {file, index};
+            face_unit.emplace(id, static_cast<uint32_t>(raw.units.size()));
+            raw.units.push_back(std::move(u));
+        });
+        log.info("read " + path.string() + ": " + std::to_string(raw.units.size()) + " faces so far");
+    }
+    std::unordered_map<int64_t, uint32_t> seen_tlid;
+    std::vector<LonLatE6> pts;
+    for (const auto& path : cfg.dataset.edges) {
+        Source src(path, cfg.dataset.layer, "TIGER EDGES");
+        src.expect_geometry({wkbLineString}, "TIGER EDGES need line strings");
+        const int tlid = src.field("TLID", "TIGER EDGES edge id");
+        const int tfidl = src.field("TFIDL", "TIGER EDGES face on the left");
+        const int tfidr = src.field("TFIDR", "TIGER EDGES face on the right");
+        const int cls = src.optional_field(cfg.dataset.class_field);
+        const auto file = static_cast<uint32_t>(raw.files.size());
+        raw.files.push_back(src.name());
+        auto unit_of = [&](OGRFeatureH f, int i) {
+            if (!OGR_F_IsFieldSetAndNotNull(f, i)) {
+                return no_unit;
+            }
+            auto it = face_unit.find(OGR_F_GetFieldAsInteger64(f, i));
+            return it == face_unit.end() ? no_unit : it->second;
+        };
+        src.for_each([&](OGRFeatureH f, int64_t index) {
+            const int64_t id = OGR_F_GetFieldAsInteger64(f, tlid);
+            const uint32_t l = unit_of(f, tfidl), r = unit_of(f, tfidr);
+            if (auto it = seen_tlid.find(id); it != seen_tlid.end()) {
+                // The same edge from a neighbouring county: it may know the other side's face.
+                auto& pl = raw.left[it->second];
+                auto& pr = raw.right[it->second];
+                pl = pl == no_unit ? l : pl;
+                pr = pr == no_unit ? r : pr;
+                return;
+            }
+            OGRGeometryH g = OGR_F_GetGeometryRef(f);
+            const std::string where = src.name() + ":" + std::to_string(index);
+            if (g == nullptr || wkbFlatten(OGR_G_GetGeometryType(g)) != wkbLineString) {
+                throw input_error(where + ": TLID " + std::to_string(id) + " has no line string geometry");
+            }
+            snap_points(g, pts, where);
+            raw.points_read += pts.size();
+            const uint32_t c = cls >= 0 ? raw.intern_class(OGR_F_GetFieldAsString(f, cls)) : 0;
+            seen_tlid.emplace(id, static_cast<uint32_t>(raw.polyline_count()));
+            raw.add_polyline(pts, l, r, c, static_cast<uint64_t>(id), {file, index});
+        });
+        log.info("read " + path.string() + ": " + std::to_string(raw.polyline_count()) + " edges so far");
+    }
+}
+
+/// Signed area sign of a ring in micro-degrees (exact).
+int ring_orientation(const std::vector<LonLatE6>& r)
+{
+    int128 a = 0;
+    for (size_t i = 0; i + 1 < r.size(); ++i) {
+        a += static_cast<int128>(r[i].lon) * r[i + 1].lat - static_cast<int128>(r[i + 1].lon) * r[i].lat;
+    }
+    return (a > 0) - (a < 0);
+}
+
+double ring_area_deg2(const std::vector<LonLatE6>& r)
+{
+    double a = 0;
+    for (size_t i = 0; i + 1 < r.size(); ++i) {
+        a += 1e-12 * (static_cast<double>(r[i].lon) * r[i + 1].lat - static_cast<double>(r[i + 1].lon) * r[i].lat);
+    }
+    return 0.5 * a;
+}
+
+void read_polygons(const IngestConfig& cfg, RawMap& raw, const Log& log)
+{
+    std::vector<LonLatE6> ring;
+    for (const auto& path : cfg.dataset.inputs) {
+        Source src(path, cfg.dataset.layer, "polygons");
+        src.expect_geometry({wkbPolygon, wkbMultiPolygon}, "a polygons dataset needs polygons");
+        const int code_i = src.field(cfg.dataset.code_field, "dataset.code_field");
+        const auto fields = level_fields(src, cfg.levels);
+        const int lat_i = src.optional_field(cfg.dataset.intpt_lat_field);
+        const int lon_i = src.optional_field(cfg.dataset.intpt_lon_field);
+        if (!cfg.dataset.intpt_lat_field.empty() && (lat_i < 0 || lon_i < 0)) {
+            throw input_error(src.where() + ": no field '" + cfg.dataset.intpt_lat_field + "' or '" +
+                              cfg.dataset.intpt_lon_field + "' (dataset.intpt_lat_field/intpt_lon_field)");
+        }
+        const int cls = src.optional_field(cfg.dataset.class_field);
+        const auto file = static_cast<uint32_t>(raw.files.size());
+        raw.files.push_back(src.name());
+        src.for_each([&](OGRFeatureH f, int64_t index) {
+            const std::string where = src.name() + ":" + std::to_string(index);
+            OGRGeometryH g = OGR_F_GetGeometryRef(f);
+            if (g == nullptr || OGR_G_IsEmpty(g)) {
+                ++raw.empty_geometries;
+                return;
+            }
+            const auto type = wkbFlatten(OGR_G_GetGeometryType(g));
+            if (type != wkbPolygon && type != wkbMultiPolygon) {
+                throw input_error(where + ": geometry type is " + OGRGeometryTypeToName(type) +
+                                  ", a polygons dataset needs polygons");
+            }
+            const std::string code = OGR_F_GetFieldAsString(f, code_i);
+            if (code.empty()) {
+                throw input_error(where + ": empty '" + cfg.dataset.code_field + "'");
+            }
+            RawUnit u;
+            for (size_t L = 0; L < cfg.levels.size(); ++L) {
+                u.codes.push_back(level_code(cfg.levels[L], f, fields[L], code));
+            }
+            u.intpt = intpt(f, lat_i, lon_i);
+            u.source = {file, index};
+            const auto unit = static_cast<uint32_t>(raw.units.size());
+            const uint32_t c = cls >= 0 ? raw.intern_class(OGR_F_GetFieldAsString(f, cls)) : 0;
+            const int nparts = type == wkbPolygon ? 1 : OGR_G_GetGeometryCount(g);
+            for (int part = 0; part < nparts; ++part) {
+                OGRGeometryH poly = type == wkbPolygon ? g : OGR_G_GetGeometryRef(g, part);
+                const int nrings = OGR_G_GetGeometryCount(poly);
+                for (int ri = 0; ri < nrings; ++ri) {
+                    snap_points(OGR_G_GetGeometryRef(poly, ri), ring, where);
+                    raw.points_read += ring.size();
+                    if (ring.size() < 2) {
+                        continue;
+                    }
+                    if (!(ring.front() == ring.back())) {
+                        ring.push_back(ring.front());
+                    }
+                    // Exterior rings counter-clockwise, holes clockwise: the unit is on the left.
+                    const int o = ring_orientation(ring);
+                    const bool unit_left = ri == 0 ? o >= 0 : o <= 0;
+                    u.weight += (ri == 0 ? 1 : -1) * std::fabs(ring_area_deg2(ring));
+                    for (size_t k = 0; k + 1 < ring.size(); ++k) {
+                        const LonLatE6 seg[2] = {ring[k], ring[k + 1]};
+                        raw.add_polyline(seg, unit_left ? unit : no_unit, unit_left ? no_unit : unit, c, 0,
+                                         {file, index});
+                    }
+                }
+            }
+            raw.units.push_back(std::move(u));
+        });
+        log.info("read " + path.string() + ": " + std::to_string(raw.units.size()) + " polygons so far");
+    }
+}
+
+void read_lines(const IngestConfig& cfg, RawMap& raw, const Log& log)
+{
+    std::vector<LonLatE6> pts;
+    for (const auto& path : cfg.dataset.inputs) {
+        Source src(path, cfg.dataset.layer, "lines");
+        src.expect_geometry({wkbLineString, wkbMultiLineString}, "a lines dataset needs line strings");
+        const int cls = src.optional_field(cfg.dataset.class_field);
+        if (!cfg.dataset.class_field.empty() && cls < 0) {
+            throw input_error(src.where() + ": no field '" + cfg.dataset.class_field + "' (dataset.class_field)");
+        }
+        const auto file = static_cast<uint32_t>(raw.files.size());
+        raw.files.push_back(src.name());
+        src.for_each([&](OGRFeatureH f, int64_t index) {
+            const std::string where = src.name() + ":" + std::to_string(index);
+            OGRGeometryH g = OGR_F_GetGeometryRef(f);
+            if (g == nullptr || OGR_G_IsEmpty(g)) {
+                ++raw.empty_geometries;
+                return;
+            }
+            const auto type = wkbFlatten(OGR_G_GetGeometryType(g));
+            if (type != wkbLineString && type != wkbMultiLineString) {
+                throw input_error(where + ": geometry type is " + OGRGeometryTypeToName(type) +
+                                  ", a lines dataset needs line strings");
+            }
+            const uint32_t c = cls >= 0 ? raw.intern_class(OGR_F_GetFieldAsString(f, cls)) : 0;
+            const int nparts = type == wkbLineString ? 1 : OGR_G_GetGeometryCount(g);
+            for (int part = 0; part < nparts; ++part) {
+                snap_points(type == wkbLineString ? g : OGR_G_GetGeometryRef(g, part), pts, where);
+                raw.points_read += pts.size();
+                raw.add_polyline(pts, no_unit, no_unit, c, 0, {file, index});
+            }
+        });
+        log.info("read " + path.string() + ": " + std::to_string(raw.polyline_count()) + " lines so far");
+    }
+}
+
+} // namespace
+
+RawMap read_dataset(const IngestConfig& cfg, const Log& log)
+{
+    RawMap raw;
+    for (const auto& l : cfg.levels) {
+        raw.level_names.push_back(l.name);
+    }
+    switch (cfg.dataset.kind) {
+    case DatasetSpec::Kind::tiger:
+        raw.kind = RawMap::Kind::edges;
+        read_tiger(cfg, raw, log);
+        break;
+    case DatasetSpec::Kind::polygons:
+        raw.kind = RawMap::Kind::polygon_segments;
+        read_polygons(cfg, raw, log);
+        break;
+    case DatasetSpec::Kind::lines:
+        raw.kind = RawMap::Kind::lines;
+        read_lines(cfg, raw, log);
+        break;
+    }
+    return raw;
+}
+
+std::string gdal_version()
+{
+    return std::string("GDAL ") + GDALVersionInfo("RELEASE_NAME");
+}
+
+} // namespace tigerlod::ingest

@@ -1,0 +1,19 @@
+#pragma once
+/// @file sources.hpp
+/// Readers for the inputs a config names, through GDAL (zipped shapefiles via
+/// /vsizip/, TopoJSON, GeoPackage, anything OGR reads). Each throws
+/// input_error naming the file, the layer or feature, and the fault.
+
+#include "core/log.hpp"
+#include "stages/ingest/config.hpp"
+#include "stages/ingest/raw_map.hpp"
+
+namespace tigerlod::ingest {
+
+/// Read the dataset of `cfg` into a RawMap, coordinates snapped to 1e-6 degrees.
+RawMap read_dataset(const IngestConfig& cfg, const Log& log);
+
+/// Versions of the libraries the readers use, for --version.
+std::string gdal_version();
+
+} // namespace tigerlod::ingest
