@@ -147,6 +147,12 @@ IngestConfig load_config(const fs::path& file)
         ctx.fail(ds["kind"], "'dataset.kind' must be tiger, polygons or lines, got '" + kind + "'");
     }
     d.layer = ctx.get<std::string>(ds, "layer", "");
+    if (const YAML::Node fetch = ds["fetch"]) { // used by the pipeline, which fetches before ingest
+        ctx.check_keys(fetch, "dataset.fetch", {"npm", "into"});
+        if (ctx.get<std::string>(fetch, "npm", "").empty() || ctx.get<std::string>(fetch, "into", "").empty()) {
+            ctx.fail(fetch, "'dataset.fetch' needs 'npm' (package@version) and 'into' (a folder)");
+        }
+    }
     if (d.intpt_lat_field.empty() != d.intpt_lon_field.empty()) {
         ctx.fail(ds, "'intpt_lat_field' and 'intpt_lon_field' go together");
     }

@@ -1,0 +1,284 @@
+// Hand-made maps through the map builder, with exact expectations.
+#include "core/errors.hpp"
+#include "stages/ingest/map_builder.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <sstream>
+
+using namespace tigerlod;
+using namespace tigerlod::ingest;
+
+namespace {
+
+// Map coordinates: unit steps of 1000 micro-degrees (about 100 m) from (-96, 40).
+LonLatE6 ll(int x, int y)
+{
+    return {-96000000 + 1000 * x, 40000000 + 1000 * y};
+}
+
+const Projection& proj()
+{
+    static const Projection p{ProjectionParams{}};
+    return p;
+}
+GridPoint gp(int x, int y)
+{
+    const LonLatE6 p = ll(x, y);
+    return *proj().to_grid(p.lon * 1e-6, p.lat * 1e-6);
+}
+
+struct Built {
+    BuildResult result;
+    std::vector<chains::ChainStore> stores;
+    const chains::ChainStore& store(const std::string& level, const std::string& part = "all") const
+    {
+        for (const auto& s : stores) {
+            if (s.level_name == level && s.partition == part) {
+                return s;
+            }
+        }
+        throw std::runtime_error("no store " + level + "/" + part);
+    }
+};
+
+Built build(RawMap raw, double halo_m = 1000)
+{
+    Built b;
+    BuildOptions o;
+    o.halo_m = halo_m;
+    b.result = build_map(std::move(raw), proj(), o, [&](const chains::ChainStore& s) { b.stores.push_back(s); });
+    return b;
+}
+
+/// A chain as "LEFT|RIGHT x,y x,y ..." in map units, for exact comparisons.
+std::vector<std::string> describe(const chains::ChainStore& s, bool halo = false)
+{
+    std::vector<std::string> out;
+    for (const auto& c : s.chains) {
+        if (((c.flags & chains::chain_halo) != 0) != halo) {
+            continue;
+        }
+        std::ostringstream o;
+        o << s.strings[c.left] << "|" << s.strings[c.right];
+        for (GridPoint p : s.chain_points(c)) {
+            bool found = false;
+            for (int x = -3; x <= 6 && !found; ++x) {
+                for (int y = -3; y <= 6 && !found; ++y) {
+                    if (gp(x, y) == p) {
+                        o << " " << x << "," << y;
+                        found = true;
+                    }
+                }
+            }
+            if (!found) {
+                o << " ?";
+            }
+        }
+        out.push_back(o.str());
+    }
+    std::sort(out.begin(), out.end());
+    return out;
+}
+
+bool inside(const chains::ChainStore& s, const chains::ConstraintPoint& cp)
+{
+    PointInPolygon pip(cp.p);
+    for (const auto& c : s.chains) {
+        if ((c.left == cp.unit) != (c.right == cp.unit)) {
+            const auto pts = s.chain_points(c);
+            for (size_t k = 0; k + 1 < pts.size(); ++k) {
+                pip.add_segment(pts[k], pts[k + 1]);
+            }
+        }
+    }
+    return pip.location() == PointLocation::inside;
+}
+
+void edge(RawMap& m, std::vector<LonLatE6> pts, uint32_t l, uint32_t r, uint64_t tlid)
+{
+    m.add_polyline(pts, l, r, 0, tlid, {0, static_cast<int64_t>(tlid)});
+}
+
+/// Two coarse units A, B; B splits into B1 (north) and B2 (south) at the fine level:
+///
+///  (0,2)------(1,2)------(2,2)
+///    |    A     |    B1    |
+///    |          +----------(2,1)
+///    |          |    B2    |
+///  (0,0)------(1,0)------(2,0)
+RawMap t_junction_map()
+{
+    RawMap m;
+    m.kind = RawMap::Kind::edges;
+    m.level_names = {"coarse", "fine"};
+    m.files = {"hand"};
+    m.units = {{{"1", "1a"}, ll(0, 0), 1, {}}, {{"2", "2a"}, std::nullopt, 1, {}}, {{"2", "2b"}, std::nullopt, 1, {}}};
+    const uint32_t A = 0, B1 = 1, B2 = 2;
+    edge(m, {ll(0, 0), ll(1, 0)}, A, no_unit, 1);
+    edge(m, {ll(1, 0), ll(2, 0)}, B2, no_unit, 2);
+    edge(m, {ll(2, 0), ll(2, 1)}, B2, no_unit, 3);
+    edge(m, {ll(2, 1), ll(2, 2)}, B1, no_unit, 4);
+    edge(m, {ll(2, 2), ll(1, 2)}, B1, no_unit, 5);
+    edge(m, {ll(1, 2), ll(0, 2)}, A, no_unit, 6);
+    edge(m, {ll(0, 2), ll(0, 0)}, A, no_unit, 7);
+    edge(m, {ll(1, 0), ll(1, 1)}, A, B2, 8);
+    edge(m, {ll(1, 1), ll(1, 2)}, A, B1, 9);
+    edge(m, {ll(1, 1), ll(2, 1)}, B1, B2, 10);
+    return m;
+}
+
+} // namespace
+
+TEST(MapBuilder, ChainsMergeThroughDegreeTwoAndStopAtJunctions)
+{
+    const Built b = build(t_junction_map());
+    const auto& coarse = b.store("coarse");
+    // Junctions of degree 3 at (1,0) and (1,2); (1,1) and (2,1) have degree 2 at this level.
+    // Each chain starts at its smaller end (by lon, then lat); left and right are as walked:
+    // walking west along the bottom, A lies on the right.
+    EXPECT_EQ(describe(coarse),
+              (std::vector<std::string>{"1|2 1,0 1,1 1,2", "2| 1,0 2,0 2,1 2,2 1,2", "|1 1,0 0,0 0,2 1,2"}));
+    ASSERT_EQ(coarse.junctions.size(), 2U);
+    EXPECT_EQ(coarse.junctions[0].degree, 3U);
+    // Chain ids are the smallest TLID of their edges.
+    std::vector<uint64_t> ids;
+    for (const auto& c : coarse.chains) {
+        ids.push_back(c.id);
+    }
+    EXPECT_EQ(ids, (std::vector<uint64_t>{1, 2, 8}));
+    // The fine level, partitioned by the coarse unit: the chain between A and B is owned by "1".
+    EXPECT_EQ(describe(b.store("fine", "1")),
+              (std::vector<std::string>{"1a|2a 1,1 1,2", "1a|2b 1,0 1,1", "|1a 1,0 0,0 0,2 1,2"}));
+    EXPECT_EQ(describe(b.store("fine", "2")),
+              (std::vector<std::string>{"2a|2b 1,1 2,1", "2b| 1,0 2,0 2,1", "|2a 1,2 2,2 2,1"}));
+    EXPECT_EQ(b.result.levels[0].junctions, 2U);
+    EXPECT_EQ(b.result.levels[1].junctions, 4U);
+    EXPECT_EQ(b.result.levels[1].units, 3U);
+    EXPECT_EQ(b.result.problems.at("crossings"), 0U);
+}
+
+TEST(MapBuilder, HaloHoldsNeighbouringChainsReadOnly)
+{
+    const Built b = build(t_junction_map(), 50.0);
+    // Partition "2" sees the chains of partition "1" that touch it, as halo.
+    const auto halo = describe(b.store("fine", "2"), true);
+    EXPECT_NE(std::find(halo.begin(), halo.end(), "1a|2b 1,0 1,1"), halo.end());
+    EXPECT_NE(std::find(halo.begin(), halo.end(), "1a|2a 1,1 1,2"), halo.end());
+}
+
+TEST(MapBuilder, InternalPointsAreInsideTheirUnits)
+{
+    const Built b = build(t_junction_map());
+    for (const auto& s : b.stores) {
+        for (const auto& cp : s.constraints) {
+            // Unit A's given point (0,0) is its corner, on the boundary: it must be replaced.
+            EXPECT_TRUE(inside(s, cp)) << s.level_name << " " << s.strings[cp.unit];
+        }
+    }
+    EXPECT_EQ(b.result.problems.at("internal_points_replaced"), 2U);
+}
+
+TEST(MapBuilder, SharedPolygonEdgesMergeAndRingsCloseOnTheirSmallestVertex)
+{
+    // Two squares A | B sharing an edge, and an island C inside B (a hole in B).
+    //  (0,0)-(2,0)-(4,0); B has a hole (2.., as ring (3,1)(3,2)... scaled below.
+    RawMap m;
+    m.kind = RawMap::Kind::polygon_segments;
+    m.level_names = {"l"};
+    m.files = {"hand"};
+    m.units = {{{"A"}, std::nullopt, 4, {}}, {{"B"}, std::nullopt, 4, {}}, {{"C"}, std::nullopt, 1, {}}};
+    auto ring = [&](std::vector<LonLatE6> r, uint32_t unit, bool unit_left) {
+        for (size_t k = 0; k + 1 < r.size(); ++k) {
+            const LonLatE6 seg[2] = {r[k], r[k + 1]};
+            m.add_polyline(seg, unit_left ? unit : no_unit, unit_left ? no_unit : unit, 0, 0, {0, unit});
+        }
+    };
+    ring({ll(0, 0), ll(2, 0), ll(2, 4), ll(0, 4), ll(0, 0)}, 0, true);  // A, counter-clockwise
+    ring({ll(2, 0), ll(2, 4), ll(6, 4), ll(6, 0), ll(2, 0)}, 1, false); // B, clockwise
+    ring({ll(3, 1), ll(3, 3), ll(5, 3), ll(5, 1), ll(3, 1)}, 1, true);  // B's hole, clockwise
+    ring({ll(3, 1), ll(5, 1), ll(5, 3), ll(3, 3), ll(3, 1)}, 2, true);  // C
+    const Built b = build(std::move(m));
+    const auto& s = b.store("l");
+    // The island's ring starts at its smallest vertex (3,1) and heads to the smaller neighbour (3,3).
+    EXPECT_EQ(describe(s), (std::vector<std::string>{"A|B 2,0 2,4", "B| 2,0 6,0 6,4 2,4", "B|C 3,1 3,3 5,3 5,1 3,1",
+                                                     "|A 2,0 0,0 0,4 2,4"}));
+    EXPECT_EQ(b.result.levels[0].rings, 1U);
+    EXPECT_EQ(b.result.problems.at("overlapping_polygons"), 0U);
+    for (const auto& cp : s.constraints) {
+        EXPECT_TRUE(inside(s, cp)) << s.strings[cp.unit];
+    }
+    EXPECT_EQ(b.result.levels[0].computed_internal_points, 3U);
+    for (const auto& c : s.chains) {
+        EXPECT_EQ((c.flags & chains::chain_closed) != 0, s.chain_points(c).front() == s.chain_points(c).back());
+    }
+}
+
+TEST(MapBuilder, SnappingMergesNearPointsAndSpikesAreRepaired)
+{
+    RawMap m;
+    m.kind = RawMap::Kind::lines;
+    m.level_names = {"lines"};
+    m.files = {"hand"};
+    // 0,0 then a point 0.3 micro-degrees away (snaps onto it), then a p-q-p spike at 2,0.
+    LonLatE6 near = snap_e6(-96.0 + 0.3e-6, 40.0);
+    m.add_polyline(std::vector<LonLatE6>{ll(0, 0), near, ll(1, 0), ll(2, 0), ll(2, 1), ll(2, 0), ll(3, 0)}, no_unit,
+                   no_unit, 0, 0, {0, 0});
+    const Built b = build(std::move(m));
+    EXPECT_EQ(b.result.problems.at("duplicate_points"), 1U);
+    EXPECT_EQ(b.result.problems.at("spikes"), 1U);
+    EXPECT_EQ(describe(b.store("lines")), (std::vector<std::string>{"| 0,0 1,0 2,0 3,0"}));
+}
+
+TEST(MapBuilder, CrossingsTouchesAndOverlapsAreFoundAndMarked)
+{
+    RawMap m;
+    m.kind = RawMap::Kind::lines;
+    m.level_names = {"lines"};
+    m.files = {"hand"};
+    auto line = [&](std::vector<LonLatE6> p, int64_t f) { m.add_polyline(p, no_unit, no_unit, 0, 0, {0, f}); };
+    line({ll(0, 0), ll(2, 2)}, 0); // X with the next
+    line({ll(0, 2), ll(2, 0)}, 1);
+    // On the central meridian x is exactly 0, so these are exactly collinear after projection.
+    line({ll(0, 10), ll(0, 12)}, 2); // T: the next ends on its interior
+    line({ll(0, 11), ll(2, 11)}, 3);
+    line({ll(0, 6), ll(0, 8)}, 4); // collinear overlap with the next
+    line({ll(0, 7), ll(0, 9)}, 5);
+    line({ll(0, -2), ll(5, -2)}, 6); // clean
+    const Built b = build(std::move(m));
+    EXPECT_EQ(b.result.problems.at("crossings"), 1U);
+    EXPECT_EQ(b.result.problems.at("touches"), 1U);
+    EXPECT_EQ(b.result.problems.at("overlaps"), 1U);
+    size_t flagged = 0;
+    for (const auto& c : b.store("lines").chains) {
+        flagged += (c.flags & chains::chain_problem) != 0;
+    }
+    EXPECT_EQ(flagged, 6U); // every chain but the clean one
+    ASSERT_FALSE(b.result.samples.empty());
+    EXPECT_EQ(b.result.samples[0].kind, "crossings");
+    EXPECT_NEAR(b.result.samples[0].lon_deg, -96.0 + 0.001, 1e-6);
+    EXPECT_NEAR(b.result.samples[0].lat_deg, 40.0 + 0.001, 1e-5);
+}
+
+TEST(MapBuilder, OutputDoesNotDependOnThreads)
+{
+    auto run = [](unsigned threads) {
+        BuildOptions o;
+        o.threads = threads;
+        std::string all;
+        build_map(t_junction_map(), proj(), o, [&](const chains::ChainStore& s) { all += chains::encode(s); });
+        return all;
+    };
+    EXPECT_EQ(run(1), run(4));
+}
+
+TEST(MapBuilder, CoordinateOutsideTheProjectionIsAnInputError)
+{
+    ProjectionParams p;
+    p.kind = ProjectionParams::Kind::tm;
+    p.lon0_deg = 0;
+    const Projection tm(p);
+    RawMap m = t_junction_map();
+    EXPECT_THROW(build_map(std::move(m), tm, {}, [](const chains::ChainStore&) {}), input_error);
+}
