@@ -27,7 +27,8 @@ const std::vector<std::string> kinds = {"crossings",
                                         "unreferenced_units",
                                         "internal_points_replaced",
                                         "missing_internal_points",
-                                        "empty_geometries"};
+                                        "empty_geometries",
+                                        "snap_repairs"};
 
 uint64_t splitmix(uint64_t x) noexcept
 {
@@ -524,35 +525,226 @@ Level build_level(const Graph& g, const RawMap& raw, const std::vector<LevelCode
     return lev;
 }
 
-/// Check every boundary segment against every other; returns the edges involved.
-std::vector<uint32_t> check_planarity(const Graph& g, const std::vector<uint8_t>& checked, Problems& problems,
-                                      const RawMap& raw, unsigned threads)
+/// Which edges bound something at some level: the ones the planarity check covers.
+std::vector<uint8_t> checked_edges(const Graph& g, const RawMap& raw, const std::vector<LevelCodes>& lcs)
 {
+    std::vector<uint8_t> checked(g.edge_count(), 0);
+    for (size_t e = 0; e < g.edge_count(); ++e) {
+        bool b = raw.kind == RawMap::Kind::lines;
+        for (size_t L = 0; L < lcs.size() && !b; ++L) {
+            b = lcs[L].side(g.left[e]) != lcs[L].side(g.right[e]);
+        }
+        checked[e] = b;
+    }
+    return checked;
+}
+
+/// The segments of the checked edges, and where each lies: (edge, index of its first vertex).
+struct SegmentSet {
     std::vector<Segment> segs;
+    std::vector<std::pair<uint32_t, uint32_t>> at;
+};
+
+SegmentSet segments_of(const Graph& g, const std::vector<uint8_t>& checked)
+{
+    SegmentSet s;
     for (uint32_t e = 0; e < g.edge_count(); ++e) {
         if (!checked[e]) {
             continue;
         }
         const auto ev = g.edge(e);
-        for (size_t k = 0; k + 1 < ev.size(); ++k) {
-            segs.push_back({g.grid[ev[k]], g.grid[ev[k + 1]], e});
+        for (uint32_t k = 0; k + 1 < ev.size(); ++k) {
+            s.segs.push_back({g.grid[ev[k]], g.grid[ev[k + 1]], static_cast<uint32_t>(s.at.size())});
+            s.at.emplace_back(e, k);
         }
     }
-    const auto found = find_intersections(segs, threads);
-    std::vector<uint32_t> involved;
-    for (const auto& f : found) {
-        const Segment& s1 = segs[f.first];
-        const Segment& s2 = segs[f.second];
-        const char* kind = f.relation == SegmentRelation::cross     ? "crossings"
-                           : f.relation == SegmentRelation::overlap ? "overlaps"
-                                                                    : "touches";
-        problems.add(kind, f.x, f.y, raw.where(g.src[s1.tag]) + " " + raw.where(g.src[s2.tag]));
-        involved.push_back(s1.tag);
-        involved.push_back(s2.tag);
+    return s;
+}
+
+/// Squared distance from p to segment ab, in grid units.
+double distance2(GridPoint p, GridPoint a, GridPoint b)
+{
+    const double dx = static_cast<double>(int64_t{b.x} - a.x), dy = static_cast<double>(int64_t{b.y} - a.y);
+    const double px = static_cast<double>(int64_t{p.x} - a.x), py = static_cast<double>(int64_t{p.y} - a.y);
+    const double len2 = dx * dx + dy * dy;
+    const double t = len2 > 0 ? std::clamp((px * dx + py * dy) / len2, 0.0, 1.0) : 0.0;
+    const double ex = px - t * dx, ey = py - t * dy;
+    return ex * ex + ey * ey;
+}
+
+/// Snapping to the grid can push a vertex that lies within a fraction of the
+/// input precision of a segment across it. Where a vertex of a crossing,
+/// touching or overlapping pair is a plain pass-through vertex (degree 2 in the
+/// whole graph, the same units on each side) and dropping it moves the boundary
+/// by at most `max_shift` grid units, drop it, as snap rounding would, and
+/// check again. Returns the intersections that remain; repairs are counted.
+std::vector<Intersection> repair_snap_crossings(Graph& g, const RawMap& raw, const std::vector<LevelCodes>& lcs,
+                                                double max_shift, unsigned threads, Problems& problems)
+{
+    constexpr int max_rounds = 8;
+    for (int round = 0;; ++round) {
+        const SegmentSet s = segments_of(g, checked_edges(g, raw, lcs));
+        const std::vector<Intersection> by_segment = find_intersections(s.segs, threads);
+        std::vector<Intersection> found = by_segment;
+        for (auto& f : found) { // report edges, not segment indices
+            f.first = s.at[f.first].first;
+            f.second = s.at[f.second].first;
+        }
+        if (found.empty() || round == max_rounds) {
+            return found;
+        }
+        // Pass-through degree of every vertex in the whole graph.
+        std::vector<uint8_t> deg(g.keys.size(), 0);
+        auto bump = [&](uint32_t v, int n) { deg[v] = static_cast<uint8_t>(std::min(255, deg[v] + n)); };
+        for (size_t e = 0; e < g.edge_count(); ++e) {
+            const auto ev = g.edge(e);
+            bump(ev.front(), 1);
+            bump(ev.back(), 1);
+            for (size_t k = 1; k + 1 < ev.size(); ++k) {
+                bump(ev[k], 2);
+            }
+        }
+        // Ends at each vertex of degree 2, for joining two edges.
+        std::unordered_map<uint32_t, std::vector<uint32_t>> ends; // vertex -> edge*2 + (1 if it ends there)
+        for (uint32_t e = 0; e < g.edge_count(); ++e) {
+            const auto ev = g.edge(e);
+            for (uint32_t side = 0; side < 2; ++side) {
+                const uint32_t v = side ? ev.back() : ev.front();
+                if (deg[v] == 2) {
+                    ends[v].push_back(e * 2 + side);
+                }
+            }
+        }
+        std::vector<uint8_t> touched(g.edge_count(), 0);
+        std::vector<std::pair<uint32_t, uint32_t>> drop_interior; // (edge, vertex index)
+        std::vector<std::pair<uint32_t, uint32_t>> join;          // (edge ending at v, edge starting at v) as ends
+        for (const auto& f : by_segment) {
+            struct Candidate {
+                double d2;
+                uint32_t v;
+                uint32_t edge, index; // where v lies (index into the edge)
+            };
+            std::optional<Candidate> best;
+            for (uint32_t si : {f.first, f.second}) {
+                const auto [e, k] = s.at[si];
+                const auto ev = g.edge(e);
+                for (uint32_t idx : {k, k + 1}) {
+                    const uint32_t v = ev[idx];
+                    if (deg[v] != 2 || touched[e]) {
+                        continue;
+                    }
+                    GridPoint prev, next;
+                    if (idx > 0 && idx + 1 < ev.size()) {
+                        prev = g.grid[ev[idx - 1]];
+                        next = g.grid[ev[idx + 1]];
+                        if (ev.size() < 3 || (ev.front() == ev.back() && ev.size() < 5)) {
+                            continue;
+                        }
+                    } else {
+                        auto it = ends.find(v);
+                        if (it == ends.end() || it->second.size() != 2 || it->second[0] / 2 == it->second[1] / 2) {
+                            continue;
+                        }
+                        const uint32_t a = it->second[0], b = it->second[1];
+                        const auto ea = g.edge(a / 2), eb = g.edge(b / 2);
+                        prev = g.grid[(a & 1U) ? ea[ea.size() - 2] : ea[1]];
+                        next = g.grid[(b & 1U) ? eb[eb.size() - 2] : eb[1]];
+                        // The units on each side must carry through v.
+                        const bool same_dir = (a & 1U) != (b & 1U);
+                        const uint32_t la = g.left[a / 2], ra = g.right[a / 2];
+                        const uint32_t lb = same_dir ? g.left[b / 2] : g.right[b / 2];
+                        const uint32_t rb = same_dir ? g.right[b / 2] : g.left[b / 2];
+                        if (la != lb || ra != rb || touched[a / 2] || touched[b / 2] || prev == next) {
+                            continue;
+                        }
+                    }
+                    // Dropping v must resolve this pair: its replacement segment may meet the
+                    // pair's other segment at a shared end point only.
+                    const Segment& other = s.segs[si == f.first ? f.second : f.first];
+                    const SegmentRelation after = segment_relation(prev, next, other.a, other.b);
+                    if (after != SegmentRelation::disjoint && after != SegmentRelation::shared_endpoint) {
+                        continue;
+                    }
+                    const double d2 = distance2(g.grid[v], prev, next);
+                    if (d2 <= max_shift * max_shift && (!best || d2 < best->d2 || (d2 == best->d2 && v < best->v))) {
+                        best = Candidate{d2, v, e, idx};
+                    }
+                }
+            }
+            if (!best) {
+                continue;
+            }
+            const auto ev = g.edge(best->edge);
+            const GridPoint at = g.grid[best->v];
+            problems.add("snap_repairs", at.x, at.y, raw.where(g.src[best->edge]));
+            if (best->index > 0 && best->index + 1 < ev.size()) {
+                drop_interior.emplace_back(best->edge, best->index);
+                touched[best->edge] = 1;
+            } else {
+                const auto& two = ends.at(best->v);
+                join.emplace_back(two[0], two[1]);
+                touched[two[0] / 2] = touched[two[1] / 2] = 1;
+            }
+        }
+        if (drop_interior.empty() && join.empty()) {
+            return found;
+        }
+        // Rebuild the edges with the repairs applied, in the same order.
+        std::vector<int64_t> drop_at(g.edge_count(), -1);
+        for (auto [e, idx] : drop_interior) {
+            drop_at[e] = idx;
+        }
+        std::vector<int64_t> joined_with(g.edge_count(), -1); // first edge -> end code of the second
+        std::vector<uint8_t> absorbed(g.edge_count(), 0);
+        for (auto [a, b] : join) {
+            const uint32_t first = std::min(a / 2, b / 2);
+            const uint32_t second_end = a / 2 == first ? b : a;
+            const uint32_t first_end = a / 2 == first ? a : b;
+            joined_with[first] = static_cast<int64_t>(second_end) * 2 + (first_end & 1U);
+            absorbed[second_end / 2] = 1;
+        }
+        Graph out;
+        out.keys = std::move(g.keys);
+        out.grid = std::move(g.grid);
+        std::vector<uint32_t> pts;
+        for (uint32_t e = 0; e < g.edge_count(); ++e) {
+            if (absorbed[e]) {
+                continue;
+            }
+            const auto ev = g.edge(e);
+            pts.assign(ev.begin(), ev.end());
+            uint32_t left = g.left[e], right = g.right[e];
+            uint64_t sid = g.sid[e];
+            if (drop_at[e] >= 0) {
+                pts.erase(pts.begin() + drop_at[e]);
+            } else if (joined_with[e] >= 0) {
+                const auto code = static_cast<uint64_t>(joined_with[e]);
+                const bool first_ends_at_v = (code & 1U) != 0;
+                const uint32_t second_end = static_cast<uint32_t>(code >> 1);
+                if (!first_ends_at_v) { // make this edge end at v
+                    std::reverse(pts.begin(), pts.end());
+                    std::swap(left, right);
+                }
+                const auto sv = g.edge(second_end / 2);
+                pts.pop_back(); // v
+                if (second_end & 1U) {
+                    pts.insert(pts.end(), sv.rbegin() + 1, sv.rend());
+                } else {
+                    pts.insert(pts.end(), sv.begin() + 1, sv.end());
+                }
+                const uint64_t other = g.sid[second_end / 2];
+                sid = sid == 0 ? other : (other == 0 ? sid : std::min(sid, other));
+            }
+            out.verts.insert(out.verts.end(), pts.begin(), pts.end());
+            out.off.push_back(out.verts.size());
+            out.left.push_back(left);
+            out.right.push_back(right);
+            out.cls.push_back(g.cls[e]);
+            out.sid.push_back(sid);
+            out.src.push_back(g.src[e]);
+        }
+        g = std::move(out);
     }
-    std::sort(involved.begin(), involved.end());
-    involved.erase(std::unique(involved.begin(), involved.end()), involved.end());
-    return involved;
 }
 
 /// The best point strictly inside a unit, from its boundary segments; std::nullopt if none found.
@@ -653,17 +845,20 @@ BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptio
             }
         }
     }
-    // One planarity check over every edge that bounds something at some level.
-    std::vector<uint8_t> checked(g.edge_count(), 0);
-    for (size_t e = 0; e < g.edge_count(); ++e) {
-        bool b = raw.kind == RawMap::Kind::lines;
-        for (size_t L = 0; L < nlev && !b; ++L) {
-            b = lcs[L].side(g.left[e]) != lcs[L].side(g.right[e]);
-        }
-        checked[e] = b;
+    // One planarity check over every edge that bounds something at some level,
+    // with safe repairs of crossings that snapping made.
+    const double max_shift = options.max_snap_shift_m / projection.params().grid_m;
+    std::vector<uint32_t> bad_edges;
+    for (const auto& f : repair_snap_crossings(g, raw, lcs, max_shift, options.threads, problems)) {
+        const char* kind = f.relation == SegmentRelation::cross     ? "crossings"
+                           : f.relation == SegmentRelation::overlap ? "overlaps"
+                                                                    : "touches";
+        problems.add(kind, f.x, f.y, raw.where(g.src[f.first]) + " " + raw.where(g.src[f.second]));
+        bad_edges.push_back(f.first);
+        bad_edges.push_back(f.second);
     }
-    const auto bad_edges = check_planarity(g, checked, problems, raw, options.threads);
-    checked = {};
+    std::sort(bad_edges.begin(), bad_edges.end());
+    bad_edges.erase(std::unique(bad_edges.begin(), bad_edges.end()), bad_edges.end());
 
     const double halo_grid = options.halo_m / projection.params().grid_m;
     for (size_t L = 0; L < nlev; ++L) {
@@ -695,14 +890,22 @@ BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptio
         // partition's own chains, found on cells at least as large as the distance.
         std::vector<std::vector<uint32_t>> halo(npart);
         if (npart > 1) {
-            std::vector<SegmentRef> owned;
+            std::vector<SegmentRef> refs;
             for (uint32_t ci = 0; ci < lev.chains.size(); ++ci) {
-                const auto cv = lev.chain(lev.chains[ci]);
+                const auto& c = lev.chains[ci];
+                // A border between two parts bounds both: the other part's units need it.
+                uint32_t also = none;
+                for (uint32_t side : {c.left, c.right}) {
+                    if (side != none && parent(side) != c.owner) {
+                        also = parent(side);
+                    }
+                }
+                const auto cv = lev.chain(c);
                 for (size_t k = 0; k + 1 < cv.size(); ++k) {
-                    owned.push_back({g.grid[cv[k]], g.grid[cv[k + 1]], ci, lev.chains[ci].owner});
+                    refs.push_back({g.grid[cv[k]], g.grid[cv[k + 1]], ci, c.owner, also});
                 }
             }
-            for (const auto& [chain, part] : find_near(owned, halo_grid)) {
+            for (const auto& [chain, part] : find_near(refs, halo_grid)) {
                 halo[part].push_back(chain);
             }
         }

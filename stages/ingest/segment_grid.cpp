@@ -182,6 +182,9 @@ std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRe
         cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
         for (uint64_t k : cells) {
             reach.emplace_back(k, segs[i].part);
+            if (segs[i].also != UINT32_MAX) {
+                reach.emplace_back(k, segs[i].also);
+            }
         }
         i = j;
     }
@@ -207,13 +210,13 @@ std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRe
         }
         i = j;
     }
-    std::sort(out.begin(), out.end());
-    out.erase(std::unique(out.begin(), out.end()), out.end());
     std::vector<std::pair<uint32_t, uint32_t>> result;
     result.reserve(out.size());
     for (auto [part, chain] : out) {
         result.emplace_back(chain, part);
     }
+    std::sort(result.begin(), result.end());
+    result.erase(std::unique(result.begin(), result.end()), result.end());
     return result;
 }
 

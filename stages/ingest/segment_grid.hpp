@@ -33,13 +33,15 @@ std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, u
 struct SegmentRef {
     GridPoint a, b;
     uint32_t chain = 0;
-    uint32_t part = 0;
+    uint32_t part = 0;          ///< the part that owns the chain
+    uint32_t also = UINT32_MAX; ///< another part the chain bounds (a border between parts), if any
 };
 
 /// Pairs (chain, part) such that a segment of `chain` (owned by another part)
-/// comes within `distance` grid units of a segment owned by `part`. A
-/// conservative superset: pairs up to about two cells apart may be included.
-/// Sorted by (part, chain).
+/// comes within `distance` grid units of a segment that bounds `part` (owned
+/// by it, or a border of it). A conservative superset: pairs up to about two
+/// cells apart may be included. Segments of one chain must be consecutive.
+/// Sorted by (chain, part).
 std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRef>& segs, double distance);
 
 } // namespace tigerlod::ingest

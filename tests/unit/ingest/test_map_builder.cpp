@@ -282,3 +282,42 @@ TEST(MapBuilder, CoordinateOutsideTheProjectionIsAnInputError)
     RawMap m = t_junction_map();
     EXPECT_THROW(build_map(std::move(m), tm, {}, [](const chains::ChainStore&) {}), input_error);
 }
+
+TEST(MapBuilder, SnapRepairDropsAPassThroughVertexWithinThePrecisionOnly)
+{
+    // A line on the central meridian (x = 0 exactly), and a second line with a
+    // vertex V on it, its neighbours 1 micro-degree (8.5 cm) west:
+    //        W2
+    //   |   /
+    //   |  V      V touches the first line; dropping V moves the second by 8.5 cm.
+    //   |   \ .
+    //        W1
+    auto make = [] {
+        RawMap m;
+        m.kind = RawMap::Kind::lines;
+        m.level_names = {"lines"};
+        m.files = {"hand"};
+        const LonLatE6 v = ll(0, 2);
+        m.add_polyline(std::vector<LonLatE6>{ll(0, 0), ll(0, 4)}, no_unit, no_unit, 0, 0, {0, 0});
+        m.add_polyline(std::vector<LonLatE6>{{v.lon - 1, v.lat - 1000}, v, {v.lon - 1, v.lat + 1000}}, no_unit, no_unit,
+                       0, 0, {0, 1});
+        return m;
+    };
+    auto run = [&](double max_shift_m) {
+        BuildOptions o;
+        o.max_snap_shift_m = max_shift_m;
+        Built b;
+        b.result = build_map(make(), proj(), o, [&](const chains::ChainStore& s) { b.stores.push_back(s); });
+        return b;
+    };
+    const Built repaired = run(0.12);
+    EXPECT_EQ(repaired.result.problems.at("snap_repairs"), 1U);
+    EXPECT_EQ(repaired.result.problems.at("touches"), 0U);
+    ASSERT_EQ(repaired.stores.size(), 1U);
+    for (const auto& c : repaired.stores[0].chains) {
+        EXPECT_EQ(c.count, 2U); // V is gone from the second line
+    }
+    const Built kept = run(0.05);
+    EXPECT_EQ(kept.result.problems.at("snap_repairs"), 0U);
+    EXPECT_EQ(kept.result.problems.at("touches"), 2U); // counted per segment pair: both segments at V
+}

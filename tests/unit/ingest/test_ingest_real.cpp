@@ -1,0 +1,205 @@
+// Invariants on real data from ../shared/data (skipped with a reason when absent)
+// and on the default dataset (us-atlas, fetched by scripts/test into .cache/).
+#include "core/errors.hpp"
+#include "stages/ingest/config.hpp"
+#include "stages/ingest/map_builder.hpp"
+#include "stages/ingest/sources.hpp"
+
+#include <gdal.h>
+#include <ogr_api.h>
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <map>
+#include <set>
+
+namespace fs = std::filesystem;
+using namespace tigerlod;
+using namespace tigerlod::ingest;
+
+namespace {
+
+const fs::path source_dir = TIGERLOD_SOURCE_DIR;
+const fs::path shared_data = source_dir.parent_path() / "shared" / "data";
+
+struct Ingested {
+    BuildResult result;
+    std::vector<chains::ChainStore> stores;
+    size_t finest_units = 0;
+};
+
+Ingested run_ingest(const fs::path& config, unsigned threads = 2)
+{
+    const IngestConfig cfg = load_config(config);
+    Log log;
+    RawMap raw = read_dataset(cfg, log);
+    Ingested run;
+    run.finest_units = raw.units.size();
+    BuildOptions o;
+    o.halo_m = cfg.halo_m;
+    o.threads = threads;
+    run.result = build_map(std::move(raw), Projection(cfg.projection), o,
+                           [&](const chains::ChainStore& s) { run.stores.push_back(s); });
+    return run;
+}
+
+std::map<std::string, uint64_t> units_per_level(const Ingested& r)
+{
+    std::map<std::string, uint64_t> out;
+    for (const auto& l : r.result.levels) {
+        out[l.name] = l.units;
+    }
+    return out;
+}
+
+/// Every constraint point strictly inside its unit, by an exact test against the
+/// store's own chains (halo included: a unit's border may belong to a neighbour
+/// partition); every unit of each partition has exactly one point.
+void expect_points_inside(const Ingested& r)
+{
+    size_t checked = 0;
+    for (const auto& s : r.stores) {
+        std::set<uint32_t> seen;
+        for (const auto& cp : s.constraints) {
+            EXPECT_TRUE(seen.insert(cp.unit).second) << s.level_name << " " << s.strings[cp.unit];
+            PointInPolygon pip(cp.p);
+            for (const auto& c : s.chains) {
+                if ((c.left == cp.unit) != (c.right == cp.unit)) {
+                    const auto pts = s.chain_points(c);
+                    for (size_t k = 0; k + 1 < pts.size(); ++k) {
+                        pip.add_segment(pts[k], pts[k + 1]);
+                    }
+                }
+            }
+            EXPECT_EQ(pip.location(), PointLocation::inside)
+                << s.level_name << "/" << s.partition << " unit " << s.strings[cp.unit];
+            ++checked;
+        }
+    }
+    uint64_t units = 0;
+    for (const auto& l : r.result.levels) {
+        units += l.units;
+    }
+    EXPECT_EQ(checked, units);
+}
+
+void expect_no_topology_problems(const Ingested& r)
+{
+    for (const char* kind : {"crossings", "touches", "overlaps", "overlapping_polygons", "non_nesting_units",
+                             "missing_internal_points", "degenerate_polylines"}) {
+        EXPECT_EQ(r.result.problems.at(kind), 0U) << kind;
+    }
+    for (const auto& s : r.stores) {
+        for (const auto& c : s.chains) {
+            EXPECT_EQ(c.flags & chains::chain_problem, 0U) << s.level_name << " chain " << c.id;
+        }
+    }
+}
+
+/// Distinct values of `field` (cut to each prefix length) over the features of the layers in `zips`.
+std::vector<size_t> distinct_prefixes(const std::vector<fs::path>& zips, const char* field,
+                                      const std::vector<size_t>& prefixes)
+{
+    GDALAllRegister();
+    std::vector<std::set<std::string>> sets(prefixes.size());
+    for (const auto& z : zips) {
+        GDALDatasetH ds = GDALOpenEx(("/vsizip/" + z.string()).c_str(), GDAL_OF_VECTOR, nullptr, nullptr, nullptr);
+        EXPECT_NE(ds, nullptr) << z;
+        if (ds == nullptr) {
+            continue;
+        }
+        OGRLayerH layer = GDALDatasetGetLayer(ds, 0);
+        const int fi = OGR_FD_GetFieldIndex(OGR_L_GetLayerDefn(layer), field);
+        OGRFeatureH f;
+        while ((f = OGR_L_GetNextFeature(layer)) != nullptr) {
+            const std::string v = OGR_F_GetFieldAsString(f, fi);
+            for (size_t i = 0; i < prefixes.size(); ++i) {
+                sets[i].insert(v.substr(0, prefixes[i]));
+            }
+            OGR_F_Destroy(f);
+        }
+        GDALClose(ds);
+    }
+    std::vector<size_t> out;
+    for (const auto& s : sets) {
+        out.push_back(s.size());
+    }
+    return out;
+}
+
+} // namespace
+
+TEST(IngestReal, FloydCountyLevelsFacesAndPoints)
+{
+    if (!fs::exists(shared_data / "tiger" / "tl_2020_51063_edges.zip")) {
+        GTEST_SKIP() << "../shared/data/tiger is absent: Floyd County tests need it";
+    }
+    const Ingested r = run_ingest(source_dir / "configs" / "floyd.yaml");
+    EXPECT_EQ(units_per_level(r), (std::map<std::string, uint64_t>{
+                                      {"state", 1}, {"county", 1}, {"tract", 5}, {"block_group", 12}, {"block", 709}}));
+    // Every face is accounted for: all 3,086 read, each bounding some edge.
+    EXPECT_EQ(r.finest_units, 3086U);
+    EXPECT_EQ(r.result.problems.at("unreferenced_units"), 0U);
+    EXPECT_EQ(r.result.input_vertices, 209304U);
+    expect_no_topology_problems(r);
+    expect_points_inside(r);
+    // The county is one closed ring at the county level.
+    EXPECT_EQ(r.result.levels[1].chains, 1U);
+    EXPECT_EQ(r.result.levels[1].rings, 1U);
+}
+
+TEST(IngestReal, FloydIsByteIdenticalAcrossThreadCounts)
+{
+    if (!fs::exists(shared_data / "tiger" / "tl_2020_51063_edges.zip")) {
+        GTEST_SKIP() << "../shared/data/tiger is absent: Floyd County tests need it";
+    }
+    auto bytes = [](const Ingested& r) {
+        std::string all;
+        for (const auto& s : r.stores) {
+            all += chains::encode(s);
+        }
+        return all;
+    };
+    EXPECT_EQ(bytes(run_ingest(source_dir / "configs" / "floyd.yaml", 1)),
+              bytes(run_ingest(source_dir / "configs" / "floyd.yaml", 2)));
+}
+
+TEST(IngestReal, TwentyStateTracts)
+{
+    const fs::path dir = shared_data / "tiger" / "tracts2010";
+    if (!fs::exists(dir)) {
+        GTEST_SKIP() << "../shared/data/tiger/tracts2010 is absent: the 20-state tract test needs it";
+    }
+    std::vector<fs::path> zips;
+    for (const auto& e : fs::directory_iterator(dir)) {
+        zips.push_back(e.path());
+    }
+    ASSERT_EQ(zips.size(), 20U);
+    const auto want = distinct_prefixes(zips, "GEOID10", {2, 5, 11});
+    const Ingested r = run_ingest(source_dir / "configs" / "tracts2010.yaml");
+    EXPECT_EQ(units_per_level(r), (std::map<std::string, uint64_t>{
+                                      {"nation", 1}, {"state", want[0]}, {"county", want[1]}, {"tract", want[2]}}));
+    EXPECT_EQ(want[2], 6606U);
+    EXPECT_EQ(r.result.input_vertices, 3807105U);
+    // One vertex of a Kansas tract (20051072600) lies 0.2 cm from a segment it is pushed across by the
+    // 1 cm grid; the repair drops the 1e-6 degree stub next to it (a 0.11 m move).
+    EXPECT_EQ(r.result.problems.at("snap_repairs"), 1U);
+    expect_no_topology_problems(r);
+    expect_points_inside(r);
+}
+
+TEST(IngestReal, DefaultDatasetUsAtlas)
+{
+    const fs::path file = source_dir / ".cache" / "npm" / "us-atlas-3.0.1" / "counties-10m.json";
+    if (!fs::exists(file)) {
+        GTEST_SKIP() << ".cache/npm/us-atlas-3.0.1 is absent: run scripts/fetch-npm us-atlas@3.0.1 "
+                        ".cache/npm/us-atlas-3.0.1 (scripts/test does)";
+    }
+    const Ingested r = run_ingest(source_dir / "configs" / "demo.yaml");
+    // 3,231 counties, one without geometry; 56 states and territories.
+    EXPECT_EQ(r.result.problems.at("empty_geometries"), 1U);
+    EXPECT_EQ(units_per_level(r), (std::map<std::string, uint64_t>{{"nation", 1}, {"state", 56}, {"county", 3230}}));
+    EXPECT_EQ(r.result.problems.at("missing_internal_points"), 0U);
+    expect_points_inside(r);
+}

@@ -1,0 +1,91 @@
+// The grid search must find exactly what a brute-force all-pairs check finds.
+#include "stages/ingest/segment_grid.hpp"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+using namespace tigerlod;
+using namespace tigerlod::ingest;
+
+namespace {
+
+std::vector<std::tuple<uint32_t, uint32_t, SegmentRelation>> brute_force(const std::vector<Segment>& segs)
+{
+    std::vector<std::tuple<uint32_t, uint32_t, SegmentRelation>> out;
+    for (uint32_t i = 0; i < segs.size(); ++i) {
+        for (uint32_t j = i + 1; j < segs.size(); ++j) {
+            const auto r = segment_relation(segs[i].a, segs[i].b, segs[j].a, segs[j].b);
+            if (r != SegmentRelation::disjoint && r != SegmentRelation::shared_endpoint) {
+                out.emplace_back(i, j, r);
+            }
+        }
+    }
+    return out;
+}
+
+} // namespace
+
+TEST(SegmentGrid, MatchesBruteForceOnRandomSegments)
+{
+    std::mt19937 rng(12345);
+    for (int round = 0; round < 20; ++round) {
+        // Mixed lengths on a small lattice, so shared ends, touches and overlaps all occur.
+        std::uniform_int_distribution<int> coord(0, 40), len(1, round % 2 ? 40 : 4);
+        std::vector<Segment> segs;
+        for (uint32_t i = 0; i < 300; ++i) {
+            const GridPoint a{coord(rng), coord(rng)};
+            GridPoint b{a.x + len(rng) * (coord(rng) % 3 - 1), a.y + len(rng) * (coord(rng) % 3 - 1)};
+            if (a == b) {
+                b.x += 1;
+            }
+            segs.push_back({a, b, i});
+        }
+        const auto want = brute_force(segs);
+        for (unsigned threads : {1U, 3U}) {
+            const auto got = find_intersections(segs, threads);
+            ASSERT_EQ(got.size(), want.size()) << "round " << round;
+            for (size_t k = 0; k < got.size(); ++k) {
+                EXPECT_EQ(got[k].first, std::get<0>(want[k]));
+                EXPECT_EQ(got[k].second, std::get<1>(want[k]));
+                EXPECT_EQ(got[k].relation, std::get<2>(want[k]));
+            }
+        }
+    }
+}
+
+TEST(SegmentGrid, LongDiagonalsAmongShortSegments)
+{
+    // A 2^30-long diagonal among short segments: the supercover must still find the hit.
+    std::vector<Segment> segs;
+    const int32_t big = 1 << 30;
+    segs.push_back({{0, 0}, {big, big}, 0});
+    for (uint32_t i = 1; i < 200; ++i) {
+        const int32_t x = static_cast<int32_t>(i) * (big / 200);
+        segs.push_back({{x + 10, x - 10}, {x + 30, x - 30}, i}); // near the diagonal, not on it
+    }
+    segs.push_back({{big / 2 - 5, big / 2 + 5}, {big / 2 + 5, big / 2 - 5}, 200}); // crosses it
+    const auto got = find_intersections(segs, 2);
+    ASSERT_EQ(got.size(), 1U);
+    EXPECT_EQ(got[0].first, 0U);
+    EXPECT_EQ(got[0].second, 200U);
+    EXPECT_EQ(got[0].relation, SegmentRelation::cross);
+    EXPECT_NEAR(got[0].x, big / 2, 1.0);
+}
+
+TEST(SegmentGrid, NearFindsChainsWithinTheDistanceOnly)
+{
+    // Part 0 owns a chain along y=0; part 1 owns one 50 units above and one 5000 above.
+    std::vector<SegmentRef> segs = {
+        {{0, 0}, {1000, 0}, 0, 0}, {{0, 50}, {1000, 50}, 1, 1}, {{0, 5000}, {1000, 5000}, 2, 1}};
+    const auto near = find_near(segs, 100.0);
+    EXPECT_EQ(near, (std::vector<std::pair<uint32_t, uint32_t>>{{0, 1}, {1, 0}}));
+}
+
+TEST(SegmentGrid, BordersReachBothParts)
+{
+    // Part 2 owns nothing near chain 0, but chain 0 (owned by part 0) bounds part 2: it is in part 2's halo.
+    std::vector<SegmentRef> segs = {{{0, 0}, {1000, 0}, 0, 0, 2}, {{0, 90000}, {1000, 90000}, 1, 2}};
+    const auto near = find_near(segs, 100.0);
+    EXPECT_EQ(near, (std::vector<std::pair<uint32_t, uint32_t>>{{0, 2}}));
+}
