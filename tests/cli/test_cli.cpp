@@ -1,0 +1,327 @@
+// The executables as a user runs them: --help, success writing nothing to
+// stderr, determinism, and every kind of bad input failing with the
+// documented exit code, a message naming the file and fault, and nothing
+// half-written.
+#include <cpl_conv.h>
+#include <gdal.h>
+#include <ogr_api.h>
+#include <ogr_srs_api.h>
+
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <sys/wait.h>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+const fs::path bin_dir = TIGERLOD_BIN_DIR;
+
+struct Result {
+    int code = -1;
+    std::string out, err;
+};
+
+std::string slurp(const fs::path& p)
+{
+    std::ifstream in(p, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+class Cli : public ::testing::Test {
+  protected:
+    void SetUp() override
+    {
+        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+        m_dir = fs::temp_directory_path() / (std::string("tigerlod-cli-") + info->name());
+        fs::remove_all(m_dir);
+        fs::create_directories(m_dir);
+        GDALAllRegister();
+    }
+    void TearDown() override { fs::remove_all(m_dir); }
+
+    Result run(const std::string& tool, const std::string& args)
+    {
+        const std::string cmd = (bin_dir / ("tigerlod-" + tool)).string() + " " + args + " >" +
+                                (m_dir / "stdout").string() + " 2>" + (m_dir / "stderr").string();
+        const int status = std::system(cmd.c_str());
+        Result r;
+        r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+        r.out = slurp(m_dir / "stdout");
+        r.err = slurp(m_dir / "stderr");
+        return r;
+    }
+
+    /// Write a shapefile of `type` with the given fields and features (WKT, then one value per field).
+    void write_shp(const fs::path& path, OGRwkbGeometryType type, const std::vector<std::string>& fields,
+                   const std::vector<std::vector<std::string>>& features)
+    {
+        GDALDriverH drv = GDALGetDriverByName("ESRI Shapefile");
+        GDALDatasetH ds = GDALCreate(drv, path.c_str(), 0, 0, 0, GDT_Unknown, nullptr);
+        ASSERT_NE(ds, nullptr);
+        OGRSpatialReferenceH srs = OSRNewSpatialReference(nullptr);
+        OSRImportFromEPSG(srs, 4269);
+        OSRSetAxisMappingStrategy(srs, OAMS_TRADITIONAL_GIS_ORDER);
+        OGRLayerH layer = GDALDatasetCreateLayer(ds, path.stem().c_str(), srs, type, nullptr);
+        for (const auto& f : fields) {
+            const bool is_int = f == "TLID" || f == "TFIDL" || f == "TFIDR" || f == "TFID";
+            OGRFieldDefnH fd = OGR_Fld_Create(f.c_str(), is_int ? OFTInteger64 : OFTString);
+            ASSERT_EQ(OGR_L_CreateField(layer, fd, TRUE), OGRERR_NONE);
+            OGR_Fld_Destroy(fd);
+        }
+        for (const auto& values : features) {
+            OGRFeatureH feat = OGR_F_Create(OGR_L_GetLayerDefn(layer));
+            OGRGeometryH g = nullptr;
+            char* wkt = const_cast<char*>(values[0].c_str());
+            OGR_G_CreateFromWkt(&wkt, srs, &g);
+            OGR_F_SetGeometryDirectly(feat, g);
+            for (size_t i = 1; i < values.size(); ++i) {
+                OGR_F_SetFieldString(feat, static_cast<int>(i - 1), values[i].c_str());
+            }
+            ASSERT_EQ(OGR_L_CreateFeature(layer, feat), OGRERR_NONE);
+            OGR_F_Destroy(feat);
+        }
+        OSRDestroySpatialReference(srs);
+        GDALClose(ds);
+    }
+
+    /// Zip the files of a shapefile (or any files) into `zip`.
+    void zip(const fs::path& zip_path, const std::vector<fs::path>& files)
+    {
+        void* z = CPLCreateZip(zip_path.c_str(), nullptr);
+        ASSERT_NE(z, nullptr);
+        for (const auto& f : files) {
+            const std::string data = slurp(f);
+            CPLCreateFileInZip(z, f.filename().c_str(), nullptr);
+            CPLWriteFileInZip(z, data.data(), static_cast<int>(data.size()));
+            CPLCloseFileInZip(z);
+        }
+        CPLCloseZip(z);
+    }
+    std::vector<fs::path> shp_files(const fs::path& shp)
+    {
+        std::vector<fs::path> out;
+        for (const char* ext : {".shp", ".shx", ".dbf", ".prj"}) {
+            out.push_back(fs::path(shp).replace_extension(ext));
+        }
+        return out;
+    }
+
+    /// A county of three faces (A; B1 north of B2) as TIGER EDGES and FACES zips.
+    void make_tiger(const std::string& tag = "")
+    {
+        auto p = [](double x, double y) {
+            std::ostringstream o;
+            o.precision(10);
+            o << (-96.0 + 0.001 * x) << " " << (40.0 + 0.001 * y);
+            return o.str();
+        };
+        auto line = [&](std::initializer_list<std::pair<double, double>> pts) {
+            std::string s = "LINESTRING (";
+            for (auto [x, y] : pts) {
+                s += (s.back() == '(' ? "" : ",") + p(x, y);
+            }
+            return s + ")";
+        };
+        const std::vector<std::string> ef = {"TLID", "TFIDL", "TFIDR", "MTFCC"};
+        write_shp(m_dir / ("edges" + tag + ".shp"), wkbLineString, ef,
+                  {{line({{0, 0}, {1, 0}}), "1", "101", "900", "F"},
+                   {line({{1, 0}, {2, 0}}), "2", "103", "900", "F"},
+                   {line({{2, 0}, {2, 1}}), "3", "103", "900", "F"},
+                   {line({{2, 1}, {2, 2}}), "4", "102", "900", "F"},
+                   {line({{2, 2}, {1, 2}}), "5", "102", "900", "F"},
+                   {line({{1, 2}, {0, 2}}), "6", "101", "900", "F"},
+                   {line({{0, 2}, {0, 0}}), "7", "101", "900", "F"},
+                   {line({{1, 0}, {1, 1}}), "8", "101", "103", "F"},
+                   {line({{1, 1}, {1, 2}}), "9", "101", "102", "F"},
+                   {line({{1, 1}, {2, 1}}), "10", "102", "103", "F"}});
+        const std::vector<std::string> ff = {"TFID",      "STATEFP20", "COUNTYFP20", "TRACTCE20", "BLKGRPCE20",
+                                             "BLOCKCE20", "INTPTLAT",  "INTPTLON",   "ATOTAL"};
+        auto poly = [&](double x0, double y0, double x1, double y1) {
+            return "POLYGON ((" + p(x0, y0) + "," + p(x0, y1) + "," + p(x1, y1) + "," + p(x1, y0) + "," + p(x0, y0) +
+                   "))";
+        };
+        write_shp(m_dir / ("faces" + tag + ".shp"), wkbPolygon, ff,
+                  {{poly(0, 0, 1, 2), "101", "51", "063", "920100", "1", "1000", "+40.0010", "-095.9995", "5"},
+                   {poly(1, 1, 2, 2), "102", "51", "063", "920200", "1", "1001", "+40.0015", "-095.9985", "5"},
+                   {poly(1, 0, 2, 1), "103", "51", "063", "920200", "2", "2000", "+40.0005", "-095.9985", "5"}});
+        zip(m_dir / ("edges" + tag + ".zip"), shp_files(m_dir / ("edges" + tag + ".shp")));
+        zip(m_dir / ("faces" + tag + ".zip"), shp_files(m_dir / ("faces" + tag + ".shp")));
+    }
+
+    fs::path config(const std::string& body)
+    {
+        const fs::path p = m_dir / "config.yaml";
+        std::ofstream(p) << "name: t\n" << body;
+        return p;
+    }
+    fs::path tiger_config(const std::string& edges = "edges.zip", const std::string& faces = "faces.zip",
+                          const std::string& extra = "")
+    {
+        return config("dataset:\n  kind: tiger\n  edges: [" + edges + "]\n  faces: [" + faces + "]\n" + extra);
+    }
+
+    /// A failure: the code, a message fragment, nothing in or beside the output folder.
+    void expect_failure(const Result& r, int code, const std::string& fragment)
+    {
+        EXPECT_EQ(r.code, code) << r.err;
+        EXPECT_NE(r.err.find(fragment), std::string::npos) << "stderr: " << r.err;
+        EXPECT_NE(r.err.find("tigerlod-"), std::string::npos) << r.err;
+        EXPECT_FALSE(fs::exists(m_dir / "out"));
+        for (const auto& e : fs::directory_iterator(m_dir)) {
+            EXPECT_EQ(e.path().filename().string().find("out.tmp-"), std::string::npos) << e.path();
+        }
+    }
+    std::string out() const { return (m_dir / "out").string(); }
+
+    fs::path m_dir;
+};
+
+} // namespace
+
+TEST_F(Cli, HelpAndVersion)
+{
+    for (const char* tool : {"ingest", "dump"}) {
+        const Result h = run(tool, "--help");
+        EXPECT_EQ(h.code, 0);
+        EXPECT_NE(h.out.find("Usage: tigerlod-"), std::string::npos);
+        EXPECT_NE(h.out.find("Exit codes: 0 done; 1"), std::string::npos);
+        EXPECT_TRUE(h.err.empty());
+        const Result v = run(tool, "--version");
+        EXPECT_EQ(v.code, 0);
+        EXPECT_NE(v.out.find("0.1.0"), std::string::npos);
+        expect_failure(run(tool, "--no-such-option"), 2, "unknown option '--no-such-option'");
+    }
+    expect_failure(run("ingest", ""), 2, "missing argument CONFIG");
+}
+
+TEST_F(Cli, IngestSucceedsQuietlyAndDeterministically)
+{
+    make_tiger();
+    const auto cfg = tiger_config();
+    const Result r = run("ingest", cfg.string() + " " + out() + " --threads 1");
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_TRUE(r.err.empty()) << r.err;
+    EXPECT_NE(r.out.find("problems: none"), std::string::npos) << r.out;
+    for (const char* f : {"ingest-report.json", "manifest.json", "ingest-timings.json", "state/all.tlc",
+                          "tract/51063.tlc", "block/510639202001.tlc"}) {
+        EXPECT_TRUE(fs::exists(m_dir / "out" / f)) << f;
+    }
+    const std::string report = slurp(m_dir / "out" / "ingest-report.json");
+    EXPECT_NE(report.find("\"crossings\": 0"), std::string::npos);
+    // Same inputs, other thread count: byte-identical outputs (timings aside).
+    const Result again = run("ingest", cfg.string() + " " + (m_dir / "out2").string() + " --threads 2");
+    ASSERT_EQ(again.code, 0);
+    for (const auto& e : fs::recursive_directory_iterator(m_dir / "out")) {
+        if (e.is_regular_file() && e.path().filename() != "ingest-timings.json") {
+            const auto rel = fs::relative(e.path(), m_dir / "out");
+            EXPECT_EQ(slurp(e.path()), slurp(m_dir / "out2" / rel)) << rel;
+        }
+    }
+    // An existing output is kept unless --overwrite.
+    const Result exists = run("ingest", cfg.string() + " " + out());
+    EXPECT_EQ(exists.code, 2);
+    EXPECT_NE(exists.err.find("exists. Use --overwrite to replace it."), std::string::npos);
+    EXPECT_EQ(run("ingest", cfg.string() + " " + out() + " --overwrite").code, 0);
+    // dump prints a store as sorted text.
+    const Result d = run("dump", (m_dir / "out" / "tract" / "51063.tlc").string());
+    EXPECT_EQ(d.code, 0);
+    EXPECT_EQ(d.out.rfind("chain-store 1.0\nlevel 2/5 tract\npartition 51063\n", 0), 0U) << d.out;
+}
+
+TEST_F(Cli, MissingInputFile)
+{
+    make_tiger();
+    expect_failure(run("ingest", tiger_config("nope.zip").string() + " " + out()), 2, "nope.zip: no such file");
+    expect_failure(run("ingest", (m_dir / "no-config.yaml").string() + " " + out()), 2, "no such config file");
+}
+
+TEST_F(Cli, ZipWithoutTheExpectedLayer)
+{
+    make_tiger();
+    std::ofstream(m_dir / "readme.txt") << "not a shapefile\n";
+    zip(m_dir / "empty.zip", {m_dir / "readme.txt"});
+    expect_failure(run("ingest", tiger_config("empty.zip").string() + " " + out()), 1,
+                   "empty.zip: cannot open as a vector dataset (TIGER EDGES)");
+    // The FACES zip given as EDGES: a layer of the wrong kind.
+    expect_failure(run("ingest", tiger_config("faces.zip").string() + " " + out()), 1,
+                   "faces.zip layer 'faces': geometry type is Polygon, TIGER EDGES need line strings");
+}
+
+TEST_F(Cli, WrongGeometryType)
+{
+    make_tiger();
+    write_shp(m_dir / "points.shp", wkbPoint, {"TLID", "TFIDL", "TFIDR"}, {{"POINT (-96 40)", "1", "2", "3"}});
+    zip(m_dir / "points.zip", shp_files(m_dir / "points.shp"));
+    expect_failure(run("ingest", tiger_config("points.zip").string() + " " + out()), 1,
+                   "layer 'points': geometry type is Point, TIGER EDGES need line strings");
+}
+
+TEST_F(Cli, FacesWithoutAConfiguredAttribute)
+{
+    make_tiger();
+    const auto cfg = tiger_config("edges.zip", "faces.zip", "levels:\n  - {name: district, fields: [VTDST20]}\n");
+    expect_failure(run("ingest", cfg.string() + " " + out()), 1,
+                   "layer 'faces': no field 'VTDST20' (level 'district')");
+}
+
+TEST_F(Cli, TruncatedShp)
+{
+    make_tiger();
+    const auto size = fs::file_size(m_dir / "edges.shp");
+    fs::resize_file(m_dir / "edges.shp", size - 30);
+    expect_failure(run("ingest", tiger_config("edges.shp").string() + " " + out()), 1, "edges.shp:9: Error in fread()");
+}
+
+TEST_F(Cli, CorruptDbf)
+{
+    make_tiger();
+    const auto size = fs::file_size(m_dir / "edges.dbf");
+    fs::resize_file(m_dir / "edges.dbf", size - 40);
+    expect_failure(run("ingest", tiger_config("edges.shp").string() + " " + out()), 1, "failed on DBF file");
+}
+
+TEST_F(Cli, CoordinatesOutsideTheProjectionsDomain)
+{
+    make_tiger();
+    const auto cfg = tiger_config("edges.zip", "faces.zip", "projection: {kind: tm, lon0: 30}\n");
+    expect_failure(run("ingest", cfg.string() + " " + out()), 1,
+                   "edges.zip:0: coordinate (-96.000000, 40.000000) is outside the domain of projection tm lon0=30");
+}
+
+TEST_F(Cli, ConfigErrors)
+{
+    make_tiger();
+    expect_failure(
+        run("ingest", tiger_config("edges.zip", "faces.zip", "ingest: {halo_m: 5, nope: 1}\n").string() + " " + out()),
+        2, "config.yaml:6: unknown key 'ingest.nope' (known: halo_m, threads)");
+    expect_failure(run("ingest", config("dataset: {kind: tiger\n").string() + " " + out()), 2, "not valid YAML");
+    expect_failure(run("ingest", config("dataset: {kind: raster}\n").string() + " " + out()), 2,
+                   "'dataset.kind' must be tiger, polygons or lines, got 'raster'");
+    expect_failure(
+        run("ingest", tiger_config("edges.zip", "faces.zip", "projection: {grid_m: -1}\n").string() + " " + out()), 2,
+        "'projection.grid_m' must be in");
+    expect_failure(run("ingest", tiger_config().string() + " " + out() + " --halo-m -3"), 2,
+                   "option '--halo-m' must be >= 0");
+}
+
+TEST_F(Cli, DumpRejectsACorruptStore)
+{
+    make_tiger();
+    ASSERT_EQ(run("ingest", tiger_config().string() + " " + out()).code, 0);
+    const fs::path store = m_dir / "out" / "county" / "51.tlc";
+    std::string bytes = slurp(store);
+    bytes[bytes.size() / 2] ^= 0x20;
+    std::ofstream(m_dir / "bad.tlc", std::ios::binary) << bytes;
+    const Result r = run("dump", (m_dir / "bad.tlc").string());
+    EXPECT_EQ(r.code, 1);
+    EXPECT_NE(r.err.find("bad.tlc: checksum mismatch (corrupt file)"), std::string::npos) << r.err;
+    EXPECT_TRUE(r.out.empty());
+    const Result missing = run("dump", (m_dir / "none.tlc").string());
+    EXPECT_EQ(missing.code, 3);
+    EXPECT_NE(missing.err.find("none.tlc: cannot open for reading"), std::string::npos);
+}
