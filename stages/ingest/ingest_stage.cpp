@@ -135,6 +135,7 @@ int IngestStage::run(const StageContext& ctx)
     options.halo_m = cfg.halo_m;
     options.threads = threads;
     options.max_problem_samples = static_cast<size_t>(m_max_problem_samples);
+    options.log = &ctx.log;
     const BuildResult result = build_map(std::move(raw), projection, options, [&](const chains::ChainStore& s) {
         const fs::path dir = out.path() / s.level_name;
         if (made.insert(s.level_name).second) {

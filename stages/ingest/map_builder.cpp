@@ -1,6 +1,7 @@
 #include "stages/ingest/map_builder.hpp"
 
 #include "core/errors.hpp"
+#include "stages/ingest/radix_sort.hpp"
 #include "stages/ingest/segment_grid.hpp"
 
 #include <algorithm>
@@ -108,19 +109,20 @@ template <class F> void parallel_for(size_t n, unsigned threads, F&& f)
 Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems& problems)
 {
     Graph g;
-    std::vector<uint64_t> occ(raw.coords.size());
+    // Sort (key, occurrence) by key: vertex ids follow the keys, so they do not
+    // depend on the order of the input.
+    std::vector<std::pair<uint64_t, uint32_t>> occ(raw.coords.size());
     for (size_t i = 0; i < occ.size(); ++i) {
-        occ[i] = pack_key(raw.coords[i]);
+        occ[i] = {pack_key(raw.coords[i]), static_cast<uint32_t>(i)};
     }
-    g.keys = occ;
-    std::sort(g.keys.begin(), g.keys.end());
-    g.keys.erase(std::unique(g.keys.begin(), g.keys.end()), g.keys.end());
+    radix_sort_by_key(occ);
     std::vector<uint32_t> id(occ.size());
-    parallel_for(occ.size(), threads, [&](size_t b, size_t e) {
-        for (size_t i = b; i < e; ++i) {
-            id[i] = static_cast<uint32_t>(std::lower_bound(g.keys.begin(), g.keys.end(), occ[i]) - g.keys.begin());
+    for (size_t i = 0; i < occ.size(); ++i) {
+        if (i == 0 || occ[i].first != occ[i - 1].first) {
+            g.keys.push_back(occ[i].first);
         }
-    });
+        id[occ[i].second] = static_cast<uint32_t>(g.keys.size() - 1);
+    }
     occ = {};
     g.grid.resize(g.keys.size());
     std::vector<uint8_t> bad(g.keys.size(), 0);
@@ -176,11 +178,7 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
         for (uint64_t k = raw.offsets[p]; k < raw.offsets[p + 1]; ++k) {
             const uint32_t v = remap[id[k]];
             if (!buf.empty() && buf.back() == v) {
-                if (raw.kind != RawMap::Kind::polygon_segments) {
-                    problems.add("duplicate_points", g.grid[v].x, g.grid[v].y, raw.where(raw.source[p]));
-                } else {
-                    problems.count("duplicate_points");
-                }
+                problems.add("duplicate_points", g.grid[v].x, g.grid[v].y, raw.where(raw.source[p]));
                 continue;
             }
             buf.push_back(v);
@@ -196,10 +194,7 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
             buf.pop_back();
         }
         if (buf.size() < 2 || (buf.size() < 4 && buf.front() == buf.back())) {
-            if (raw.kind != RawMap::Kind::polygon_segments) {
-                const LonLatE6 at = raw.coords[raw.offsets[p]];
-                problems.add_lonlat("degenerate_polylines", at, raw.where(raw.source[p]));
-            }
+            problems.add_lonlat("degenerate_polylines", raw.coords[raw.offsets[p]], raw.where(raw.source[p]));
             continue;
         }
         g.verts.insert(g.verts.end(), buf.begin(), buf.end());
@@ -215,7 +210,8 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
     return g;
 }
 
-/// Merge two-point polygon segments that neighbouring polygons share.
+/// Split polygon rings into segments and merge the segments that neighbouring
+/// polygons share into one edge with a unit on each side.
 void merge_segments(Graph& g, const RawMap& raw, Problems& problems)
 {
     struct Rec {
@@ -225,13 +221,15 @@ void merge_segments(Graph& g, const RawMap& raw, Problems& problems)
         uint32_t edge;
     };
     std::vector<Rec> recs;
-    recs.reserve(g.edge_count());
+    recs.reserve(g.verts.size());
     for (uint32_t i = 0; i < g.edge_count(); ++i) {
         const auto e = g.edge(i);
         const uint32_t u = g.left[i] != no_unit ? g.left[i] : g.right[i];
         const bool on_left_of_given = g.left[i] != no_unit;
-        const bool forward = e[0] < e[1];
-        recs.push_back({std::min(e[0], e[1]), std::max(e[0], e[1]), u, forward == on_left_of_given, i});
+        for (size_t k = 0; k + 1 < e.size(); ++k) {
+            const bool forward = e[k] < e[k + 1];
+            recs.push_back({std::min(e[k], e[k + 1]), std::max(e[k], e[k + 1]), u, forward == on_left_of_given, i});
+        }
     }
     std::sort(recs.begin(), recs.end(), [](const Rec& x, const Rec& y) {
         return x.a != y.a ? x.a < y.a : (x.b != y.b ? x.b < y.b : x.edge < y.edge);
@@ -822,10 +820,17 @@ BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptio
     const size_t nlev = raw.level_names.size();
     result.input_vertices = raw.points_read;
     problems.count("empty_geometries", raw.empty_geometries);
+    auto note = [&](const std::string& what) {
+        if (options.log != nullptr) {
+            options.log->info(what);
+        }
+    };
     Graph g = make_graph(raw, projection, options.threads, problems);
-    if (raw.kind == RawMap::Kind::polygon_segments) {
+    note("interned and projected " + std::to_string(g.keys.size()) + " vertices");
+    if (raw.kind == RawMap::Kind::polygon_rings) {
         merge_segments(g, raw, problems);
     }
+    note("merged shared segments: " + std::to_string(g.edge_count()) + " edges");
     result.unique_vertices = g.keys.size();
     result.edges = g.edge_count();
     const auto lcs = level_codes(raw, problems);
@@ -857,12 +862,14 @@ BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptio
         bad_edges.push_back(f.first);
         bad_edges.push_back(f.second);
     }
+    note("checked planarity");
     std::sort(bad_edges.begin(), bad_edges.end());
     bad_edges.erase(std::unique(bad_edges.begin(), bad_edges.end()), bad_edges.end());
 
     const double halo_grid = options.halo_m / projection.params().grid_m;
     for (size_t L = 0; L < nlev; ++L) {
         Level lev = build_level(g, raw, lcs, L);
+        note("level " + raw.level_names[L] + ": built chains");
         for (uint32_t e : bad_edges) {
             if (lev.chain_of_edge[e] != none) {
                 lev.chains[lev.chain_of_edge[e]].problem = true;
@@ -1061,6 +1068,8 @@ BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptio
             sink(s);
         }
         st.junctions = lev.junctions.size();
+        note("level " + st.name + ": " + std::to_string(st.chains) + " chains in " + std::to_string(st.partitions) +
+             " partitions");
         result.levels.push_back(st);
     }
     return result;

@@ -19,6 +19,7 @@
 /// as snap rounding (Hobby 1999) would, and the check runs again; each repair
 /// is counted as `snap_repairs`, anything left as crossings, touches or overlaps.
 
+#include "core/log.hpp"
 #include "core/projection.hpp"
 #include "formats/chains/chain_store.hpp"
 #include "stages/ingest/raw_map.hpp"
@@ -38,6 +39,7 @@ struct BuildOptions {
     /// step of the 1e-6 degree input grid (at most 0.112 m of latitude), plus the
     /// projection's scale error. 0 turns repairs off.
     double max_snap_shift_m = 0.12;
+    const Log* log = nullptr; ///< progress lines, if given
 };
 
 /// One data problem found (or repaired) by ingest.

@@ -55,7 +55,7 @@ struct RawUnit {
 struct RawMap {
     enum class Kind {
         edges,            ///< noded polylines with faces on each side (TIGER EDGES)
-        polygon_segments, ///< two-point polylines with their polygon on the left; shared ones get merged
+        polygon_rings,    ///< closed rings with their polygon on one side; segments that neighbours share get merged
         lines             ///< a one-level map: every polyline is a boundary
     };
     Kind kind = Kind::edges;

@@ -1,5 +1,7 @@
 #include "stages/ingest/segment_grid.hpp"
 
+#include "stages/ingest/radix_sort.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <thread>
@@ -79,8 +81,9 @@ std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, u
     for (uint32_t i = 0; i < segs.size(); ++i) {
         grid.cover(segs[i].a, segs[i].b, 0, [&](uint64_t k) { entries.emplace_back(k, i); });
     }
-    std::sort(entries.begin(), entries.end());
-    entries.erase(std::unique(entries.begin(), entries.end()), entries.end());
+    // Entries come in segment order, and the sort is stable: each cell lists its
+    // segments in order. A segment enters a cell once, as the cover never repeats one.
+    radix_sort_by_key(entries);
     std::vector<size_t> group_start;
     for (size_t i = 0; i < entries.size(); ++i) {
         if (i == 0 || entries[i].first != entries[i - 1].first) {

@@ -360,11 +360,7 @@ void read_polygons(const IngestConfig& cfg, RawMap& raw, const Log& log)
                     const int o = ring_orientation(ring);
                     const bool unit_left = ri == 0 ? o >= 0 : o <= 0;
                     u.weight += (ri == 0 ? 1 : -1) * std::fabs(ring_area_deg2(ring));
-                    for (size_t k = 0; k + 1 < ring.size(); ++k) {
-                        const LonLatE6 seg[2] = {ring[k], ring[k + 1]};
-                        raw.add_polyline(seg, unit_left ? unit : no_unit, unit_left ? no_unit : unit, c, 0,
-                                         {file, index});
-                    }
+                    raw.add_polyline(ring, unit_left ? unit : no_unit, unit_left ? no_unit : unit, c, 0, {file, index});
                 }
             }
             raw.units.push_back(std::move(u));
@@ -423,7 +419,7 @@ RawMap read_dataset(const IngestConfig& cfg, const Log& log)
         read_tiger(cfg, raw, log);
         break;
     case DatasetSpec::Kind::polygons:
-        raw.kind = RawMap::Kind::polygon_segments;
+        raw.kind = RawMap::Kind::polygon_rings;
         read_polygons(cfg, raw, log);
         break;
     case DatasetSpec::Kind::lines:

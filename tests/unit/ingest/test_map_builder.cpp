@@ -185,15 +185,12 @@ TEST(MapBuilder, SharedPolygonEdgesMergeAndRingsCloseOnTheirSmallestVertex)
     // Two squares A | B sharing an edge, and an island C inside B (a hole in B).
     //  (0,0)-(2,0)-(4,0); B has a hole (2.., as ring (3,1)(3,2)... scaled below.
     RawMap m;
-    m.kind = RawMap::Kind::polygon_segments;
+    m.kind = RawMap::Kind::polygon_rings;
     m.level_names = {"l"};
     m.files = {"hand"};
     m.units = {{{"A"}, std::nullopt, 4, {}}, {{"B"}, std::nullopt, 4, {}}, {{"C"}, std::nullopt, 1, {}}};
     auto ring = [&](std::vector<LonLatE6> r, uint32_t unit, bool unit_left) {
-        for (size_t k = 0; k + 1 < r.size(); ++k) {
-            const LonLatE6 seg[2] = {r[k], r[k + 1]};
-            m.add_polyline(seg, unit_left ? unit : no_unit, unit_left ? no_unit : unit, 0, 0, {0, unit});
-        }
+        m.add_polyline(r, unit_left ? unit : no_unit, unit_left ? no_unit : unit, 0, 0, {0, unit});
     };
     ring({ll(0, 0), ll(2, 0), ll(2, 4), ll(0, 4), ll(0, 0)}, 0, true);  // A, counter-clockwise
     ring({ll(2, 0), ll(2, 4), ll(6, 4), ll(6, 0), ll(2, 0)}, 1, false); // B, clockwise
