@@ -160,14 +160,18 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
     std::vector<uint32_t> remap(g.keys.size());
     std::iota(remap.begin(), remap.end(), 0U);
     {
-        std::vector<uint32_t> order(g.keys.size());
-        std::iota(order.begin(), order.end(), 0U);
-        std::sort(order.begin(), order.end(),
-                  [&](uint32_t a, uint32_t b) { return g.grid[a] != g.grid[b] ? g.grid[a] < g.grid[b] : a < b; });
-        for (size_t i = 1; i < order.size(); ++i) {
-            if (g.grid[order[i]] == g.grid[order[i - 1]]) {
-                remap[order[i]] = remap[order[i - 1]];
-                problems.add("merged_vertices", g.grid[order[i]].x, g.grid[order[i]].y, "");
+        std::vector<std::pair<uint64_t, uint32_t>> by_grid(g.keys.size());
+        for (uint32_t v = 0; v < g.keys.size(); ++v) {
+            by_grid[v] = {(uint64_t{static_cast<uint32_t>(g.grid[v].x) ^ 0x80000000U} << 32) |
+                              (static_cast<uint32_t>(g.grid[v].y) ^ 0x80000000U),
+                          v};
+        }
+        radix_sort_by_key(by_grid); // stable: the smallest id comes first among equals
+        for (size_t i = 1; i < by_grid.size(); ++i) {
+            if (by_grid[i].first == by_grid[i - 1].first) {
+                const uint32_t v = by_grid[i].second;
+                remap[v] = remap[by_grid[i - 1].second];
+                problems.add("merged_vertices", g.grid[v].x, g.grid[v].y, "");
             }
         }
     }
@@ -231,9 +235,19 @@ void merge_segments(Graph& g, const RawMap& raw, Problems& problems)
             recs.push_back({std::min(e[k], e[k + 1]), std::max(e[k], e[k + 1]), u, forward == on_left_of_given, i});
         }
     }
-    std::sort(recs.begin(), recs.end(), [](const Rec& x, const Rec& y) {
-        return x.a != y.a ? x.a < y.a : (x.b != y.b ? x.b < y.b : x.edge < y.edge);
-    });
+    {
+        // Records come in edge order and the sort is stable: (a, b, edge) order.
+        std::vector<std::pair<uint64_t, uint32_t>> keys(recs.size());
+        for (uint32_t i = 0; i < recs.size(); ++i) {
+            keys[i] = {(uint64_t{recs[i].a} << 32) | recs[i].b, i};
+        }
+        radix_sort_by_key(keys);
+        std::vector<Rec> sorted(recs.size());
+        for (size_t i = 0; i < keys.size(); ++i) {
+            sorted[i] = recs[keys[i].second];
+        }
+        recs = std::move(sorted);
+    }
     Graph out;
     out.keys = std::move(g.keys);
     out.grid = std::move(g.grid);
@@ -543,7 +557,10 @@ struct SegmentSet {
     std::vector<std::pair<uint32_t, uint32_t>> at;
 };
 
-SegmentSet segments_of(const Graph& g, const std::vector<uint8_t>& checked)
+/// The segments of the checked edges; with a scope, only those of the edges it
+/// flags and those whose box meets one of the `hot` boxes.
+SegmentSet segments_of(const Graph& g, const std::vector<uint8_t>& checked, const std::vector<uint8_t>& scope,
+                       const std::vector<GridBox>& hot)
 {
     SegmentSet s;
     for (uint32_t e = 0; e < g.edge_count(); ++e) {
@@ -552,8 +569,18 @@ SegmentSet segments_of(const Graph& g, const std::vector<uint8_t>& checked)
         }
         const auto ev = g.edge(e);
         for (uint32_t k = 0; k + 1 < ev.size(); ++k) {
-            s.segs.push_back({g.grid[ev[k]], g.grid[ev[k + 1]], static_cast<uint32_t>(s.at.size())});
-            s.at.emplace_back(e, k);
+            const GridPoint a = g.grid[ev[k]], b = g.grid[ev[k + 1]];
+            bool take = scope.empty() || scope[e];
+            if (!take) {
+                GridBox box;
+                box.extend(a);
+                box.extend(b);
+                take = std::any_of(hot.begin(), hot.end(), [&](const GridBox& h) { return h.intersects(box); });
+            }
+            if (take) {
+                s.segs.push_back({a, b, static_cast<uint32_t>(s.at.size())});
+                s.at.emplace_back(e, k);
+            }
         }
     }
     return s;
@@ -580,8 +607,12 @@ std::vector<Intersection> repair_snap_crossings(Graph& g, const RawMap& raw, con
                                                 double max_shift, unsigned threads, Problems& problems)
 {
     constexpr int max_rounds = 8;
+    // After the first round only what a repair touched can change: the repaired
+    // edges, the segments whose boxes meet theirs, and pairs still unresolved.
+    std::vector<uint8_t> scope;
+    std::vector<GridBox> hot;
     for (int round = 0;; ++round) {
-        const SegmentSet s = segments_of(g, checked_edges(g, raw, lcs));
+        const SegmentSet s = segments_of(g, checked_edges(g, raw, lcs), scope, hot);
         const std::vector<Intersection> by_segment = find_intersections(s.segs, threads);
         std::vector<Intersection> found = by_segment;
         for (auto& f : found) { // report edges, not segment indices
@@ -701,6 +732,12 @@ std::vector<Intersection> repair_snap_crossings(Graph& g, const RawMap& raw, con
             joined_with[first] = static_cast<int64_t>(second_end) * 2 + (first_end & 1U);
             absorbed[second_end / 2] = 1;
         }
+        std::vector<uint8_t> unresolved(g.edge_count(), 0);
+        for (const auto& f : found) {
+            unresolved[f.first] = unresolved[f.second] = 1;
+        }
+        scope.clear();
+        hot.clear();
         Graph out;
         out.keys = std::move(g.keys);
         out.grid = std::move(g.grid);
@@ -709,6 +746,8 @@ std::vector<Intersection> repair_snap_crossings(Graph& g, const RawMap& raw, con
             if (absorbed[e]) {
                 continue;
             }
+            const bool repaired = drop_at[e] >= 0 || joined_with[e] >= 0;
+            scope.push_back(repaired || unresolved[e]);
             const auto ev = g.edge(e);
             pts.assign(ev.begin(), ev.end());
             uint32_t left = g.left[e], right = g.right[e];
@@ -732,6 +771,14 @@ std::vector<Intersection> repair_snap_crossings(Graph& g, const RawMap& raw, con
                 }
                 const uint64_t other = g.sid[second_end / 2];
                 sid = sid == 0 ? other : (other == 0 ? sid : std::min(sid, other));
+            }
+            if (repaired) {
+                for (size_t k = 0; k + 1 < pts.size(); ++k) {
+                    GridBox box;
+                    box.extend(out.grid[pts[k]]);
+                    box.extend(out.grid[pts[k + 1]]);
+                    hot.push_back(box);
+                }
             }
             out.verts.insert(out.verts.end(), pts.begin(), pts.end());
             out.off.push_back(out.verts.size());

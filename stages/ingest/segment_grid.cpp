@@ -171,19 +171,40 @@ std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRe
         return {};
     }
     const Grid grid = make_grid(segs, std::max(1.0, distance));
-    // Cells within reach of each part's own segments.
-    std::vector<std::pair<uint64_t, uint32_t>> reach;
+    // The cells each chain passes through; consecutive segments mostly share one.
     std::vector<uint64_t> cells;
-    for (size_t i = 0; i < segs.size();) {
+    auto chain_cells = [&](size_t i) {
         size_t j = i;
         cells.clear();
         while (j < segs.size() && segs[j].chain == segs[i].chain) {
-            grid.cover(segs[j].a, segs[j].b, 1, [&](uint64_t k) { cells.push_back(k); });
+            grid.cover(segs[j].a, segs[j].b, 0, [&](uint64_t k) {
+                if (cells.empty() || cells.back() != k) {
+                    cells.push_back(k);
+                }
+            });
             ++j;
         }
         std::sort(cells.begin(), cells.end());
         cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+        return j;
+    };
+    // Cells within reach (one cell around, cells being at least `distance` wide)
+    // of the segments that bound each part.
+    std::vector<std::pair<uint64_t, uint32_t>> reach;
+    std::vector<uint64_t> around;
+    for (size_t i = 0; i < segs.size();) {
+        const size_t j = chain_cells(i);
+        around.clear();
         for (uint64_t k : cells) {
+            for (uint64_t dx = 0; dx < 3; ++dx) {
+                for (uint64_t dy = 0; dy < 3; ++dy) {
+                    around.push_back(k + (dx << 32) + dy - (uint64_t{1} << 32) - 1);
+                }
+            }
+        }
+        std::sort(around.begin(), around.end());
+        around.erase(std::unique(around.begin(), around.end()), around.end());
+        for (uint64_t k : around) {
             reach.emplace_back(k, segs[i].part);
             if (segs[i].also != UINT32_MAX) {
                 reach.emplace_back(k, segs[i].also);
@@ -191,32 +212,27 @@ std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRe
         }
         i = j;
     }
-    std::sort(reach.begin(), reach.end());
-    reach.erase(std::unique(reach.begin(), reach.end()), reach.end());
-    std::vector<std::pair<uint32_t, uint32_t>> out; // (part, chain)
+    radix_sort_by_key(reach);
+    std::vector<std::pair<uint32_t, uint32_t>> result; // (chain, part)
+    std::vector<uint32_t> parts;
     for (size_t i = 0; i < segs.size();) {
-        size_t j = i;
-        cells.clear();
-        while (j < segs.size() && segs[j].chain == segs[i].chain) {
-            grid.cover(segs[j].a, segs[j].b, 0, [&](uint64_t k) { cells.push_back(k); });
-            ++j;
-        }
-        std::sort(cells.begin(), cells.end());
-        cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+        const size_t j = chain_cells(i);
+        parts.clear();
         for (uint64_t k : cells) {
-            auto it = std::lower_bound(reach.begin(), reach.end(), std::pair<uint64_t, uint32_t>{k, 0});
+            auto it = std::lower_bound(reach.begin(), reach.end(), k,
+                                       [](const std::pair<uint64_t, uint32_t>& e, uint64_t key) { return e.first < key; });
             for (; it != reach.end() && it->first == k; ++it) {
                 if (it->second != segs[i].part) {
-                    out.emplace_back(it->second, segs[i].chain);
+                    parts.push_back(it->second);
                 }
             }
         }
+        std::sort(parts.begin(), parts.end());
+        parts.erase(std::unique(parts.begin(), parts.end()), parts.end());
+        for (uint32_t part : parts) {
+            result.emplace_back(segs[i].chain, part);
+        }
         i = j;
-    }
-    std::vector<std::pair<uint32_t, uint32_t>> result;
-    result.reserve(out.size());
-    for (auto [part, chain] : out) {
-        result.emplace_back(chain, part);
     }
     std::sort(result.begin(), result.end());
     result.erase(std::unique(result.begin(), result.end()), result.end());
