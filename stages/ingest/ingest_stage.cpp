@@ -122,7 +122,7 @@ int IngestStage::run(const StageContext& ctx)
     ctx.log.info("config " + cfg.file.string() + ": " + projection.describe());
 
     const double t0 = ctx.log.elapsed_s();
-    RawMap raw = read_dataset(cfg, ctx.log);
+    RawMap raw = read_dataset(cfg, threads, ctx.log);
     const double t_read = ctx.log.elapsed_s();
     const uint64_t points_read = raw.points_read;
     ctx.log.info("read " + std::to_string(points_read) + " points, " + std::to_string(raw.polyline_count()) +

@@ -32,6 +32,33 @@ uint32_t RawMap::intern_class(const std::string& name)
     return static_cast<uint32_t>(classes.size() - 1);
 }
 
+void RawMap::append(RawMap&& part)
+{
+    const auto file0 = static_cast<uint32_t>(files.size());
+    const auto unit0 = static_cast<uint32_t>(units.size());
+    files.insert(files.end(), part.files.begin(), part.files.end());
+    for (auto& u : part.units) {
+        u.source.file += file0;
+        units.push_back(std::move(u));
+    }
+    std::vector<uint32_t> cls(part.classes.size());
+    for (size_t c = 0; c < part.classes.size(); ++c) {
+        cls[c] = intern_class(part.classes[c]);
+    }
+    const uint64_t coord0 = coords.size();
+    coords.insert(coords.end(), part.coords.begin(), part.coords.end());
+    for (size_t p = 0; p < part.polyline_count(); ++p) {
+        offsets.push_back(coord0 + part.offsets[p + 1]);
+        left.push_back(part.left[p] == no_unit ? no_unit : part.left[p] + unit0);
+        right.push_back(part.right[p] == no_unit ? no_unit : part.right[p] + unit0);
+        feature_class.push_back(cls[part.feature_class[p]]);
+        source_id.push_back(part.source_id[p]);
+        source.push_back({part.source[p].file + file0, part.source[p].feature});
+    }
+    points_read += part.points_read;
+    empty_geometries += part.empty_geometries;
+}
+
 std::string RawMap::where(SourceRef src) const
 {
     std::string s = src.file < files.size() ? files[src.file] : std::string("?");

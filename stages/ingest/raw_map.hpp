@@ -54,9 +54,9 @@ struct RawUnit {
 /// The whole input map.
 struct RawMap {
     enum class Kind {
-        edges,            ///< noded polylines with faces on each side (TIGER EDGES)
-        polygon_rings,    ///< closed rings with their polygon on one side; segments that neighbours share get merged
-        lines             ///< a one-level map: every polyline is a boundary
+        edges,         ///< noded polylines with faces on each side (TIGER EDGES)
+        polygon_rings, ///< closed rings with their polygon on one side; segments that neighbours share get merged
+        lines          ///< a one-level map: every polyline is a boundary
     };
     Kind kind = Kind::edges;
     std::vector<std::string> level_names;
@@ -77,6 +77,9 @@ struct RawMap {
     void add_polyline(std::span<const LonLatE6> pts, uint32_t left_unit, uint32_t right_unit, uint32_t cls,
                       uint64_t sid, SourceRef src);
     uint32_t intern_class(const std::string& name);
+    /// Append another map read from other files (same kind and levels): its
+    /// files, units, classes and polylines follow this map's.
+    void append(RawMap&& part);
     /// "file:feature" for messages.
     std::string where(SourceRef src) const;
 };

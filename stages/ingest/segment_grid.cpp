@@ -219,8 +219,9 @@ std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRe
         const size_t j = chain_cells(i);
         parts.clear();
         for (uint64_t k : cells) {
-            auto it = std::lower_bound(reach.begin(), reach.end(), k,
-                                       [](const std::pair<uint64_t, uint32_t>& e, uint64_t key) { return e.first < key; });
+            auto it =
+                std::lower_bound(reach.begin(), reach.end(), k,
+                                 [](const std::pair<uint64_t, uint32_t>& e, uint64_t key) { return e.first < key; });
             for (; it != reach.end() && it->first == k; ++it) {
                 if (it->second != segs[i].part) {
                     parts.push_back(it->second);

@@ -8,7 +8,10 @@
 #include <ogr_api.h>
 #include <ogr_srs_api.h>
 
+#include <atomic>
 #include <cmath>
+#include <exception>
+#include <thread>
 #include <cstring>
 #include <memory>
 #include <unordered_map>
@@ -302,10 +305,11 @@ double ring_area_deg2(const std::vector<LonLatE6>& r)
     return 0.5 * a;
 }
 
-void read_polygons(const IngestConfig& cfg, RawMap& raw, const Log& log)
+/// One polygon file into `raw` (a part of its own: file index 0).
+void read_polygon_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw)
 {
     std::vector<LonLatE6> ring;
-    for (const auto& path : cfg.dataset.inputs) {
+    {
         Source src(path, cfg.dataset.layer, "polygons");
         src.expect_geometry({wkbPolygon, wkbMultiPolygon}, "a polygons dataset needs polygons");
         const int code_i = src.field(cfg.dataset.code_field, "dataset.code_field");
@@ -365,14 +369,14 @@ void read_polygons(const IngestConfig& cfg, RawMap& raw, const Log& log)
             }
             raw.units.push_back(std::move(u));
         });
-        log.info("read " + path.string() + ": " + std::to_string(raw.units.size()) + " polygons so far");
     }
 }
 
-void read_lines(const IngestConfig& cfg, RawMap& raw, const Log& log)
+/// One line file into `raw` (a part of its own: file index 0).
+void read_line_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw)
 {
     std::vector<LonLatE6> pts;
-    for (const auto& path : cfg.dataset.inputs) {
+    {
         Source src(path, cfg.dataset.layer, "lines");
         src.expect_geometry({wkbLineString, wkbMultiLineString}, "a lines dataset needs line strings");
         const int cls = src.optional_field(cfg.dataset.class_field);
@@ -401,13 +405,49 @@ void read_lines(const IngestConfig& cfg, RawMap& raw, const Log& log)
                 raw.add_polyline(pts, no_unit, no_unit, c, 0, {file, index});
             }
         });
-        log.info("read " + path.string() + ": " + std::to_string(raw.polyline_count()) + " lines so far");
+    }
+}
+
+/// Read every file with `read_one` on up to `threads` threads, each into a part
+/// of its own, and append the parts in file order: the result does not depend
+/// on the thread count, nor does the first error reported.
+template <class F>
+void read_files(const std::vector<fs::path>& files, unsigned threads, RawMap& raw, const Log& log, F&& read_one)
+{
+    std::vector<RawMap> parts(files.size());
+    std::vector<std::exception_ptr> errors(files.size());
+    std::atomic<size_t> next{0};
+    auto work = [&] {
+        for (size_t i = next++; i < files.size(); i = next++) {
+            try {
+                read_one(files[i], parts[i]);
+            } catch (...) {
+                errors[i] = std::current_exception();
+            }
+        }
+    };
+    std::vector<std::thread> pool;
+    for (unsigned t = 1; t < std::min<size_t>(threads, files.size()); ++t) {
+        pool.emplace_back(work);
+    }
+    work();
+    for (auto& t : pool) {
+        t.join();
+    }
+    for (size_t i = 0; i < files.size(); ++i) {
+        if (errors[i]) {
+            std::rethrow_exception(errors[i]);
+        }
+        log.info("read " + files[i].string() + ": " + std::to_string(parts[i].units.size()) + " units, " +
+                 std::to_string(parts[i].points_read) + " points");
+        raw.append(std::move(parts[i]));
+        RawMap done = std::move(parts[i]); // frees the part now, not at the end
     }
 }
 
 } // namespace
 
-RawMap read_dataset(const IngestConfig& cfg, const Log& log)
+RawMap read_dataset(const IngestConfig& cfg, unsigned threads, const Log& log)
 {
     RawMap raw;
     for (const auto& l : cfg.levels) {
@@ -420,11 +460,13 @@ RawMap read_dataset(const IngestConfig& cfg, const Log& log)
         break;
     case DatasetSpec::Kind::polygons:
         raw.kind = RawMap::Kind::polygon_rings;
-        read_polygons(cfg, raw, log);
+        read_files(cfg.dataset.inputs, threads, raw, log,
+                   [&](const fs::path& p, RawMap& part) { read_polygon_file(cfg, p, part); });
         break;
     case DatasetSpec::Kind::lines:
         raw.kind = RawMap::Kind::lines;
-        read_lines(cfg, raw, log);
+        read_files(cfg.dataset.inputs, threads, raw, log,
+                   [&](const fs::path& p, RawMap& part) { read_line_file(cfg, p, part); });
         break;
     }
     return raw;

@@ -10,8 +10,10 @@
 
 namespace tigerlod::ingest {
 
-/// Read the dataset of `cfg` into a RawMap, coordinates snapped to 1e-6 degrees.
-RawMap read_dataset(const IngestConfig& cfg, const Log& log);
+/// Read the dataset of `cfg` into a RawMap, coordinates snapped to 1e-6
+/// degrees. Polygon and line files are read on up to `threads` threads; the
+/// result is the same for any thread count.
+RawMap read_dataset(const IngestConfig& cfg, unsigned threads, const Log& log);
 
 /// Versions of the libraries the readers use, for --version.
 std::string gdal_version();

@@ -33,7 +33,7 @@ Ingested run_ingest(const fs::path& config, unsigned threads = 2)
 {
     const IngestConfig cfg = load_config(config);
     Log log;
-    RawMap raw = read_dataset(cfg, log);
+    RawMap raw = read_dataset(cfg, threads, log);
     Ingested run;
     run.finest_units = raw.units.size();
     BuildOptions o;
