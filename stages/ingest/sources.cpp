@@ -14,6 +14,7 @@
 #include <thread>
 #include <cstring>
 #include <memory>
+#include <mutex>
 #include <unordered_map>
 
 namespace fs = std::filesystem;
@@ -61,7 +62,9 @@ class Source {
   public:
     Source(const fs::path& path, const std::string& layer_name, const char* role) : m_name(path.filename().string())
     {
-        GDALAllRegister();
+        // Registering drivers is not thread-safe; sources open on several threads.
+        static std::once_flag registered;
+        std::call_once(registered, [] { GDALAllRegister(); });
         std::string open = path.string();
         if (path.extension() == ".zip") {
             open = "/vsizip/" + open;
