@@ -128,17 +128,12 @@ class Cli : public ::testing::Test {
             return s + ")";
         };
         const std::vector<std::string> ef = {"TLID", "TFIDL", "TFIDR", "MTFCC"};
-        write_shp(m_dir / ("edges" + tag + ".shp"), wkbLineString, ef,
-                  {{line({{0, 0}, {1, 0}}), "1", "101", "900", "F"},
-                   {line({{1, 0}, {2, 0}}), "2", "103", "900", "F"},
-                   {line({{2, 0}, {2, 1}}), "3", "103", "900", "F"},
-                   {line({{2, 1}, {2, 2}}), "4", "102", "900", "F"},
-                   {line({{2, 2}, {1, 2}}), "5", "102", "900", "F"},
-                   {line({{1, 2}, {0, 2}}), "6", "101", "900", "F"},
-                   {line({{0, 2}, {0, 0}}), "7", "101", "900", "F"},
-                   {line({{1, 0}, {1, 1}}), "8", "101", "103", "F"},
-                   {line({{1, 1}, {1, 2}}), "9", "101", "102", "F"},
-                   {line({{1, 1}, {2, 1}}), "10", "102", "103", "F"}});
+        m_edges = {{line({{0, 0}, {1, 0}}), "1", "101", "900", "F"}, {line({{1, 0}, {2, 0}}), "2", "103", "900", "F"},
+                   {line({{2, 0}, {2, 1}}), "3", "103", "900", "F"}, {line({{2, 1}, {2, 2}}), "4", "102", "900", "F"},
+                   {line({{2, 2}, {1, 2}}), "5", "102", "900", "F"}, {line({{1, 2}, {0, 2}}), "6", "101", "900", "F"},
+                   {line({{0, 2}, {0, 0}}), "7", "101", "900", "F"}, {line({{1, 0}, {1, 1}}), "8", "101", "103", "F"},
+                   {line({{1, 1}, {1, 2}}), "9", "101", "102", "F"}, {line({{1, 1}, {2, 1}}), "10", "102", "103", "F"}};
+        write_shp(m_dir / ("edges" + tag + ".shp"), wkbLineString, ef, m_edges);
         const std::vector<std::string> ff = {"TFID",      "STATEFP20", "COUNTYFP20", "TRACTCE20", "BLKGRPCE20",
                                              "BLOCKCE20", "INTPTLAT",  "INTPTLON",   "ATOTAL"};
         auto poly = [&](double x0, double y0, double x1, double y1) {
@@ -179,6 +174,7 @@ class Cli : public ::testing::Test {
     std::string out() const { return (m_dir / "out").string(); }
 
     fs::path m_dir;
+    std::vector<std::vector<std::string>> m_edges; ///< WKT, TLID, TFIDL, TFIDR, MTFCC
 };
 
 } // namespace
@@ -324,4 +320,39 @@ TEST_F(Cli, DumpRejectsACorruptStore)
     const Result missing = run("dump", (m_dir / "none.tlc").string());
     EXPECT_EQ(missing.code, 3);
     EXPECT_NE(missing.err.find("none.tlc: cannot open for reading"), std::string::npos);
+}
+
+TEST_F(Cli, EdgesSharedByTwoCountyFilesAreDeduplicatedByTlid)
+{
+    make_tiger();
+    ASSERT_EQ(run("ingest", tiger_config().string() + " " + out()).code, 0);
+    // The same map split into two files that both hold the edges between A and B
+    // (TLIDs 8 and 9), each knowing only its own side's face, as neighbouring
+    // counties' files do.
+    std::vector<std::vector<std::string>> west, east;
+    for (auto e : m_edges) {
+        const int tlid = std::stoi(e[1]);
+        if (tlid == 8 || tlid == 9) {
+            auto w = e, x = e;
+            w[3] = "999999"; // face unknown to this file: outside
+            x[2] = "999999";
+            west.push_back(w);
+            east.push_back(x);
+        } else if (e[2] == "101") {
+            west.push_back(e);
+        } else {
+            east.push_back(e);
+        }
+    }
+    const std::vector<std::string> ef = {"TLID", "TFIDL", "TFIDR", "MTFCC"};
+    write_shp(m_dir / "west.shp", wkbLineString, ef, west);
+    write_shp(m_dir / "east.shp", wkbLineString, ef, east);
+    const Result r = run("ingest", tiger_config("west.shp, east.shp").string() + " " + (m_dir / "split").string());
+    ASSERT_EQ(r.code, 0) << r.err;
+    for (const auto& e : fs::recursive_directory_iterator(m_dir / "out")) {
+        if (e.path().extension() == ".tlc") {
+            const auto rel = fs::relative(e.path(), m_dir / "out");
+            EXPECT_EQ(slurp(e.path()), slurp(m_dir / "split" / rel)) << rel;
+        }
+    }
 }
