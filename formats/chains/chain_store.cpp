@@ -145,6 +145,20 @@ void ChainStore::canonicalize()
     });
 }
 
+PointLocation unit_location(const ChainStore& store, uint32_t unit, GridPoint p)
+{
+    PointInPolygon pip(p);
+    for (const auto& c : store.chains) {
+        if ((c.left == unit) != (c.right == unit)) {
+            const auto pts = store.chain_points(c);
+            for (size_t k = 0; k + 1 < pts.size(); ++k) {
+                pip.add_segment(pts[k], pts[k + 1]);
+            }
+        }
+    }
+    return pip.location();
+}
+
 std::string encode(const ChainStore& s)
 {
     Writer w;

@@ -87,6 +87,12 @@ struct ChainStore {
     std::unordered_map<std::string, uint32_t> m_index;
 }; // struct ChainStore
 
+/// Where `p` lies relative to the unit with string index `unit`, by an exact
+/// even-odd test over the store's chains (halo included) that have the unit on
+/// exactly one side. Exact only if the store holds the unit's whole boundary,
+/// as ingest's stores do for the units of their partition.
+PointLocation unit_location(const ChainStore& store, uint32_t unit, GridPoint p);
+
 /// Encode as the bytes of a version 1.0 file.
 std::string encode(const ChainStore& store);
 

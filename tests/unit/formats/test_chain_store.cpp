@@ -127,3 +127,21 @@ TEST(ChainStore, MissingFileIsAnEnvironmentError)
 {
     EXPECT_THROW(read("/nonexistent/x.tlc"), environment_error);
 }
+
+TEST(ChainStore, UnitLocationUsesChainsWithTheUnitOnOneSideOnly)
+{
+    // Unit A: the square (0,0)-(10,10) as two chains, one with B on its other
+    // side; a chain with A on both sides (inside A) must not count.
+    ChainStore s;
+    const uint32_t A = s.intern("A"), B = s.intern("B");
+    const GridPoint south_east[] = {{0, 0}, {10, 0}, {10, 10}};
+    const GridPoint north_west[] = {{10, 10}, {0, 10}, {0, 0}};
+    const GridPoint inner[] = {{2, 2}, {8, 8}};
+    s.add_chain({1, A, 0, 0, 0, 0, 0}, south_east);
+    s.add_chain({2, A, B, 0, 0, 0, 0}, north_west);
+    s.add_chain({3, A, A, 0, 0, 0, 0}, inner);
+    EXPECT_EQ(unit_location(s, A, {5, 5}), PointLocation::inside);
+    EXPECT_EQ(unit_location(s, A, {5, 11}), PointLocation::outside);
+    EXPECT_EQ(unit_location(s, A, {10, 5}), PointLocation::boundary);
+    EXPECT_EQ(unit_location(s, B, {5, 5}), PointLocation::outside); // B's boundary here is one open chain
+}

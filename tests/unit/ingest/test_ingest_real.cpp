@@ -63,16 +63,7 @@ void expect_points_inside(const Ingested& r)
         std::set<uint32_t> seen;
         for (const auto& cp : s.constraints) {
             EXPECT_TRUE(seen.insert(cp.unit).second) << s.level_name << " " << s.strings[cp.unit];
-            PointInPolygon pip(cp.p);
-            for (const auto& c : s.chains) {
-                if ((c.left == cp.unit) != (c.right == cp.unit)) {
-                    const auto pts = s.chain_points(c);
-                    for (size_t k = 0; k + 1 < pts.size(); ++k) {
-                        pip.add_segment(pts[k], pts[k + 1]);
-                    }
-                }
-            }
-            EXPECT_EQ(pip.location(), PointLocation::inside)
+            EXPECT_EQ(chains::unit_location(s, cp.unit, cp.p), PointLocation::inside)
                 << s.level_name << "/" << s.partition << " unit " << s.strings[cp.unit];
             ++checked;
         }

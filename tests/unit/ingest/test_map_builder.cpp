@@ -84,16 +84,7 @@ std::vector<std::string> describe(const chains::ChainStore& s, bool halo = false
 
 bool inside(const chains::ChainStore& s, const chains::ConstraintPoint& cp)
 {
-    PointInPolygon pip(cp.p);
-    for (const auto& c : s.chains) {
-        if ((c.left == cp.unit) != (c.right == cp.unit)) {
-            const auto pts = s.chain_points(c);
-            for (size_t k = 0; k + 1 < pts.size(); ++k) {
-                pip.add_segment(pts[k], pts[k + 1]);
-            }
-        }
-    }
-    return pip.location() == PointLocation::inside;
+    return chains::unit_location(s, cp.unit, cp.p) == PointLocation::inside;
 }
 
 void edge(RawMap& m, std::vector<LonLatE6> pts, uint32_t l, uint32_t r, uint64_t tlid)
