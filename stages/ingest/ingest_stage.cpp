@@ -13,6 +13,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <cstdio>
+#include <future>
 #include <iostream>
 #include <set>
 #include <sys/resource.h>
@@ -121,6 +122,25 @@ int IngestStage::run(const StageContext& ctx)
     const Projection projection(cfg.projection);
     ctx.log.info("config " + cfg.file.string() + ": " + projection.describe());
 
+    // The manifest's input digests are computed beside the work, not after it.
+    std::vector<std::pair<fs::path, const char*>> input_files{{cfg.file, "config"}};
+    for (const auto& p : cfg.dataset.faces) {
+        input_files.emplace_back(p, "faces");
+    }
+    for (const auto& p : cfg.dataset.edges) {
+        input_files.emplace_back(p, "edges");
+    }
+    for (const auto& p : cfg.dataset.inputs) {
+        input_files.emplace_back(p, "input");
+    }
+    auto digests = std::async(std::launch::async, [&input_files] {
+        std::vector<std::string> out;
+        for (const auto& f : input_files) {
+            out.push_back(sha256_file(f.first));
+        }
+        return out;
+    });
+
     const double t0 = ctx.log.elapsed_s();
     RawMap raw = read_dataset(cfg, threads, ctx.log);
     const double t_read = ctx.log.elapsed_s();
@@ -186,21 +206,13 @@ int IngestStage::run(const StageContext& ctx)
     manifest["version"] = tigerlod_version();
     manifest["libraries"] = versions();
     json inputs = json::array();
-    auto add_input = [&](const fs::path& p, const char* role) {
+    const std::vector<std::string> sha = digests.get();
+    for (size_t i = 0; i < input_files.size(); ++i) {
+        const auto& [p, role] = input_files[i];
         inputs.push_back({{"role", role},
                           {"path", p.lexically_relative(cfg.file.parent_path()).string()},
                           {"bytes", fs::file_size(p)},
-                          {"sha256", sha256_file(p)}});
-    };
-    add_input(cfg.file, "config");
-    for (const auto& p : cfg.dataset.faces) {
-        add_input(p, "faces");
-    }
-    for (const auto& p : cfg.dataset.edges) {
-        add_input(p, "edges");
-    }
-    for (const auto& p : cfg.dataset.inputs) {
-        add_input(p, "input");
+                          {"sha256", sha[i]}});
     }
     manifest["inputs"] = inputs;
     json levels_spec = json::array();

@@ -269,7 +269,10 @@ void merge_segments(Graph& g, const RawMap& raw, Problems& problems)
         if (conflict) {
             std::string where;
             for (size_t k = i; k < j; ++k) {
-                where += (where.empty() ? "" : " ") + raw.where(g.src[recs[k].edge]);
+                if (!where.empty()) {
+                    where += ' ';
+                }
+                where += raw.where(g.src[recs[k].edge]);
             }
             problems.add("overlapping_polygons", (pa.x + 0.5 * (pb.x - pa.x)), (pa.y + 0.5 * (pb.y - pa.y)), where);
         }

@@ -63,7 +63,8 @@ std::string RawMap::where(SourceRef src) const
 {
     std::string s = src.file < files.size() ? files[src.file] : std::string("?");
     if (src.feature >= 0) {
-        s += ":" + std::to_string(src.feature);
+        s += ':';
+        s += std::to_string(src.feature);
     }
     return s;
 }
