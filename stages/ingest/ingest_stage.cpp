@@ -73,6 +73,9 @@ void IngestStage::add_args(ArgSet& args)
     args.positional("OUTPUT", &m_output, "the output folder, written under a temporary name and renamed on success");
     args.group("Ingest");
     args.add("overwrite", &m_overwrite, "replace OUTPUT if it exists");
+    args.add("validate", &m_validate,
+             "resolve the config, open every input and check its layers and fields, print the resolved\n"
+             "      options, and exit without reading features or writing anything");
     args.add("halo-m", &m_halo_m, "halo distance in metres (overrides ingest.halo_m; default 1000)", "M");
     args.add("threads", &m_threads, "worker threads, 0 for all cores (overrides ingest.threads)", "N");
     args.add("max-problem-samples", &m_max_problem_samples, "problems listed with their location in the report", "N");
@@ -121,6 +124,16 @@ int IngestStage::run(const StageContext& ctx)
     const unsigned threads = cfg.threads == 0 ? std::max(1U, std::thread::hardware_concurrency()) : cfg.threads;
     const Projection projection(cfg.projection);
     ctx.log.info("config " + cfg.file.string() + ": " + projection.describe());
+    if (m_validate) {
+        validate_dataset(cfg);
+        std::printf("%s: valid; dataset %s, %zu input files, levels", cfg.file.c_str(), cfg.name.c_str(),
+                    cfg.dataset.edges.size() + cfg.dataset.faces.size() + cfg.dataset.inputs.size());
+        for (const auto& l : cfg.levels) {
+            std::printf(" %s", l.name.c_str());
+        }
+        std::printf("; projection %s; halo %g m; %u threads\n", projection.describe().c_str(), cfg.halo_m, threads);
+        return exit_ok;
+    }
 
     // The manifest's input digests are computed beside the work, not after it.
     std::vector<std::pair<fs::path, const char*>> input_files{{cfg.file, "config"}};

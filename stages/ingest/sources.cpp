@@ -214,17 +214,83 @@ std::vector<std::vector<int>> level_fields(const Source& src, const std::vector<
     return out;
 }
 
+/// A FACES layer, checked, with its field indices.
+struct FacesLayer {
+    Source src;
+    int tfid, lat, lon, area;
+    std::vector<std::vector<int>> levels;
+};
+FacesLayer open_faces(const IngestConfig& cfg, const fs::path& path)
+{
+    Source src(path, cfg.dataset.layer, "TIGER FACES");
+    src.expect_geometry({wkbPolygon, wkbMultiPolygon}, "TIGER FACES need polygons");
+    const int tfid = src.field("TFID", "TIGER FACES face id");
+    auto levels = level_fields(src, cfg.levels);
+    const int lat = src.optional_field(cfg.dataset.intpt_lat_field);
+    const int lon = src.optional_field(cfg.dataset.intpt_lon_field);
+    const int area = src.optional_field("ATOTAL");
+    return {std::move(src), tfid, lat, lon, area, std::move(levels)};
+}
+
+/// An EDGES layer, checked, with its field indices.
+struct EdgesLayer {
+    Source src;
+    int tlid, tfidl, tfidr, cls;
+};
+EdgesLayer open_edges(const IngestConfig& cfg, const fs::path& path)
+{
+    Source src(path, cfg.dataset.layer, "TIGER EDGES");
+    src.expect_geometry({wkbLineString}, "TIGER EDGES need line strings");
+    const int tlid = src.field("TLID", "TIGER EDGES edge id");
+    const int tfidl = src.field("TFIDL", "TIGER EDGES face on the left");
+    const int tfidr = src.field("TFIDR", "TIGER EDGES face on the right");
+    const int cls = src.optional_field(cfg.dataset.class_field);
+    return {std::move(src), tlid, tfidl, tfidr, cls};
+}
+
+/// A polygon layer, checked, with its field indices.
+struct PolygonLayer {
+    Source src;
+    int code, lat, lon, cls;
+    std::vector<std::vector<int>> levels;
+};
+PolygonLayer open_polygons(const IngestConfig& cfg, const fs::path& path)
+{
+    Source src(path, cfg.dataset.layer, "polygons");
+    src.expect_geometry({wkbPolygon, wkbMultiPolygon}, "a polygons dataset needs polygons");
+    const int code = src.field(cfg.dataset.code_field, "dataset.code_field");
+    auto levels = level_fields(src, cfg.levels);
+    const int lat = src.optional_field(cfg.dataset.intpt_lat_field);
+    const int lon = src.optional_field(cfg.dataset.intpt_lon_field);
+    if (!cfg.dataset.intpt_lat_field.empty() && (lat < 0 || lon < 0)) {
+        throw input_error(src.where() + ": no field '" + cfg.dataset.intpt_lat_field + "' or '" +
+                          cfg.dataset.intpt_lon_field + "' (dataset.intpt_lat_field/intpt_lon_field)");
+    }
+    const int cls = src.optional_field(cfg.dataset.class_field);
+    return {std::move(src), code, lat, lon, cls, std::move(levels)};
+}
+
+/// A line layer, checked, with its field indices.
+struct LineLayer {
+    Source src;
+    int cls;
+};
+LineLayer open_lines(const IngestConfig& cfg, const fs::path& path)
+{
+    Source src(path, cfg.dataset.layer, "lines");
+    src.expect_geometry({wkbLineString, wkbMultiLineString}, "a lines dataset needs line strings");
+    const int cls = src.optional_field(cfg.dataset.class_field);
+    if (!cfg.dataset.class_field.empty() && cls < 0) {
+        throw input_error(src.where() + ": no field '" + cfg.dataset.class_field + "' (dataset.class_field)");
+    }
+    return {std::move(src), cls};
+}
+
 void read_tiger(const IngestConfig& cfg, RawMap& raw, const Log& log)
 {
     std::unordered_map<int64_t, uint32_t> face_unit;
     for (const auto& path : cfg.dataset.faces) {
-        Source src(path, cfg.dataset.layer, "TIGER FACES");
-        src.expect_geometry({wkbPolygon, wkbMultiPolygon}, "TIGER FACES need polygons");
-        const int tfid = src.field("TFID", "TIGER FACES face id");
-        const auto fields = level_fields(src, cfg.levels);
-        const int lat_i = src.optional_field(cfg.dataset.intpt_lat_field);
-        const int lon_i = src.optional_field(cfg.dataset.intpt_lon_field);
-        const int area_i = src.optional_field("ATOTAL");
+        auto [src, tfid, lat_i, lon_i, area_i, fields] = open_faces(cfg, path);
         OGR_L_SetIgnoredFields(src.layer(), std::array<const char*, 2>{"OGR_GEOMETRY", nullptr}.data());
         const auto file = static_cast<uint32_t>(raw.files.size());
         raw.files.push_back(src.name());
@@ -248,12 +314,7 @@ void read_tiger(const IngestConfig& cfg, RawMap& raw, const Log& log)
     std::unordered_map<int64_t, uint32_t> seen_tlid;
     std::vector<LonLatE6> pts;
     for (const auto& path : cfg.dataset.edges) {
-        Source src(path, cfg.dataset.layer, "TIGER EDGES");
-        src.expect_geometry({wkbLineString}, "TIGER EDGES need line strings");
-        const int tlid = src.field("TLID", "TIGER EDGES edge id");
-        const int tfidl = src.field("TFIDL", "TIGER EDGES face on the left");
-        const int tfidr = src.field("TFIDR", "TIGER EDGES face on the right");
-        const int cls = src.optional_field(cfg.dataset.class_field);
+        auto [src, tlid, tfidl, tfidr, cls] = open_edges(cfg, path);
         const auto file = static_cast<uint32_t>(raw.files.size());
         raw.files.push_back(src.name());
         auto unit_of = [&](OGRFeatureH f, int i) {
@@ -313,17 +374,7 @@ void read_polygon_file(const IngestConfig& cfg, const fs::path& path, RawMap& ra
 {
     std::vector<LonLatE6> ring;
     {
-        Source src(path, cfg.dataset.layer, "polygons");
-        src.expect_geometry({wkbPolygon, wkbMultiPolygon}, "a polygons dataset needs polygons");
-        const int code_i = src.field(cfg.dataset.code_field, "dataset.code_field");
-        const auto fields = level_fields(src, cfg.levels);
-        const int lat_i = src.optional_field(cfg.dataset.intpt_lat_field);
-        const int lon_i = src.optional_field(cfg.dataset.intpt_lon_field);
-        if (!cfg.dataset.intpt_lat_field.empty() && (lat_i < 0 || lon_i < 0)) {
-            throw input_error(src.where() + ": no field '" + cfg.dataset.intpt_lat_field + "' or '" +
-                              cfg.dataset.intpt_lon_field + "' (dataset.intpt_lat_field/intpt_lon_field)");
-        }
-        const int cls = src.optional_field(cfg.dataset.class_field);
+        auto [src, code_i, lat_i, lon_i, cls, fields] = open_polygons(cfg, path);
         const auto file = static_cast<uint32_t>(raw.files.size());
         raw.files.push_back(src.name());
         src.for_each([&](OGRFeatureH f, int64_t index) {
@@ -380,12 +431,7 @@ void read_line_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw)
 {
     std::vector<LonLatE6> pts;
     {
-        Source src(path, cfg.dataset.layer, "lines");
-        src.expect_geometry({wkbLineString, wkbMultiLineString}, "a lines dataset needs line strings");
-        const int cls = src.optional_field(cfg.dataset.class_field);
-        if (!cfg.dataset.class_field.empty() && cls < 0) {
-            throw input_error(src.where() + ": no field '" + cfg.dataset.class_field + "' (dataset.class_field)");
-        }
+        auto [src, cls] = open_lines(cfg, path);
         const auto file = static_cast<uint32_t>(raw.files.size());
         raw.files.push_back(src.name());
         src.for_each([&](OGRFeatureH f, int64_t index) {
@@ -473,6 +519,23 @@ RawMap read_dataset(const IngestConfig& cfg, unsigned threads, const Log& log)
         break;
     }
     return raw;
+}
+
+void validate_dataset(const IngestConfig& cfg)
+{
+    for (const auto& p : cfg.dataset.faces) {
+        open_faces(cfg, p);
+    }
+    for (const auto& p : cfg.dataset.edges) {
+        open_edges(cfg, p);
+    }
+    for (const auto& p : cfg.dataset.inputs) {
+        if (cfg.dataset.kind == DatasetSpec::Kind::polygons) {
+            open_polygons(cfg, p);
+        } else {
+            open_lines(cfg, p);
+        }
+    }
 }
 
 std::string gdal_version()

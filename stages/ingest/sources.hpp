@@ -15,6 +15,10 @@ namespace tigerlod::ingest {
 /// result is the same for any thread count.
 RawMap read_dataset(const IngestConfig& cfg, unsigned threads, const Log& log);
 
+/// Open every input of `cfg` and check its layer, geometry type and fields,
+/// reading no features. Throws input_error as read_dataset would.
+void validate_dataset(const IngestConfig& cfg);
+
 /// Versions of the libraries the readers use, for --version.
 std::string gdal_version();
 

@@ -356,3 +356,18 @@ TEST_F(Cli, EdgesSharedByTwoCountyFilesAreDeduplicatedByTlid)
         }
     }
 }
+
+TEST_F(Cli, ValidateChecksInputsAndWritesNothing)
+{
+    make_tiger();
+    const Result ok = run("ingest", "--validate " + tiger_config().string() + " " + out());
+    EXPECT_EQ(ok.code, 0) << ok.err;
+    EXPECT_NE(ok.out.find("valid; dataset t, 2 input files, levels state county tract block_group block"),
+              std::string::npos)
+        << ok.out;
+    EXPECT_TRUE(ok.err.empty());
+    EXPECT_FALSE(fs::exists(m_dir / "out"));
+    const auto bad = tiger_config("edges.zip", "faces.zip", "levels:\n  - {name: district, fields: [VTDST20]}\n");
+    expect_failure(run("ingest", "--validate " + bad.string() + " " + out()), 1,
+                   "layer 'faces': no field 'VTDST20' (level 'district')");
+}
