@@ -29,7 +29,8 @@ const std::vector<std::string> kinds = {"crossings",
                                         "internal_points_replaced",
                                         "missing_internal_points",
                                         "empty_geometries",
-                                        "snap_repairs"};
+                                        "snap_repairs",
+                                        "duplicate_segments"};
 
 uint64_t splitmix(uint64_t x) noexcept
 {
@@ -215,9 +216,12 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
 }
 
 /// Split polygon rings into segments and merge the segments that neighbouring
-/// polygons share into one edge with a unit on each side.
+/// polygons share into one edge with a unit on each side. For a line layer,
+/// split the lines and keep one of each set of identical segments (a river
+/// stored twice becomes one chain), counted as `duplicate_segments`.
 void merge_segments(Graph& g, const RawMap& raw, Problems& problems)
 {
+    const bool lines = raw.kind == RawMap::Kind::lines;
     struct Rec {
         uint32_t a, b; // a < b
         uint32_t unit;
@@ -266,7 +270,13 @@ void merge_segments(Graph& g, const RawMap& raw, Problems& problems)
         }
         const Rec& first = recs[i];
         const GridPoint pa = out.grid[first.a], pb = out.grid[first.b];
-        if (conflict) {
+        if (lines) {
+            l = r = no_unit;
+            if (j - i > 1) {
+                problems.add("duplicate_segments", (pa.x + 0.5 * (pb.x - pa.x)), (pa.y + 0.5 * (pb.y - pa.y)),
+                             raw.where(g.src[first.edge]) + " " + raw.where(g.src[recs[i + 1].edge]));
+            }
+        } else if (conflict) {
             std::string where;
             for (size_t k = i; k < j; ++k) {
                 if (!where.empty()) {
@@ -877,7 +887,7 @@ BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptio
     };
     Graph g = make_graph(raw, projection, options.threads, problems);
     note("interned and projected " + std::to_string(g.keys.size()) + " vertices");
-    if (raw.kind == RawMap::Kind::polygon_rings) {
+    if (raw.kind != RawMap::Kind::edges) {
         merge_segments(g, raw, problems);
     }
     note("merged shared segments: " + std::to_string(g.edge_count()) + " edges");

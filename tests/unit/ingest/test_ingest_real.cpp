@@ -11,6 +11,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <set>
 
@@ -193,4 +194,59 @@ TEST(IngestReal, DefaultDatasetUsAtlas)
     EXPECT_EQ(units_per_level(r), (std::map<std::string, uint64_t>{{"nation", 1}, {"state", 56}, {"county", 3230}}));
     EXPECT_EQ(r.result.problems.at("missing_internal_points"), 0U);
     expect_points_inside(r);
+}
+
+TEST(IngestReal, FloydLinearWaterAsALineLayerLosesNoSegment)
+{
+    const fs::path zip = shared_data / "tiger" / "tl_2020_51063_linearwater.zip";
+    if (!fs::exists(zip)) {
+        GTEST_SKIP() << "../shared/data/tiger is absent: the line layer test needs it";
+    }
+    const fs::path dir = fs::temp_directory_path() / "tigerlod-test-linearwater";
+    fs::create_directories(dir);
+    std::ofstream(dir / "water.yaml") << "name: water\ndataset:\n  kind: lines\n  inputs: [" << zip.string()
+                                      << "]\n  class_field: MTFCC\n";
+    const Ingested r = run_ingest(dir / "water.yaml");
+    fs::remove_all(dir);
+    ASSERT_EQ(r.stores.size(), 1U);
+    const auto& s = r.stores[0];
+    // Every distinct input segment, as snapped and projected, is in exactly one chain.
+    const IngestConfig cfg = [&] {
+        IngestConfig c;
+        c.dataset.kind = DatasetSpec::Kind::lines;
+        c.dataset.inputs = {zip};
+        c.levels = {{"lines", "", {}, -1}};
+        return c;
+    }();
+    Log log;
+    const RawMap raw = read_dataset(cfg, 1, log);
+    const Projection proj(cfg.projection);
+    std::set<std::pair<GridPoint, GridPoint>> input, output;
+    for (size_t p = 0; p < raw.polyline_count(); ++p) {
+        for (uint64_t k = raw.offsets[p]; k + 1 < raw.offsets[p + 1]; ++k) {
+            const auto a = *proj.to_grid(raw.coords[k].lon * 1e-6, raw.coords[k].lat * 1e-6);
+            const auto b = *proj.to_grid(raw.coords[k + 1].lon * 1e-6, raw.coords[k + 1].lat * 1e-6);
+            if (a != b) {
+                input.insert(std::minmax(a, b));
+            }
+        }
+    }
+    size_t segments = 0;
+    for (const auto& c : s.chains) {
+        const auto pts = s.chain_points(c);
+        EXPECT_EQ((c.flags & chains::chain_closed) != 0, pts.front() == pts.back());
+        for (size_t k = 0; k + 1 < pts.size(); ++k) {
+            EXPECT_TRUE(output.insert(std::minmax(pts[k], pts[k + 1])).second) << "segment in two chains";
+            ++segments;
+        }
+    }
+    const uint64_t repaired = r.result.problems.at("spikes") + r.result.problems.at("snap_repairs");
+    if (repaired == 0) {
+        EXPECT_EQ(output, input);
+    }
+    EXPECT_EQ(segments, output.size());
+    EXPECT_GT(r.result.levels[0].chains, 100U);
+    for (const auto& j : s.junctions) {
+        EXPECT_NE(j.degree, 2U);
+    }
 }

@@ -309,3 +309,22 @@ TEST(MapBuilder, SnapRepairDropsAPassThroughVertexWithinThePrecisionOnly)
     EXPECT_EQ(kept.result.problems.at("snap_repairs"), 0U);
     EXPECT_EQ(kept.result.problems.at("touches"), 2U); // counted per segment pair: both segments at V
 }
+
+TEST(MapBuilder, IdenticalLineworkInALineLayerBecomesOneChain)
+{
+    // A river stored twice (features 0 and 1), and a tributary joining at (2,0):
+    //   0,0 --- 1,0 --- 2,0 --- 3,0      (twice)
+    //                    |
+    //                   2,-2
+    RawMap m;
+    m.kind = RawMap::Kind::lines;
+    m.level_names = {"lines"};
+    m.files = {"hand"};
+    m.add_polyline(std::vector<LonLatE6>{ll(0, 0), ll(1, 0), ll(2, 0), ll(3, 0)}, no_unit, no_unit, 0, 0, {0, 0});
+    m.add_polyline(std::vector<LonLatE6>{ll(3, 0), ll(2, 0), ll(1, 0), ll(0, 0)}, no_unit, no_unit, 0, 0, {0, 1});
+    m.add_polyline(std::vector<LonLatE6>{ll(2, -2), ll(2, 0)}, no_unit, no_unit, 0, 0, {0, 2});
+    const Built b = build(std::move(m));
+    EXPECT_EQ(b.result.problems.at("duplicate_segments"), 3U);
+    EXPECT_EQ(b.result.problems.at("overlaps"), 0U);
+    EXPECT_EQ(describe(b.store("lines")), (std::vector<std::string>{"| 0,0 1,0 2,0", "| 2,-2 2,0", "| 2,0 3,0"}));
+}
