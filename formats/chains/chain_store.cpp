@@ -5,6 +5,7 @@
 #include "core/fs.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cstring>
 #include <fstream>
 #include <numeric>
@@ -27,6 +28,13 @@ class Writer {
         std::memcpy(b, &v, sizeof(T)); // the format is little-endian, as every target of ours
         m_out.append(b, sizeof(T));
     }
+    /// Points as consecutive little-endian (i32 x, i32 y): GridPoint's own layout.
+    void put_points(std::span<const GridPoint> pts)
+    {
+        static_assert(sizeof(GridPoint) == 8 && std::endian::native == std::endian::little);
+        m_out.append(reinterpret_cast<const char*>(pts.data()), pts.size_bytes());
+    }
+    void reserve(size_t n) { m_out.reserve(n); }
     void put_str(std::string_view s)
     {
         put(static_cast<uint32_t>(s.size()));
@@ -76,6 +84,15 @@ class Reader {
             fail(std::string("count ") + std::to_string(n) + " of " + what + " exceeds the file");
         }
         return n;
+    }
+    /// Append `n` points (little-endian i32 pairs, GridPoint's layout).
+    void get_points(uint32_t n, std::vector<GridPoint>& out)
+    {
+        need(static_cast<size_t>(n) * sizeof(GridPoint), "chain points");
+        const size_t old = out.size();
+        out.resize(old + n);
+        std::memcpy(out.data() + old, m_bytes.data() + m_pos, static_cast<size_t>(n) * sizeof(GridPoint));
+        m_pos += static_cast<size_t>(n) * sizeof(GridPoint);
     }
     size_t pos() const noexcept { return m_pos; }
 
@@ -162,6 +179,8 @@ PointLocation unit_location(const ChainStore& store, uint32_t unit, GridPoint p)
 std::string encode(const ChainStore& s)
 {
     Writer w;
+    w.reserve(256 + s.points.size() * sizeof(GridPoint) + s.chains.size() * chain_record_size +
+              s.junctions.size() * 20 + s.constraints.size() * 16);
     w.bytes().append(magic, sizeof magic);
     w.put(major_version);
     w.put(minor_version);
@@ -193,10 +212,7 @@ std::string encode(const ChainStore& s)
         w.put(c.feature_class);
         w.put(c.flags);
         w.put(c.count);
-        for (GridPoint pt : s.chain_points(c)) {
-            w.put(pt.x);
-            w.put(pt.y);
-        }
+        w.put_points(s.chain_points(c));
     }
     w.put(static_cast<uint32_t>(s.junctions.size()));
     for (const auto& j : s.junctions) {
@@ -318,13 +334,8 @@ ChainStore decode(std::span<const std::byte> bytes, const std::string& name)
         if (c.count < 2) {
             body.fail("chain " + std::to_string(c.id) + " has " + std::to_string(c.count) + " points, need at least 2");
         }
-        body.need(static_cast<size_t>(c.count) * 8, "chain points");
         c.first = s.points.size();
-        for (uint32_t k = 0; k < c.count; ++k) {
-            const auto x = body.get<int32_t>("points");
-            const auto y = body.get<int32_t>("points");
-            s.points.push_back({x, y});
-        }
+        body.get_points(c.count, s.points);
         const bool closed = s.points[c.first] == s.points.back();
         if (closed != ((c.flags & chain_closed) != 0)) {
             body.fail("chain " + std::to_string(c.id) + ": closed flag disagrees with its end points");

@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 #include <yaml-cpp/yaml.h>
 
+#include <atomic>
 #include <cstdio>
 #include <future>
 #include <iostream>
@@ -162,19 +163,17 @@ int IngestStage::run(const StageContext& ctx)
                  " polylines, " + std::to_string(raw.units.size()) + " units");
 
     OutputDir out(m_output, m_overwrite);
-    std::set<std::string> made;
-    uint64_t stores = 0;
+    for (const auto& l : cfg.levels) {
+        fs::create_directories(out.path() / l.name);
+    }
+    std::atomic<uint64_t> stores{0};
     BuildOptions options;
     options.halo_m = cfg.halo_m;
     options.threads = threads;
     options.max_problem_samples = static_cast<size_t>(m_max_problem_samples);
     options.log = &ctx.log;
     const BuildResult result = build_map(std::move(raw), projection, options, [&](const chains::ChainStore& s) {
-        const fs::path dir = out.path() / s.level_name;
-        if (made.insert(s.level_name).second) {
-            fs::create_directories(dir);
-        }
-        chains::write(dir / (file_name(s.partition) + ".tlc"), s);
+        chains::write(out.path() / s.level_name / (file_name(s.partition) + ".tlc"), s);
         ++stores;
     });
     const double t_build = ctx.log.elapsed_s();
@@ -186,7 +185,7 @@ int IngestStage::run(const StageContext& ctx)
     report["input_vertices"] = result.input_vertices;
     report["unique_vertices"] = result.unique_vertices;
     report["edges"] = result.edges;
-    report["stores"] = stores;
+    report["stores"] = stores.load();
     json levels = json::array();
     for (const auto& l : result.levels) {
         levels.push_back({{"name", l.name},
@@ -251,7 +250,7 @@ int IngestStage::run(const StageContext& ctx)
     std::printf("ingest %s: %llu input vertices in %.2f s (%.2f M/s), %llu stores in %s\n", cfg.name.c_str(),
                 static_cast<unsigned long long>(points_read), seconds,
                 seconds > 0 ? static_cast<double>(points_read) / seconds / 1e6 : 0.0,
-                static_cast<unsigned long long>(stores), m_output.c_str());
+                static_cast<unsigned long long>(stores.load()), m_output.c_str());
     std::printf("  %-12s %8s %8s %7s %10s %9s %6s\n", "level", "units", "chains", "rings", "vertices", "junctions",
                 "parts");
     for (const auto& l : result.levels) {

@@ -646,14 +646,24 @@ std::vector<Intersection> repair_snap_crossings(Graph& g, const RawMap& raw, con
                 bump(ev[k], 2);
             }
         }
-        // Ends at each vertex of degree 2, for joining two edges.
+        // Edge ends at the candidate vertices (those of the pairs found, of degree 2),
+        // for joining two edges there.
         std::unordered_map<uint32_t, std::vector<uint32_t>> ends; // vertex -> edge*2 + (1 if it ends there)
+        for (const auto& f : by_segment) {
+            for (uint32_t si : {f.first, f.second}) {
+                const auto [e, k] = s.at[si];
+                for (uint32_t v : {g.edge(e)[k], g.edge(e)[k + 1]}) {
+                    if (deg[v] == 2) {
+                        ends.try_emplace(v);
+                    }
+                }
+            }
+        }
         for (uint32_t e = 0; e < g.edge_count(); ++e) {
             const auto ev = g.edge(e);
             for (uint32_t side = 0; side < 2; ++side) {
-                const uint32_t v = side ? ev.back() : ev.front();
-                if (deg[v] == 2) {
-                    ends[v].push_back(e * 2 + side);
+                if (auto it = ends.find(side ? ev.back() : ev.front()); it != ends.end()) {
+                    it->second.push_back(e * 2 + side);
                 }
             }
         }
@@ -1002,131 +1012,149 @@ BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptio
         st.name = raw.level_names[L];
         st.units = raw.kind == RawMap::Kind::lines ? 0 : lc.codes.size();
         st.partitions = npart;
-        std::vector<std::vector<chains::ConstraintPoint>> part_points(npart);
-        std::vector<std::vector<uint32_t>> part_units(npart);
-        std::vector<std::pair<GridPoint, GridPoint>> useg;
-        for (uint32_t code = 0; code < lc.codes.size() && raw.kind != RawMap::Kind::lines; ++code) {
-            useg.clear();
-            for (uint32_t ci : unit_chains[code]) {
-                const auto cv = lev.chain(lev.chains[ci]);
-                for (size_t k = 0; k + 1 < cv.size(); ++k) {
-                    useg.push_back({g.grid[cv[k]], g.grid[cv[k + 1]]});
-                }
-            }
+        // Internal points, unit by unit on the worker threads; problems are
+        // recorded afterwards in code order.
+        struct UnitPoint {
             std::optional<GridPoint> pt;
-            if (rep[code] != none) {
-                const LonLatE6 ll = *raw.units[rep[code]].intpt;
-                pt = projection.to_grid(ll.lon * 1e-6, ll.lat * 1e-6);
-                if (pt) {
-                    PointInPolygon pip(*pt);
-                    for (const auto& [a, b] : useg) {
-                        pip.add_segment(a, b);
-                    }
-                    if (pip.location() != PointLocation::inside) {
-                        problems.add("internal_points_replaced", pt->x, pt->y,
-                                     raw.where(raw.units[rep[code]].source) + " (" + st.name + " " + lc.codes[code] +
-                                         ")");
-                        pt.reset();
+            std::optional<GridPoint> rejected; // a given point not strictly inside
+            bool computed = false;
+            GridPoint near;
+        };
+        const size_t npoints = raw.kind == RawMap::Kind::lines ? 0 : lc.codes.size();
+        std::vector<UnitPoint> unit_points(npoints);
+        parallel_for(npoints, options.threads, [&](size_t b, size_t e) {
+            std::vector<std::pair<GridPoint, GridPoint>> useg;
+            for (size_t code = b; code < e; ++code) {
+                useg.clear();
+                for (uint32_t ci : unit_chains[code]) {
+                    const auto cv = lev.chain(lev.chains[ci]);
+                    for (size_t k = 0; k + 1 < cv.size(); ++k) {
+                        useg.push_back({g.grid[cv[k]], g.grid[cv[k + 1]]});
                     }
                 }
-            }
-            if (!pt) {
-                pt = point_inside(useg);
-                if (pt) {
-                    ++st.computed_internal_points;
+                UnitPoint& up = unit_points[code];
+                up.near = useg.empty() ? GridPoint{} : useg.front().first;
+                if (rep[code] != none) {
+                    const LonLatE6 ll = *raw.units[rep[code]].intpt;
+                    up.pt = projection.to_grid(ll.lon * 1e-6, ll.lat * 1e-6);
+                    if (up.pt) {
+                        PointInPolygon pip(*up.pt);
+                        for (const auto& [a, c] : useg) {
+                            pip.add_segment(a, c);
+                        }
+                        if (pip.location() != PointLocation::inside) {
+                            up.rejected = up.pt;
+                            up.pt.reset();
+                        }
+                    }
+                }
+                if (!up.pt) {
+                    up.pt = point_inside(useg);
+                    up.computed = up.pt.has_value();
                 }
             }
-            const uint32_t part = parent(code);
-            part_units[part].push_back(code);
-            if (!pt) {
-                const GridPoint at = useg.empty() ? GridPoint{} : useg.front().first;
-                problems.add("missing_internal_points", at.x, at.y, st.name + " " + lc.codes[code]);
+        });
+        std::vector<std::vector<chains::ConstraintPoint>> part_points(npart);
+        for (uint32_t code = 0; code < npoints; ++code) {
+            const UnitPoint& up = unit_points[code];
+            if (up.rejected) {
+                problems.add("internal_points_replaced", up.rejected->x, up.rejected->y,
+                             raw.where(raw.units[rep[code]].source) + " (" + st.name + " " + lc.codes[code] + ")");
+            }
+            st.computed_internal_points += up.computed;
+            if (!up.pt) {
+                problems.add("missing_internal_points", up.near.x, up.near.y, st.name + " " + lc.codes[code]);
                 continue;
             }
-            part_points[part].push_back({code, chains::constraint_internal, *pt});
+            part_points[parent(code)].push_back({code, chains::constraint_internal, *up.pt});
         }
-        // Emit one store per partition.
+        // One store per partition, built, encoded and handed to the sink on the
+        // worker threads.
         std::vector<std::vector<uint32_t>> own(npart);
         for (uint32_t ci = 0; ci < lev.chains.size(); ++ci) {
             own[lev.chains[ci].owner].push_back(ci);
+            const auto& c = lev.chains[ci];
+            st.chains += 1;
+            st.rings += c.ring ? 1 : 0;
+            st.vertices += c.count;
         }
-        std::vector<GridPoint> pts;
         for (uint32_t part = 0; part < npart; ++part) {
-            if (own[part].empty() && part_points[part].empty()) {
-                continue;
-            }
-            chains::ChainStore s;
-            s.level_index = static_cast<uint32_t>(L);
-            s.level_count = static_cast<uint32_t>(nlev);
-            s.level_name = st.name;
-            s.partition = part_names[part];
-            s.projection = projection.params();
-            s.halo_m = options.halo_m;
-            std::vector<uint32_t> sidx(lc.codes.size() + 1, none);
-            auto str = [&](uint32_t code) {
-                if (code == none) {
-                    return 0U;
-                }
-                if (sidx[code] == none) {
-                    sidx[code] = s.intern(lc.codes[code]);
-                }
-                return sidx[code];
-            };
-            std::vector<uint32_t> cls_idx(raw.classes.size(), none);
-            auto add = [&](uint32_t ci, bool is_halo) {
-                const auto& c = lev.chains[ci];
-                const auto cv = lev.chain(c);
-                pts.clear();
-                for (uint32_t v : cv) {
-                    pts.push_back(g.grid[v]);
-                }
-                if (cls_idx[c.cls] == none) {
-                    cls_idx[c.cls] = s.intern(raw.classes[c.cls]);
-                }
-                chains::ChainInfo info;
-                info.id = c.id;
-                info.left = str(c.left);
-                info.right = str(c.right);
-                info.feature_class = cls_idx[c.cls];
-                info.flags = (cv.front() == cv.back() ? chains::chain_closed : 0U) |
-                             (is_halo ? chains::chain_halo : 0U) | (c.problem ? chains::chain_problem : 0U);
-                s.add_chain(info, pts);
-            };
-            std::vector<uint8_t> is_end;
-            for (uint32_t ci : own[part]) {
-                add(ci, false);
-                const auto& c = lev.chains[ci];
-                st.chains += 1;
-                st.rings += c.ring ? 1 : 0;
-                st.vertices += c.count;
-            }
-            for (uint32_t ci : halo[part]) {
-                add(ci, true);
-                ++st.halo_chains;
-            }
-            // Junctions at the ends of the partition's own chains.
-            std::vector<uint32_t> ends;
-            for (uint32_t ci : own[part]) {
-                const auto cv = lev.chain(lev.chains[ci]);
-                ends.push_back(cv.front());
-                ends.push_back(cv.back());
-            }
-            std::sort(ends.begin(), ends.end());
-            ends.erase(std::unique(ends.begin(), ends.end()), ends.end());
-            for (uint32_t v : ends) {
-                auto it = std::lower_bound(lev.junctions.begin(), lev.junctions.end(), v);
-                if (it != lev.junctions.end() && *it == v) {
-                    const auto k = static_cast<size_t>(it - lev.junctions.begin());
-                    s.junctions.push_back({g.keys[v], g.grid[v], lev.junction_degree[k]});
-                }
-            }
-            for (const auto& cp : part_points[part]) {
-                s.constraints.push_back({str(cp.unit), cp.kind, cp.p});
-            }
+            st.halo_chains += halo[part].size();
             st.constraint_points += part_points[part].size();
-            s.canonicalize();
-            sink(s);
         }
+        parallel_for(npart, options.threads, [&](size_t pb, size_t pe) {
+            std::vector<GridPoint> pts;
+            for (size_t part = pb; part < pe; ++part) {
+                if (own[part].empty() && part_points[part].empty()) {
+                    continue;
+                }
+                chains::ChainStore s;
+                s.level_index = static_cast<uint32_t>(L);
+                s.level_count = static_cast<uint32_t>(nlev);
+                s.level_name = st.name;
+                s.partition = part_names[part];
+                s.projection = projection.params();
+                s.halo_m = options.halo_m;
+                std::unordered_map<uint32_t, uint32_t> sidx;
+                auto str = [&](uint32_t code) {
+                    if (code == none) {
+                        return 0U;
+                    }
+                    auto [it, added] = sidx.try_emplace(code, 0U);
+                    if (added) {
+                        it->second = s.intern(lc.codes[code]);
+                    }
+                    return it->second;
+                };
+                std::vector<uint32_t> cls_idx(raw.classes.size(), none);
+                auto add = [&](uint32_t ci, bool is_halo) {
+                    const auto& c = lev.chains[ci];
+                    const auto cv = lev.chain(c);
+                    pts.clear();
+                    for (uint32_t v : cv) {
+                        pts.push_back(g.grid[v]);
+                    }
+                    if (cls_idx[c.cls] == none) {
+                        cls_idx[c.cls] = s.intern(raw.classes[c.cls]);
+                    }
+                    chains::ChainInfo info;
+                    info.id = c.id;
+                    info.left = str(c.left);
+                    info.right = str(c.right);
+                    info.feature_class = cls_idx[c.cls];
+                    info.flags = (cv.front() == cv.back() ? chains::chain_closed : 0U) |
+                                 (is_halo ? chains::chain_halo : 0U) | (c.problem ? chains::chain_problem : 0U);
+                    s.add_chain(info, pts);
+                };
+                for (uint32_t ci : own[part]) {
+                    add(ci, false);
+                }
+                for (uint32_t ci : halo[part]) {
+                    add(ci, true);
+                }
+                // Junctions at the ends of the partition's own chains.
+                std::vector<uint32_t> ends;
+                for (uint32_t ci : own[part]) {
+                    const auto cv = lev.chain(lev.chains[ci]);
+                    ends.push_back(cv.front());
+                    ends.push_back(cv.back());
+                }
+                std::sort(ends.begin(), ends.end());
+                ends.erase(std::unique(ends.begin(), ends.end()), ends.end());
+                for (uint32_t v : ends) {
+                    auto it = std::lower_bound(lev.junctions.begin(), lev.junctions.end(), v);
+                    if (it != lev.junctions.end() && *it == v) {
+                        const auto k = static_cast<size_t>(it - lev.junctions.begin());
+                        s.junctions.push_back({g.keys[v], g.grid[v], lev.junction_degree[k]});
+                    }
+                }
+                for (const auto& cp : part_points[part]) {
+                    s.constraints.push_back({str(cp.unit), cp.kind, cp.p});
+                }
+                s.canonicalize();
+                sink(s);
+            }
+        });
         st.junctions = lev.junctions.size();
         note("level " + st.name + ": " + std::to_string(st.chains) + " chains in " + std::to_string(st.partitions) +
              " partitions");

@@ -63,7 +63,10 @@ struct BuildResult {
     uint64_t input_vertices = 0, unique_vertices = 0, edges = 0;
 };
 
-/// Called once per finished chain store, coarsest level first, partitions in code order.
+/// Called once per finished chain store. Levels come coarsest first, but within
+/// a level it is called from up to BuildOptions::threads threads at once, in no
+/// particular order: it must be thread-safe. Each store's content does not
+/// depend on the threads.
 using StoreSink = std::function<void(const chains::ChainStore&)>;
 
 /// Build every level's chain stores. Throws input_error (naming file and

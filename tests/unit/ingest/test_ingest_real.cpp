@@ -13,6 +13,8 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <mutex>
+#include <tuple>
 #include <set>
 
 namespace fs = std::filesystem;
@@ -40,8 +42,14 @@ Ingested run_ingest(const fs::path& config, unsigned threads = 2)
     BuildOptions o;
     o.halo_m = cfg.halo_m;
     o.threads = threads;
-    run.result = build_map(std::move(raw), Projection(cfg.projection), o,
-                           [&](const chains::ChainStore& s) { run.stores.push_back(s); });
+    std::mutex m; // the sink runs on several threads
+    run.result = build_map(std::move(raw), Projection(cfg.projection), o, [&](const chains::ChainStore& s) {
+        std::lock_guard lock(m);
+        run.stores.push_back(s);
+    });
+    std::sort(run.stores.begin(), run.stores.end(), [](const auto& x, const auto& y) {
+        return std::tie(x.level_index, x.partition) < std::tie(y.level_index, y.partition);
+    });
     return run;
 }
 

@@ -5,6 +5,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <mutex>
+#include <tuple>
 #include <sstream>
 
 using namespace tigerlod;
@@ -43,13 +45,27 @@ struct Built {
     }
 };
 
-Built build(RawMap raw, double halo_m = 1000)
+/// Build, collecting the stores (the sink runs on several threads) in (level, partition) order.
+Built build(RawMap raw, BuildOptions o)
 {
     Built b;
+    std::mutex m;
+    b.result = build_map(std::move(raw), proj(), o, [&](const chains::ChainStore& s) {
+        std::lock_guard lock(m);
+        b.stores.push_back(s);
+    });
+    std::sort(b.stores.begin(), b.stores.end(), [](const auto& x, const auto& y) {
+        return std::tie(x.level_index, x.partition) < std::tie(y.level_index, y.partition);
+    });
+    return b;
+}
+
+Built build(RawMap raw, double halo_m = 1000)
+{
     BuildOptions o;
     o.halo_m = halo_m;
-    b.result = build_map(std::move(raw), proj(), o, [&](const chains::ChainStore& s) { b.stores.push_back(s); });
-    return b;
+    o.threads = 2;
+    return build(std::move(raw), o);
 }
 
 /// A chain as "LEFT|RIGHT x,y x,y ..." in map units, for exact comparisons.
@@ -255,7 +271,9 @@ TEST(MapBuilder, OutputDoesNotDependOnThreads)
         BuildOptions o;
         o.threads = threads;
         std::string all;
-        build_map(t_junction_map(), proj(), o, [&](const chains::ChainStore& s) { all += chains::encode(s); });
+        for (const auto& s : build(t_junction_map(), o).stores) {
+            all += chains::encode(s);
+        }
         return all;
     };
     EXPECT_EQ(run(1), run(4));
@@ -294,9 +312,7 @@ TEST(MapBuilder, SnapRepairDropsAPassThroughVertexWithinThePrecisionOnly)
     auto run = [&](double max_shift_m) {
         BuildOptions o;
         o.max_snap_shift_m = max_shift_m;
-        Built b;
-        b.result = build_map(make(), proj(), o, [&](const chains::ChainStore& s) { b.stores.push_back(s); });
-        return b;
+        return build(make(), o);
     };
     const Built repaired = run(0.12);
     EXPECT_EQ(repaired.result.problems.at("snap_repairs"), 1U);
