@@ -876,12 +876,246 @@ std::optional<GridPoint> point_inside(const std::vector<std::pair<GridPoint, Gri
     return std::nullopt;
 }
 
-} // namespace
-
-const std::vector<std::string>& problem_kinds()
+void log_progress(const BuildOptions& options, const std::string& what)
 {
-    return kinds;
+    if (options.log != nullptr) {
+        options.log->info(what);
+    }
 }
+
+/// One level: its chains, partitions, halos, internal points and stores.
+LevelStats process_level(const Graph& g, const RawMap& raw, const std::vector<LevelCodes>& lcs, size_t L,
+                         const std::vector<uint32_t>& bad_edges, const Projection& projection,
+                         const BuildOptions& options, Problems& problems, const StoreSink& sink)
+{
+    const size_t nlev = lcs.size();
+    const double halo_grid = options.halo_m / projection.params().grid_m;
+    auto note = [&](const std::string& what) { log_progress(options, what); };
+    Level lev = build_level(g, raw, lcs, L);
+    note("level " + raw.level_names[L] + ": built chains");
+    for (uint32_t e : bad_edges) {
+        if (lev.chain_of_edge[e] != none) {
+            lev.chains[lev.chain_of_edge[e]].problem = true;
+        }
+    }
+    const auto& lc = lcs[L];
+    // Partitions: the parent unit; a chain between two parents belongs to the smaller code.
+    uint32_t npart = 1;
+    std::vector<std::string> part_names{"all"};
+    if (L > 0) {
+        part_names = lcs[L - 1].codes;
+        npart = static_cast<uint32_t>(part_names.size());
+    }
+    auto parent = [&](uint32_t code) { return L == 0 ? 0U : lc.parent[code]; };
+    for (auto& c : lev.chains) {
+        uint32_t o = none;
+        for (uint32_t side : {c.left, c.right}) {
+            if (side != none) {
+                o = std::min(o, parent(side));
+            }
+        }
+        c.owner = o == none ? 0 : o;
+    }
+    // Halo: chains of other partitions that bound one of the partition's units or
+    // come within the halo distance of its chains, found on cells at least as
+    // large as the distance.
+    std::vector<std::vector<uint32_t>> halo(npart);
+    if (npart > 1) {
+        std::vector<SegmentRef> refs;
+        for (uint32_t ci = 0; ci < lev.chains.size(); ++ci) {
+            const auto& c = lev.chains[ci];
+            // A border between two parts bounds both: the other part's units need it.
+            uint32_t also = none;
+            for (uint32_t side : {c.left, c.right}) {
+                if (side != none && parent(side) != c.owner) {
+                    also = parent(side);
+                }
+            }
+            const auto cv = lev.chain(c);
+            for (size_t k = 0; k + 1 < cv.size(); ++k) {
+                refs.push_back({g.grid[cv[k]], g.grid[cv[k + 1]], ci, c.owner, also});
+            }
+        }
+        for (const auto& [chain, part] : find_near(refs, halo_grid)) {
+            halo[part].push_back(chain);
+        }
+    }
+    // Units of each partition and their boundary segments.
+    std::vector<std::vector<uint32_t>> unit_chains(lc.codes.size());
+    for (uint32_t ci = 0; ci < lev.chains.size(); ++ci) {
+        const auto& c = lev.chains[ci];
+        if (c.left != none) {
+            unit_chains[c.left].push_back(ci);
+        }
+        if (c.right != none && c.right != c.left) {
+            unit_chains[c.right].push_back(ci);
+        }
+    }
+    // The representative finest unit of each code: the heaviest with a given point.
+    std::vector<uint32_t> rep(lc.codes.size(), none);
+    for (uint32_t u = 0; u < raw.units.size(); ++u) {
+        if (!raw.units[u].intpt) {
+            continue;
+        }
+        uint32_t& r = rep[lc.of_unit[u]];
+        if (r == none || raw.units[u].weight > raw.units[r].weight) {
+            r = u;
+        }
+    }
+    LevelStats st;
+    st.name = raw.level_names[L];
+    st.units = raw.kind == RawMap::Kind::lines ? 0 : lc.codes.size();
+    st.partitions = npart;
+    // Internal points, unit by unit on the worker threads; problems are
+    // recorded afterwards in code order.
+    struct UnitPoint {
+        std::optional<GridPoint> pt;
+        std::optional<GridPoint> rejected; // a given point not strictly inside
+        bool computed = false;
+        GridPoint near;
+    };
+    const size_t npoints = raw.kind == RawMap::Kind::lines ? 0 : lc.codes.size();
+    std::vector<UnitPoint> unit_points(npoints);
+    parallel_for(npoints, options.threads, [&](size_t b, size_t e) {
+        std::vector<std::pair<GridPoint, GridPoint>> useg;
+        for (size_t code = b; code < e; ++code) {
+            useg.clear();
+            for (uint32_t ci : unit_chains[code]) {
+                const auto cv = lev.chain(lev.chains[ci]);
+                for (size_t k = 0; k + 1 < cv.size(); ++k) {
+                    useg.push_back({g.grid[cv[k]], g.grid[cv[k + 1]]});
+                }
+            }
+            UnitPoint& up = unit_points[code];
+            up.near = useg.empty() ? GridPoint{} : useg.front().first;
+            if (rep[code] != none) {
+                const LonLatE6 ll = *raw.units[rep[code]].intpt;
+                up.pt = projection.to_grid(ll.lon * 1e-6, ll.lat * 1e-6);
+                if (up.pt) {
+                    PointInPolygon pip(*up.pt);
+                    for (const auto& [a, c] : useg) {
+                        pip.add_segment(a, c);
+                    }
+                    if (pip.location() != PointLocation::inside) {
+                        up.rejected = up.pt;
+                        up.pt.reset();
+                    }
+                }
+            }
+            if (!up.pt) {
+                up.pt = point_inside(useg);
+                up.computed = up.pt.has_value();
+            }
+        }
+    });
+    std::vector<std::vector<chains::ConstraintPoint>> part_points(npart);
+    for (uint32_t code = 0; code < npoints; ++code) {
+        const UnitPoint& up = unit_points[code];
+        if (up.rejected) {
+            problems.add("internal_points_replaced", up.rejected->x, up.rejected->y,
+                         raw.where(raw.units[rep[code]].source) + " (" + st.name + " " + lc.codes[code] + ")");
+        }
+        st.computed_internal_points += up.computed;
+        if (!up.pt) {
+            problems.add("missing_internal_points", up.near.x, up.near.y, st.name + " " + lc.codes[code]);
+            continue;
+        }
+        part_points[parent(code)].push_back({code, chains::constraint_internal, *up.pt});
+    }
+    // One store per partition, built, encoded and handed to the sink on the
+    // worker threads.
+    std::vector<std::vector<uint32_t>> own(npart);
+    for (uint32_t ci = 0; ci < lev.chains.size(); ++ci) {
+        own[lev.chains[ci].owner].push_back(ci);
+        const auto& c = lev.chains[ci];
+        st.chains += 1;
+        st.rings += c.ring ? 1 : 0;
+        st.vertices += c.count;
+    }
+    for (uint32_t part = 0; part < npart; ++part) {
+        st.halo_chains += halo[part].size();
+        st.constraint_points += part_points[part].size();
+    }
+    parallel_for(npart, options.threads, [&](size_t pb, size_t pe) {
+        std::vector<GridPoint> pts;
+        for (size_t part = pb; part < pe; ++part) {
+            if (own[part].empty() && part_points[part].empty()) {
+                continue;
+            }
+            chains::ChainStore s;
+            s.level_index = static_cast<uint32_t>(L);
+            s.level_count = static_cast<uint32_t>(nlev);
+            s.level_name = st.name;
+            s.partition = part_names[part];
+            s.projection = projection.params();
+            s.halo_m = options.halo_m;
+            std::unordered_map<uint32_t, uint32_t> sidx;
+            auto str = [&](uint32_t code) {
+                if (code == none) {
+                    return 0U;
+                }
+                auto [it, added] = sidx.try_emplace(code, 0U);
+                if (added) {
+                    it->second = s.intern(lc.codes[code]);
+                }
+                return it->second;
+            };
+            std::vector<uint32_t> cls_idx(raw.classes.size(), none);
+            auto add = [&](uint32_t ci, bool is_halo) {
+                const auto& c = lev.chains[ci];
+                const auto cv = lev.chain(c);
+                pts.clear();
+                for (uint32_t v : cv) {
+                    pts.push_back(g.grid[v]);
+                }
+                if (cls_idx[c.cls] == none) {
+                    cls_idx[c.cls] = s.intern(raw.classes[c.cls]);
+                }
+                chains::ChainInfo info;
+                info.id = c.id;
+                info.left = str(c.left);
+                info.right = str(c.right);
+                info.feature_class = cls_idx[c.cls];
+                info.flags = (cv.front() == cv.back() ? chains::chain_closed : 0U) |
+                             (is_halo ? chains::chain_halo : 0U) | (c.problem ? chains::chain_problem : 0U);
+                s.add_chain(info, pts);
+            };
+            for (uint32_t ci : own[part]) {
+                add(ci, false);
+            }
+            for (uint32_t ci : halo[part]) {
+                add(ci, true);
+            }
+            // Junctions at the ends of the partition's own chains.
+            std::vector<uint32_t> ends;
+            for (uint32_t ci : own[part]) {
+                const auto cv = lev.chain(lev.chains[ci]);
+                ends.push_back(cv.front());
+                ends.push_back(cv.back());
+            }
+            std::sort(ends.begin(), ends.end());
+            ends.erase(std::unique(ends.begin(), ends.end()), ends.end());
+            for (uint32_t v : ends) {
+                auto it = std::lower_bound(lev.junctions.begin(), lev.junctions.end(), v);
+                if (it != lev.junctions.end() && *it == v) {
+                    const auto k = static_cast<size_t>(it - lev.junctions.begin());
+                    s.junctions.push_back({g.keys[v], g.grid[v], lev.junction_degree[k]});
+                }
+            }
+            for (const auto& cp : part_points[part]) {
+                s.constraints.push_back({str(cp.unit), cp.kind, cp.p});
+            }
+            s.canonicalize();
+            sink(s);
+        }
+    });
+    st.junctions = lev.junctions.size();
+    note("level " + st.name + ": " + std::to_string(st.chains) + " chains in " + std::to_string(st.partitions) +
+         " partitions");
+    return st;
+}
+
+} // namespace
 
 BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptions& options, const StoreSink& sink)
 {
@@ -890,11 +1124,7 @@ BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptio
     const size_t nlev = raw.level_names.size();
     result.input_vertices = raw.points_read;
     problems.count("empty_geometries", raw.empty_geometries);
-    auto note = [&](const std::string& what) {
-        if (options.log != nullptr) {
-            options.log->info(what);
-        }
-    };
+    auto note = [&](const std::string& what) { log_progress(options, what); };
     Graph g = make_graph(raw, projection, options.threads, problems);
     note("interned and projected " + std::to_string(g.keys.size()) + " vertices");
     if (raw.kind != RawMap::Kind::edges) {
@@ -936,229 +1166,8 @@ BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptio
     std::sort(bad_edges.begin(), bad_edges.end());
     bad_edges.erase(std::unique(bad_edges.begin(), bad_edges.end()), bad_edges.end());
 
-    const double halo_grid = options.halo_m / projection.params().grid_m;
     for (size_t L = 0; L < nlev; ++L) {
-        Level lev = build_level(g, raw, lcs, L);
-        note("level " + raw.level_names[L] + ": built chains");
-        for (uint32_t e : bad_edges) {
-            if (lev.chain_of_edge[e] != none) {
-                lev.chains[lev.chain_of_edge[e]].problem = true;
-            }
-        }
-        const auto& lc = lcs[L];
-        // Partitions: the parent unit; a chain between two parents belongs to the smaller code.
-        uint32_t npart = 1;
-        std::vector<std::string> part_names{"all"};
-        if (L > 0) {
-            part_names = lcs[L - 1].codes;
-            npart = static_cast<uint32_t>(part_names.size());
-        }
-        auto parent = [&](uint32_t code) { return L == 0 ? 0U : lc.parent[code]; };
-        for (auto& c : lev.chains) {
-            uint32_t o = none;
-            for (uint32_t side : {c.left, c.right}) {
-                if (side != none) {
-                    o = std::min(o, parent(side));
-                }
-            }
-            c.owner = o == none ? 0 : o;
-        }
-        // Halo: chains of other partitions that come within the halo distance of a
-        // partition's own chains, found on cells at least as large as the distance.
-        std::vector<std::vector<uint32_t>> halo(npart);
-        if (npart > 1) {
-            std::vector<SegmentRef> refs;
-            for (uint32_t ci = 0; ci < lev.chains.size(); ++ci) {
-                const auto& c = lev.chains[ci];
-                // A border between two parts bounds both: the other part's units need it.
-                uint32_t also = none;
-                for (uint32_t side : {c.left, c.right}) {
-                    if (side != none && parent(side) != c.owner) {
-                        also = parent(side);
-                    }
-                }
-                const auto cv = lev.chain(c);
-                for (size_t k = 0; k + 1 < cv.size(); ++k) {
-                    refs.push_back({g.grid[cv[k]], g.grid[cv[k + 1]], ci, c.owner, also});
-                }
-            }
-            for (const auto& [chain, part] : find_near(refs, halo_grid)) {
-                halo[part].push_back(chain);
-            }
-        }
-        // Units of each partition and their boundary segments.
-        std::vector<std::vector<uint32_t>> unit_chains(lc.codes.size());
-        for (uint32_t ci = 0; ci < lev.chains.size(); ++ci) {
-            const auto& c = lev.chains[ci];
-            if (c.left != none) {
-                unit_chains[c.left].push_back(ci);
-            }
-            if (c.right != none && c.right != c.left) {
-                unit_chains[c.right].push_back(ci);
-            }
-        }
-        // The representative finest unit of each code: the heaviest with a given point.
-        std::vector<uint32_t> rep(lc.codes.size(), none);
-        for (uint32_t u = 0; u < raw.units.size(); ++u) {
-            if (!raw.units[u].intpt) {
-                continue;
-            }
-            uint32_t& r = rep[lc.of_unit[u]];
-            if (r == none || raw.units[u].weight > raw.units[r].weight) {
-                r = u;
-            }
-        }
-        LevelStats st;
-        st.name = raw.level_names[L];
-        st.units = raw.kind == RawMap::Kind::lines ? 0 : lc.codes.size();
-        st.partitions = npart;
-        // Internal points, unit by unit on the worker threads; problems are
-        // recorded afterwards in code order.
-        struct UnitPoint {
-            std::optional<GridPoint> pt;
-            std::optional<GridPoint> rejected; // a given point not strictly inside
-            bool computed = false;
-            GridPoint near;
-        };
-        const size_t npoints = raw.kind == RawMap::Kind::lines ? 0 : lc.codes.size();
-        std::vector<UnitPoint> unit_points(npoints);
-        parallel_for(npoints, options.threads, [&](size_t b, size_t e) {
-            std::vector<std::pair<GridPoint, GridPoint>> useg;
-            for (size_t code = b; code < e; ++code) {
-                useg.clear();
-                for (uint32_t ci : unit_chains[code]) {
-                    const auto cv = lev.chain(lev.chains[ci]);
-                    for (size_t k = 0; k + 1 < cv.size(); ++k) {
-                        useg.push_back({g.grid[cv[k]], g.grid[cv[k + 1]]});
-                    }
-                }
-                UnitPoint& up = unit_points[code];
-                up.near = useg.empty() ? GridPoint{} : useg.front().first;
-                if (rep[code] != none) {
-                    const LonLatE6 ll = *raw.units[rep[code]].intpt;
-                    up.pt = projection.to_grid(ll.lon * 1e-6, ll.lat * 1e-6);
-                    if (up.pt) {
-                        PointInPolygon pip(*up.pt);
-                        for (const auto& [a, c] : useg) {
-                            pip.add_segment(a, c);
-                        }
-                        if (pip.location() != PointLocation::inside) {
-                            up.rejected = up.pt;
-                            up.pt.reset();
-                        }
-                    }
-                }
-                if (!up.pt) {
-                    up.pt = point_inside(useg);
-                    up.computed = up.pt.has_value();
-                }
-            }
-        });
-        std::vector<std::vector<chains::ConstraintPoint>> part_points(npart);
-        for (uint32_t code = 0; code < npoints; ++code) {
-            const UnitPoint& up = unit_points[code];
-            if (up.rejected) {
-                problems.add("internal_points_replaced", up.rejected->x, up.rejected->y,
-                             raw.where(raw.units[rep[code]].source) + " (" + st.name + " " + lc.codes[code] + ")");
-            }
-            st.computed_internal_points += up.computed;
-            if (!up.pt) {
-                problems.add("missing_internal_points", up.near.x, up.near.y, st.name + " " + lc.codes[code]);
-                continue;
-            }
-            part_points[parent(code)].push_back({code, chains::constraint_internal, *up.pt});
-        }
-        // One store per partition, built, encoded and handed to the sink on the
-        // worker threads.
-        std::vector<std::vector<uint32_t>> own(npart);
-        for (uint32_t ci = 0; ci < lev.chains.size(); ++ci) {
-            own[lev.chains[ci].owner].push_back(ci);
-            const auto& c = lev.chains[ci];
-            st.chains += 1;
-            st.rings += c.ring ? 1 : 0;
-            st.vertices += c.count;
-        }
-        for (uint32_t part = 0; part < npart; ++part) {
-            st.halo_chains += halo[part].size();
-            st.constraint_points += part_points[part].size();
-        }
-        parallel_for(npart, options.threads, [&](size_t pb, size_t pe) {
-            std::vector<GridPoint> pts;
-            for (size_t part = pb; part < pe; ++part) {
-                if (own[part].empty() && part_points[part].empty()) {
-                    continue;
-                }
-                chains::ChainStore s;
-                s.level_index = static_cast<uint32_t>(L);
-                s.level_count = static_cast<uint32_t>(nlev);
-                s.level_name = st.name;
-                s.partition = part_names[part];
-                s.projection = projection.params();
-                s.halo_m = options.halo_m;
-                std::unordered_map<uint32_t, uint32_t> sidx;
-                auto str = [&](uint32_t code) {
-                    if (code == none) {
-                        return 0U;
-                    }
-                    auto [it, added] = sidx.try_emplace(code, 0U);
-                    if (added) {
-                        it->second = s.intern(lc.codes[code]);
-                    }
-                    return it->second;
-                };
-                std::vector<uint32_t> cls_idx(raw.classes.size(), none);
-                auto add = [&](uint32_t ci, bool is_halo) {
-                    const auto& c = lev.chains[ci];
-                    const auto cv = lev.chain(c);
-                    pts.clear();
-                    for (uint32_t v : cv) {
-                        pts.push_back(g.grid[v]);
-                    }
-                    if (cls_idx[c.cls] == none) {
-                        cls_idx[c.cls] = s.intern(raw.classes[c.cls]);
-                    }
-                    chains::ChainInfo info;
-                    info.id = c.id;
-                    info.left = str(c.left);
-                    info.right = str(c.right);
-                    info.feature_class = cls_idx[c.cls];
-                    info.flags = (cv.front() == cv.back() ? chains::chain_closed : 0U) |
-                                 (is_halo ? chains::chain_halo : 0U) | (c.problem ? chains::chain_problem : 0U);
-                    s.add_chain(info, pts);
-                };
-                for (uint32_t ci : own[part]) {
-                    add(ci, false);
-                }
-                for (uint32_t ci : halo[part]) {
-                    add(ci, true);
-                }
-                // Junctions at the ends of the partition's own chains.
-                std::vector<uint32_t> ends;
-                for (uint32_t ci : own[part]) {
-                    const auto cv = lev.chain(lev.chains[ci]);
-                    ends.push_back(cv.front());
-                    ends.push_back(cv.back());
-                }
-                std::sort(ends.begin(), ends.end());
-                ends.erase(std::unique(ends.begin(), ends.end()), ends.end());
-                for (uint32_t v : ends) {
-                    auto it = std::lower_bound(lev.junctions.begin(), lev.junctions.end(), v);
-                    if (it != lev.junctions.end() && *it == v) {
-                        const auto k = static_cast<size_t>(it - lev.junctions.begin());
-                        s.junctions.push_back({g.keys[v], g.grid[v], lev.junction_degree[k]});
-                    }
-                }
-                for (const auto& cp : part_points[part]) {
-                    s.constraints.push_back({str(cp.unit), cp.kind, cp.p});
-                }
-                s.canonicalize();
-                sink(s);
-            }
-        });
-        st.junctions = lev.junctions.size();
-        note("level " + st.name + ": " + std::to_string(st.chains) + " chains in " + std::to_string(st.partitions) +
-             " partitions");
-        result.levels.push_back(st);
+        result.levels.push_back(process_level(g, raw, lcs, L, bad_edges, projection, options, problems, sink));
     }
     return result;
 }

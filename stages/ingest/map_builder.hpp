@@ -73,7 +73,4 @@ using StoreSink = std::function<void(const chains::ChainStore&)>;
 /// feature) for a coordinate outside the projection's domain.
 BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptions& options, const StoreSink& sink);
 
-/// The problem kinds build_map counts, for documentation and reports.
-const std::vector<std::string>& problem_kinds();
-
 } // namespace tigerlod::ingest
