@@ -29,7 +29,7 @@ class ArgSet {
     void positional(std::string name, std::string* target, std::string help);
 
     /// Parse argv; throws usage_error for anything unknown, missing or malformed.
-    /// Returns false if --help or --version was given (already handled by the caller).
+    /// --help and --version are handled by run_stage before this is called.
     void parse(const std::string& stage, const std::vector<std::string>& args);
     std::string help_text(const std::string& program, const std::string& description) const;
 

@@ -15,8 +15,6 @@
 #include <atomic>
 #include <cstdio>
 #include <future>
-#include <iostream>
-#include <set>
 #include <sys/resource.h>
 #include <thread>
 

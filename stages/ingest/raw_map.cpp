@@ -57,6 +57,7 @@ void RawMap::append(RawMap&& part)
     }
     points_read += part.points_read;
     empty_geometries += part.empty_geometries;
+    part = RawMap();
 }
 
 std::string RawMap::where(SourceRef src) const

@@ -78,7 +78,7 @@ struct RawMap {
                       uint64_t sid, SourceRef src);
     uint32_t intern_class(const std::string& name);
     /// Append another map read from other files (same kind and levels): its
-    /// files, units, classes and polylines follow this map's.
+    /// files, units, classes and polylines follow this map's. `part` is left empty.
     void append(RawMap&& part);
     /// "file:feature" for messages.
     std::string where(SourceRef src) const;

@@ -490,7 +490,6 @@ void read_files(const std::vector<fs::path>& files, unsigned threads, RawMap& ra
         log.info("read " + files[i].string() + ": " + std::to_string(parts[i].units.size()) + " units, " +
                  std::to_string(parts[i].points_read) + " points");
         raw.append(std::move(parts[i]));
-        RawMap done = std::move(parts[i]); // frees the part now, not at the end
     }
 }
 
