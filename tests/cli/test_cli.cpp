@@ -371,3 +371,75 @@ TEST_F(Cli, ValidateChecksInputsAndWritesNothing)
     expect_failure(run("ingest", "--validate " + bad.string() + " " + out()), 1,
                    "layer 'faces': no field 'VTDST20' (level 'district')");
 }
+
+TEST_F(Cli, EveryValidatedConfigKeyRejectsBadValues)
+{
+    make_tiger();
+    const std::vector<std::pair<std::string, std::string>> cases = {
+        {"levels:\n  - {name: county, prefix: 5}\n", "levels[0].prefix applies to polygons datasets only"},
+        {"levels:\n  - {name: a, fields: [STATEFP20]}\n  - {name: a, fields: [COUNTYFP20]}\n",
+         "levels[1]: level 'a' appears twice"},
+        {"levels:\n  - {name: a, code: US, fields: [STATEFP20]}\n",
+         "levels[0] needs exactly one of 'code', 'fields', 'prefix'"},
+        {"levels:\n  - {name: Bad-Name, code: US}\n", "levels[0].name is required"},
+        {"levels: []\n", "'levels' must be a non-empty list"},
+        {"projection: {kind: mercator}\n", "'projection.kind' must be albers, lcc, tm or utm, got 'mercator'"},
+        {"projection: {kind: utm, utm_zone: 61}\n", "'utm_zone' must be in 1..60"},
+        {"projection: {stdlat1: 95}\n", "standard parallels must lie in (-90, 90)"},
+        {"projection: {lat0: abc}\n", "'lat0' has the wrong type"},
+        {"ingest: {threads: -1}\n", "'ingest.threads' must be in 0..256"},
+        {"ingest: {halo_m: -5}\n", "'ingest.halo_m' must be >= 0"},
+        {"projection: {nope: 1}\n", "unknown key 'projection.nope'"},
+    };
+    for (const auto& [extra, fragment] : cases) {
+        SCOPED_TRACE(extra);
+        expect_failure(run("ingest", tiger_config("edges.zip", "faces.zip", extra).string() + " " + out()), 2,
+                       fragment);
+    }
+    const std::vector<std::pair<std::string, std::string>> datasets = {
+        {"dataset:\n  kind: polygons\n  inputs: [faces.zip]\nlevels:\n  - {name: a, prefix: 2}\n",
+         "a polygons dataset needs 'code_field'"},
+        {"dataset:\n  kind: polygons\n  inputs: [faces.zip]\n  code_field: TFID\n",
+         "a polygons dataset needs 'levels'"},
+        {"dataset:\n  kind: lines\n  inputs: [edges.zip]\n  fetch: {npm: x@1}\n",
+         "'dataset.fetch' needs 'npm' (package@version) and 'into' (a folder)"},
+        {"dataset:\n  kind: lines\n  inputs: [edges.zip]\n  intpt_lat_field: Y\n",
+         "'intpt_lat_field' and 'intpt_lon_field' go together"},
+        {"dataset:\n  kind: tiger\n  edges: [edges.zip]\n", "a tiger dataset needs 'edges' and 'faces'"},
+        {"dataset:\n  kind: lines\n  inputs: []\n", "a lines dataset needs 'inputs'"},
+        {"dataset:\n  kind: lines\n  inputs: [edges.zip]\nlevels:\n  - {name: a}\n  - {name: b}\n",
+         "a lines dataset has exactly one level"},
+    };
+    for (const auto& [body, fragment] : datasets) {
+        SCOPED_TRACE(body);
+        expect_failure(run("ingest", config(body).string() + " " + out()), 2, fragment);
+    }
+    expect_failure(run("ingest", config("dataset: {kind: tiger, edges: [edges.zip], faces: [faces.zip]}\n").string() +
+                                     " " + out() + " --threads 999"),
+                   2, "option '--threads' must be in 0..256");
+    expect_failure(run("ingest", tiger_config().string() + " " + out() + " --threads two"), 2,
+                   "option '--threads' needs a number, got 'two'");
+    expect_failure(run("ingest", tiger_config().string() + " " + out() + " --max-problem-samples -1"), 2,
+                   "option '--max-problem-samples' must be >= 0");
+    std::ofstream(m_dir / "noname.yaml") << "dataset: {kind: tiger}\n";
+    expect_failure(run("ingest", (m_dir / "noname.yaml").string() + " " + out()), 2, "'name' is required");
+}
+
+TEST_F(Cli, LineAndPolygonLayersWithMissingFields)
+{
+    make_tiger();
+    expect_failure(
+        run("ingest",
+            config("dataset:\n  kind: lines\n  inputs: [edges.zip]\n  class_field: NOPE\n").string() + " " + out()),
+        1, "layer 'edges': no field 'NOPE' (dataset.class_field)");
+    expect_failure(run("ingest", config("dataset:\n  kind: polygons\n  inputs: [faces.zip]\n  code_field: GEOID\n"
+                                        "levels:\n  - {name: a, prefix: 2}\n")
+                                         .string() +
+                                     " " + out()),
+                   1, "layer 'faces': no field 'GEOID' (dataset.code_field)");
+    expect_failure(run("ingest", config("dataset:\n  kind: polygons\n  inputs: [edges.zip]\n  code_field: TLID\n"
+                                        "levels:\n  - {name: a, prefix: 2}\n")
+                                         .string() +
+                                     " " + out()),
+                   1, "geometry type is Line String, a polygons dataset needs polygons");
+}
