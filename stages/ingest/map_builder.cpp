@@ -55,8 +55,7 @@ struct Graph {
 
 class Problems {
   public:
-    Problems(BuildResult& r, const RawMap& raw, const Projection& proj, size_t max_samples)
-        : m_r(r), m_raw(raw), m_proj(proj), m_max(max_samples)
+    Problems(BuildResult& r, const Projection& proj, size_t max_samples) : m_r(r), m_proj(proj), m_max(max_samples)
     {
         for (const auto& k : kinds) {
             m_r.problems[k] = 0;
@@ -79,11 +78,9 @@ class Problems {
             m_r.samples.push_back({kind, p.lon * 1e-6, p.lat * 1e-6, std::move(where)});
         }
     }
-    const RawMap& raw() const noexcept { return m_raw; }
 
   private:
     BuildResult& m_r;
-    const RawMap& m_raw;
     const Projection& m_proj;
     size_t m_max;
 };
@@ -1120,7 +1117,7 @@ LevelStats process_level(const Graph& g, const RawMap& raw, const std::vector<Le
 BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptions& options, const StoreSink& sink)
 {
     BuildResult result;
-    Problems problems(result, raw, projection, options.max_problem_samples);
+    Problems problems(result, projection, options.max_problem_samples);
     const size_t nlev = raw.level_names.size();
     result.input_vertices = raw.points_read;
     problems.count("empty_geometries", raw.empty_geometries);

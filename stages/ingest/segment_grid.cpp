@@ -171,59 +171,63 @@ std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRe
         return {};
     }
     const Grid grid = make_grid(segs, std::max(1.0, distance));
-    // The cells each chain passes through; consecutive segments mostly share one.
+    // The cells each chain passes through (consecutive segments mostly share
+    // one), computed once: chain group g spans segs[seg_start[g], seg_start[g+1])
+    // and cells[cell_start[g], cell_start[g+1]).
+    std::vector<size_t> seg_start, cell_start;
     std::vector<uint64_t> cells;
-    auto chain_cells = [&](size_t i) {
-        size_t j = i;
-        cells.clear();
-        while (j < segs.size() && segs[j].chain == segs[i].chain) {
-            grid.cover(segs[j].a, segs[j].b, 0, [&](uint64_t k) {
-                if (cells.empty() || cells.back() != k) {
+    for (size_t i = 0; i < segs.size();) {
+        seg_start.push_back(i);
+        cell_start.push_back(cells.size());
+        const auto first = static_cast<std::ptrdiff_t>(cells.size());
+        for (; i < segs.size() && segs[i].chain == segs[seg_start.back()].chain; ++i) {
+            grid.cover(segs[i].a, segs[i].b, 0, [&](uint64_t k) {
+                if (cells.size() == static_cast<size_t>(first) || cells.back() != k) {
                     cells.push_back(k);
                 }
             });
-            ++j;
         }
-        std::sort(cells.begin(), cells.end());
-        cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
-        return j;
-    };
+        std::sort(cells.begin() + first, cells.end());
+        cells.erase(std::unique(cells.begin() + first, cells.end()), cells.end());
+    }
+    seg_start.push_back(segs.size());
+    cell_start.push_back(cells.size());
+    const size_t groups = seg_start.size() - 1;
     // Cells within reach (one cell around, cells being at least `distance` wide)
     // of the segments that bound each part.
     std::vector<std::pair<uint64_t, uint32_t>> reach;
     std::vector<uint64_t> around;
-    for (size_t i = 0; i < segs.size();) {
-        const size_t j = chain_cells(i);
+    for (size_t gi = 0; gi < groups; ++gi) {
+        const SegmentRef& c = segs[seg_start[gi]];
         around.clear();
-        for (uint64_t k : cells) {
+        for (size_t n = cell_start[gi]; n < cell_start[gi + 1]; ++n) {
             for (uint64_t dx = 0; dx < 3; ++dx) {
                 for (uint64_t dy = 0; dy < 3; ++dy) {
-                    around.push_back(k + (dx << 32) + dy - (uint64_t{1} << 32) - 1);
+                    around.push_back(cells[n] + (dx << 32) + dy - (uint64_t{1} << 32) - 1);
                 }
             }
         }
         std::sort(around.begin(), around.end());
         around.erase(std::unique(around.begin(), around.end()), around.end());
         for (uint64_t k : around) {
-            reach.emplace_back(k, segs[i].part);
-            if (segs[i].also != UINT32_MAX) {
-                reach.emplace_back(k, segs[i].also);
+            reach.emplace_back(k, c.part);
+            if (c.also != UINT32_MAX) {
+                reach.emplace_back(k, c.also);
             }
         }
-        i = j;
     }
     radix_sort_by_key(reach);
     std::vector<std::pair<uint32_t, uint32_t>> result; // (chain, part)
     std::vector<uint32_t> parts;
-    for (size_t i = 0; i < segs.size();) {
-        const size_t j = chain_cells(i);
+    for (size_t gi = 0; gi < groups; ++gi) {
+        const SegmentRef& c = segs[seg_start[gi]];
         parts.clear();
-        for (uint64_t k : cells) {
+        for (size_t n = cell_start[gi]; n < cell_start[gi + 1]; ++n) {
             auto it =
-                std::lower_bound(reach.begin(), reach.end(), k,
+                std::lower_bound(reach.begin(), reach.end(), cells[n],
                                  [](const std::pair<uint64_t, uint32_t>& e, uint64_t key) { return e.first < key; });
-            for (; it != reach.end() && it->first == k; ++it) {
-                if (it->second != segs[i].part) {
+            for (; it != reach.end() && it->first == cells[n]; ++it) {
+                if (it->second != c.part) {
                     parts.push_back(it->second);
                 }
             }
@@ -231,9 +235,8 @@ std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRe
         std::sort(parts.begin(), parts.end());
         parts.erase(std::unique(parts.begin(), parts.end()), parts.end());
         for (uint32_t part : parts) {
-            result.emplace_back(segs[i].chain, part);
+            result.emplace_back(c.chain, part);
         }
-        i = j;
     }
     std::sort(result.begin(), result.end());
     result.erase(std::unique(result.begin(), result.end()), result.end());
