@@ -200,6 +200,10 @@ std::string encode(const ChainStore& s)
         w.put(d);
     }
     w.put(s.halo_m);
+    w.put(s.eps_m);
+    w.put(s.metric);
+    w.put(uint8_t{0});
+    w.put(uint16_t{0});
     w.put(static_cast<uint32_t>(s.strings.size()));
     for (const auto& str : s.strings) {
         w.put_str(str);
@@ -253,7 +257,6 @@ ChainStore decode(std::span<const std::byte> bytes, const std::string& name)
         throw format_error(name + ": unsupported major version " + std::to_string(major) + " (reads " +
                            std::to_string(major_version) + ")");
     }
-    (void)minor;
     const auto flags = r.get<uint32_t>("header");
     if (flags != 0) {
         throw format_error(name + ": unknown header flags " + std::to_string(flags));
@@ -299,6 +302,15 @@ ChainStore decode(std::span<const std::byte> bytes, const std::string& name)
         *d = body.get<double>("meta");
     }
     s.halo_m = body.get<double>("meta");
+    if (minor >= 1) {
+        s.eps_m = body.get<double>("meta");
+        s.metric = body.get<uint8_t>("meta");
+        if (!(s.eps_m >= 0) || s.metric > 2) {
+            body.fail("invalid tolerance " + std::to_string(s.eps_m) + " m or metric " + std::to_string(s.metric));
+        }
+        body.get<uint8_t>("meta");
+        body.get<uint16_t>("meta");
+    }
     const uint32_t nstrings = body.get_count(4, "strings");
     if (nstrings == 0) {
         body.fail("empty string table (entry 0 must be \"\")");
@@ -404,6 +416,9 @@ std::string to_text(const ChainStore& s)
     out << "partition " << c.partition << "\n";
     out << "projection " << Projection(c.projection).describe() << "\n";
     out << "halo_m " << c.halo_m << "\n";
+    if (c.eps_m > 0) {
+        out << "simplified eps_m=" << c.eps_m << " metric=" << static_cast<int>(c.metric) << "\n";
+    }
     out << "chains " << c.chains.size() << " points " << c.points.size() << " junctions " << c.junctions.size()
         << " constraints " << c.constraints.size() << "\n";
     for (const auto& ch : c.chains) {

@@ -1,8 +1,8 @@
 #include "stages/ingest/map_builder.hpp"
 
 #include "core/errors.hpp"
-#include "stages/ingest/radix_sort.hpp"
-#include "stages/ingest/segment_grid.hpp"
+#include "core/radix_sort.hpp"
+#include "core/segment_grid.hpp"
 
 #include <algorithm>
 #include <cmath>

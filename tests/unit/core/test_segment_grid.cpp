@@ -1,12 +1,11 @@
 // The grid search must find exactly what a brute-force all-pairs check finds.
-#include "stages/ingest/segment_grid.hpp"
+#include "core/segment_grid.hpp"
 
 #include <gtest/gtest.h>
 
 #include <random>
 
 using namespace tigerlod;
-using namespace tigerlod::ingest;
 
 namespace {
 

@@ -11,7 +11,7 @@
 #include <utility>
 #include <vector>
 
-namespace tigerlod::ingest {
+namespace tigerlod {
 
 struct Segment {
     GridPoint a, b;
@@ -44,4 +44,4 @@ struct SegmentRef {
 /// Sorted by (chain, part).
 std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRef>& segs, double distance);
 
-} // namespace tigerlod::ingest
+} // namespace tigerlod

@@ -9,7 +9,7 @@
 #include <utility>
 #include <vector>
 
-namespace tigerlod::ingest {
+namespace tigerlod {
 
 inline void radix_sort_by_key(std::vector<std::pair<uint64_t, uint32_t>>& v)
 {
@@ -45,4 +45,4 @@ inline void radix_sort_by_key(std::vector<std::pair<uint64_t, uint32_t>>& v)
     }
 }
 
-} // namespace tigerlod::ingest
+} // namespace tigerlod

@@ -1,12 +1,12 @@
-#include "stages/ingest/segment_grid.hpp"
+#include "core/segment_grid.hpp"
 
-#include "stages/ingest/radix_sort.hpp"
+#include "core/radix_sort.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <thread>
 
-namespace tigerlod::ingest {
+namespace tigerlod {
 
 namespace {
 
@@ -243,4 +243,4 @@ std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRe
     return result;
 }
 
-} // namespace tigerlod::ingest
+} // namespace tigerlod

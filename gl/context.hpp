@@ -1,0 +1,43 @@
+#pragma once
+/// @file context.hpp
+/// An off-screen OpenGL 4.5 core context on one of two backends, both opened
+/// at run time with dlopen:
+///  - osmesa: Mesa's off-screen renderer (llvmpipe); runs everywhere.
+///  - egl: EGL's device platform (a GPU, or Mesa's software device), falling
+///    back to Mesa's surfaceless platform.
+/// Rendering goes to framebuffer objects, so no window system is involved.
+/// A context is current on the thread that created it and is used from there.
+
+#include "gl/api.hpp"
+
+#include <memory>
+#include <optional>
+#include <string>
+
+namespace tigerlod::gl {
+
+enum class Backend { osmesa, egl };
+
+const char* backend_name(Backend b) noexcept;
+std::optional<Backend> parse_backend(const std::string& name) noexcept;
+
+class Context {
+  public:
+    /// Create a 4.5 core context and make it current. Throws
+    /// environment_error naming the backend and the step that failed (library
+    /// missing, no display or device, no 4.5 core context, entry point missing).
+    static std::unique_ptr<Context> create(Backend backend);
+    virtual ~Context() = default;
+
+    const Api& api() const noexcept { return m_api; }
+    Backend backend() const noexcept { return m_backend; }
+    /// "OpenGL 4.5 (Core Profile) Mesa 22.3.6 on llvmpipe (LLVM 15.0.6, 256 bits)" and the like.
+    std::string describe() const;
+
+  protected:
+    explicit Context(Backend b) : m_backend(b) {}
+    Api m_api;
+    Backend m_backend;
+}; // class Context
+
+} // namespace tigerlod::gl

@@ -1,0 +1,91 @@
+#include "stages/color/color_stage.hpp"
+
+#include "core/fs.hpp"
+#include "formats/chains/chain_store.hpp"
+#include "stages/simplify/color_io.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cstdio>
+
+namespace fs = std::filesystem;
+using json = nlohmann::ordered_json;
+
+namespace tigerlod::color {
+
+std::string ColorStage::help_notes() const
+{
+    return "Outputs:\n"
+           "  OUTPUT/eps-<E>m/<level>/<partition>.colors.json  tiles and the class of each chain per tile\n"
+           "  OUTPUT/color-report.json                         per tolerance: tiles, classes (max, mean), splits\n"
+           "tigerlod-simplify --colors OUTPUT uses them; it needs the same tolerance, metric and pixel options.\n"
+           "Exit codes: 0 done; 1 bad input data (corrupt store, a tile past the class limit even at the\n"
+           "  smallest tile); 2 usage error; 3 environment (cannot write).\n";
+}
+
+int ColorStage::run(const StageContext& ctx)
+{
+    const auto stores = simplify::list_stores(m_common.input, m_common.level);
+    OutputDir out(m_common.output, m_common.overwrite);
+    struct Total {
+        size_t tiles = 0, splits = 0, conflict_edges = 0, stores = 0;
+        uint32_t max_classes = 0;
+        double class_sum = 0;
+    };
+    std::vector<Total> totals(m_common.tolerances.size());
+    for (const auto& sf : stores) {
+        const auto store = chains::read(sf.path);
+        for (size_t ti = 0; ti < m_common.tolerances.size(); ++ti) {
+            const double eps_m = m_common.tolerances[ti];
+            simplify::ColorResult r;
+            try {
+                r = simplify::color_store(store, eps_m, m_common.options);
+            } catch (const input_error& e) {
+                throw input_error(sf.path.string() + " at eps " + std::to_string(eps_m) + " m: " + e.what());
+            }
+            const fs::path dir = out.path() / simplify::tolerance_dir(eps_m) / sf.level;
+            fs::create_directories(dir);
+            write_file_atomic(dir / (sf.partition + ".colors.json"),
+                              simplify::colors_to_json(store, eps_m, m_common.options.metric, r));
+            auto& t = totals[ti];
+            ++t.stores;
+            t.tiles += r.tiles.size();
+            t.splits += r.splits;
+            t.conflict_edges += r.conflict_edges;
+            t.max_classes = std::max(t.max_classes, r.max_classes_used);
+            t.class_sum += r.mean_classes * double(r.tiles.size());
+        }
+        ctx.log.info("color: " + sf.level + "/" + sf.partition + " done");
+    }
+    json report;
+    report["schema"] = "tigerlod.color-report/1";
+    report["input"] = m_common.input;
+    report["metric"] = simplify::metric_name(m_common.options.metric);
+    report["pixel_fraction"] = m_common.options.color.pixel_fraction;
+    report["tile_pixels"] = m_common.options.color.tile_pixels;
+    report["max_classes_allowed"] = m_common.options.color.max_classes;
+    json tols = json::array();
+    for (size_t ti = 0; ti < totals.size(); ++ti) {
+        const auto& t = totals[ti];
+        tols.push_back({{"eps_m", m_common.tolerances[ti]},
+                        {"stores", t.stores},
+                        {"tiles", t.tiles},
+                        {"splits", t.splits},
+                        {"conflict_edges", t.conflict_edges},
+                        {"classes_max", t.max_classes},
+                        {"classes_mean", t.tiles ? t.class_sum / double(t.tiles) : 0.0}});
+    }
+    report["tolerances"] = std::move(tols);
+    write_file_atomic(out.path() / "color-report.json", report.dump(2) + "\n");
+    out.commit();
+    std::printf("color: %zu stores\n", stores.size());
+    for (size_t ti = 0; ti < totals.size(); ++ti) {
+        std::printf("  eps %g m: %zu tiles, %zu splits, classes max %u\n", m_common.tolerances[ti], totals[ti].tiles,
+                    totals[ti].splits, totals[ti].max_classes);
+    }
+    std::printf("outputs in %s\n", m_common.output.c_str());
+    return exit_ok;
+}
+
+} // namespace tigerlod::color

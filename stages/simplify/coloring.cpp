@@ -1,0 +1,332 @@
+#include "stages/simplify/coloring.hpp"
+
+#include "core/errors.hpp"
+
+#include <algorithm>
+#include <bitset>
+#include <cmath>
+#include <set>
+#include <sstream>
+#include <unordered_set>
+
+namespace tigerlod::simplify {
+
+double reach_radius(double eps, double pixel, const ColorOptions& opt) noexcept
+{
+    return eps * l2_reach(opt.metric) + opt.margin_px * pixel;
+}
+
+namespace {
+
+struct Seg {
+    double ax, ay, bx, by;
+    uint32_t chain;
+    double r;
+};
+
+double point_seg2(double px, double py, const Seg& s) noexcept
+{
+    const double dx = s.bx - s.ax, dy = s.by - s.ay;
+    const double len2 = dx * dx + dy * dy;
+    double t = len2 > 0 ? ((px - s.ax) * dx + (py - s.ay) * dy) / len2 : 0.0;
+    t = std::clamp(t, 0.0, 1.0);
+    const double x = px - s.ax - t * dx, y = py - s.ay - t * dy;
+    return x * x + y * y;
+}
+
+double seg_seg_distance(const Seg& s, const Seg& t) noexcept
+{
+    auto orient = [](double ax, double ay, double bx, double by, double cx, double cy) {
+        const double v = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax);
+        return (v > 0) - (v < 0);
+    };
+    const int o1 = orient(s.ax, s.ay, s.bx, s.by, t.ax, t.ay), o2 = orient(s.ax, s.ay, s.bx, s.by, t.bx, t.by);
+    const int o3 = orient(t.ax, t.ay, t.bx, t.by, s.ax, s.ay), o4 = orient(t.ax, t.ay, t.bx, t.by, s.bx, s.by);
+    if (o1 * o2 < 0 && o3 * o4 < 0) {
+        return 0;
+    }
+    const double d2 = std::min(
+        {point_seg2(t.ax, t.ay, s), point_seg2(t.bx, t.by, s), point_seg2(s.ax, s.ay, t), point_seg2(s.bx, s.by, t)});
+    return std::sqrt(d2);
+}
+
+std::vector<Seg> make_segments(std::span<const ChainGeom> chains, double pixel, const ColorOptions& opt)
+{
+    std::vector<Seg> segs;
+    for (uint32_t c = 0; c < chains.size(); ++c) {
+        const auto& pts = chains[c].points;
+        const double r = reach_radius(chains[c].eps, pixel, opt);
+        for (size_t i = 0; i + 1 < pts.size(); ++i) {
+            segs.push_back({double(pts[i].x), double(pts[i].y), double(pts[i + 1].x), double(pts[i + 1].y), c, r});
+        }
+        if (pts.size() == 1) {
+            segs.push_back({double(pts[0].x), double(pts[0].y), double(pts[0].x), double(pts[0].y), c, r});
+        }
+    }
+    return segs;
+}
+
+/// Conflict graph: chains i != j with segments closer than r_i + r_j.
+std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> chains, const std::vector<Seg>& segs)
+{
+    double rmax = 0;
+    for (const auto& s : segs) {
+        rmax = std::max(rmax, s.r);
+    }
+    const double cell = std::max(2 * rmax, 1.0);
+    std::vector<std::pair<uint64_t, uint32_t>> entries;
+    for (uint32_t i = 0; i < segs.size(); ++i) {
+        const Seg& s = segs[i];
+        const auto x0 = static_cast<int64_t>(std::floor((std::min(s.ax, s.bx) - s.r) / cell));
+        const auto x1 = static_cast<int64_t>(std::floor((std::max(s.ax, s.bx) + s.r) / cell));
+        const auto y0 = static_cast<int64_t>(std::floor((std::min(s.ay, s.by) - s.r) / cell));
+        const auto y1 = static_cast<int64_t>(std::floor((std::max(s.ay, s.by) + s.r) / cell));
+        for (int64_t x = x0; x <= x1; ++x) {
+            for (int64_t y = y0; y <= y1; ++y) {
+                const uint64_t key =
+                    (static_cast<uint64_t>(x + (1LL << 31)) << 32) | static_cast<uint32_t>(y + (1LL << 31));
+                entries.emplace_back(key, i);
+            }
+        }
+    }
+    std::sort(entries.begin(), entries.end());
+    std::unordered_set<uint64_t> known;
+    std::vector<std::pair<uint32_t, uint32_t>> edges;
+    for (size_t b = 0; b < entries.size();) {
+        size_t e = b;
+        while (e < entries.size() && entries[e].first == entries[b].first) {
+            ++e;
+        }
+        for (size_t i = b; i < e; ++i) {
+            const Seg& s = segs[entries[i].second];
+            for (size_t j = i + 1; j < e; ++j) {
+                const Seg& t = segs[entries[j].second];
+                if (s.chain == t.chain) {
+                    continue;
+                }
+                const uint32_t lo = std::min(s.chain, t.chain), hi = std::max(s.chain, t.chain);
+                const uint64_t key = (uint64_t{lo} << 32) | hi;
+                if (known.count(key)) {
+                    continue;
+                }
+                if (seg_seg_distance(s, t) < s.r + t.r) {
+                    known.insert(key);
+                    edges.emplace_back(lo, hi);
+                }
+            }
+        }
+        b = e;
+    }
+    std::vector<std::vector<uint32_t>> adj(chains.size());
+    for (auto [a, b] : edges) {
+        adj[a].push_back(b);
+        adj[b].push_back(a);
+    }
+    for (auto& l : adj) {
+        std::sort(l.begin(), l.end());
+    }
+    return adj;
+}
+
+struct Tiler {
+    std::span<const ChainGeom> chains;
+    const std::vector<Seg>& segs;
+    std::vector<size_t> seg_begin; // first segment of each chain
+    const std::vector<std::vector<uint32_t>>& adj;
+    const ColorOptions& opt;
+    ColorResult& out;
+
+    bool touches(uint32_t c, const TileSpec& t) const
+    {
+        const double tx1 = t.x0 + t.width * t.pixel, ty1 = t.y0 + t.height * t.pixel;
+        for (size_t i = seg_begin[c]; i < seg_begin[c + 1]; ++i) {
+            const Seg& s = segs[i];
+            if (std::max(s.ax, s.bx) + s.r >= t.x0 && std::min(s.ax, s.bx) - s.r <= tx1 &&
+                std::max(s.ay, s.by) + s.r >= t.y0 && std::min(s.ay, s.by) - s.r <= ty1) {
+                return true;
+            }
+        }
+        return false;
+    }
+
+    void color(const TileSpec& spec, std::vector<uint32_t> members, uint32_t depth)
+    {
+        if (std::none_of(members.begin(), members.end(), [&](uint32_t c) { return chains[c].owned; })) {
+            return;
+        }
+        std::vector<uint32_t> local(chains.size(), UINT32_MAX);
+        for (uint32_t i = 0; i < members.size(); ++i) {
+            local[members[i]] = i;
+        }
+        std::vector<std::vector<uint32_t>> sub(members.size());
+        for (uint32_t i = 0; i < members.size(); ++i) {
+            for (uint32_t n : adj[members[i]]) {
+                if (local[n] != UINT32_MAX) {
+                    sub[i].push_back(local[n]);
+                }
+            }
+        }
+        std::vector<uint8_t> classes;
+        if (dsatur(sub, opt.max_classes, classes)) {
+            ColoredTile t;
+            t.spec = spec;
+            t.chains = std::move(members);
+            t.classes = std::move(classes);
+            t.depth = depth;
+            out.tiles.push_back(std::move(t));
+            return;
+        }
+        if (spec.width <= opt.min_tile_pixels && spec.height <= opt.min_tile_pixels) {
+            std::ostringstream msg;
+            msg << "a render tile of " << spec.width << "x" << spec.height << " pixels at grid ("
+                << std::llround(spec.x0) << ", " << std::llround(spec.y0) << ") needs more than " << opt.max_classes
+                << " stencil classes even after splitting (" << members.size() << " chains within reach)";
+            throw input_error(msg.str());
+        }
+        ++out.splits;
+        const uint32_t w0 = (spec.width + 1) / 2, h0 = (spec.height + 1) / 2;
+        for (int q = 0; q < 4; ++q) {
+            TileSpec c = spec;
+            c.width = (q & 1) ? spec.width - w0 : w0;
+            c.height = (q & 2) ? spec.height - h0 : h0;
+            c.x0 = spec.x0 + ((q & 1) ? w0 * spec.pixel : 0.0);
+            c.y0 = spec.y0 + ((q & 2) ? h0 * spec.pixel : 0.0);
+            if (c.width == 0 || c.height == 0) {
+                continue;
+            }
+            std::vector<uint32_t> sub_members;
+            for (uint32_t m : members) {
+                if (touches(m, c)) {
+                    sub_members.push_back(m);
+                }
+            }
+            color(c, std::move(sub_members), depth + 1);
+        }
+    }
+}; // struct Tiler
+
+} // namespace
+
+bool dsatur(const std::vector<std::vector<uint32_t>>& adj, uint32_t max_colors, std::vector<uint8_t>& colors)
+{
+    const auto n = static_cast<uint32_t>(adj.size());
+    colors.assign(n, 0);
+    std::vector<std::bitset<256>> used(n);
+    std::vector<uint32_t> sat(n, 0);
+    // Order: highest saturation, then highest degree, then lowest index.
+    auto key = [&](uint32_t v) { return std::tuple{-int64_t(sat[v]), -int64_t(adj[v].size()), v}; };
+    std::set<std::tuple<int64_t, int64_t, uint32_t>> queue;
+    for (uint32_t v = 0; v < n; ++v) {
+        queue.insert(key(v));
+    }
+    while (!queue.empty()) {
+        const uint32_t v = std::get<2>(*queue.begin());
+        queue.erase(queue.begin());
+        uint32_t c = 1;
+        while (c < 256 && used[v][c]) {
+            ++c;
+        }
+        if (c > max_colors || c > 255) {
+            return false;
+        }
+        colors[v] = static_cast<uint8_t>(c);
+        for (uint32_t u : adj[v]) {
+            if (colors[u] != 0 || used[u][c]) {
+                continue;
+            }
+            queue.erase(key(u));
+            used[u][c] = true;
+            ++sat[u];
+            queue.insert(key(u));
+        }
+    }
+    return true;
+}
+
+ColorResult color_tiles(std::span<const ChainGeom> chains, const ColorOptions& opt, unsigned /*threads*/)
+{
+    ColorResult out;
+    double eps_min = 0;
+    for (const auto& c : chains) {
+        if (c.eps > 0 && (eps_min == 0 || c.eps < eps_min)) {
+            eps_min = c.eps;
+        }
+    }
+    if (eps_min <= 0) {
+        return out;
+    }
+    out.pixel = eps_min * opt.pixel_fraction;
+    const auto segs = make_segments(chains, out.pixel, opt);
+    const auto adj = conflict_graph(chains, segs);
+    for (const auto& l : adj) {
+        out.conflict_edges += l.size();
+    }
+    out.conflict_edges /= 2;
+
+    Tiler tiler{chains, segs, {}, adj, opt, out};
+    tiler.seg_begin.assign(chains.size() + 1, 0);
+    for (const auto& s : segs) {
+        ++tiler.seg_begin[s.chain + 1];
+    }
+    for (size_t c = 0; c < chains.size(); ++c) {
+        tiler.seg_begin[c + 1] += tiler.seg_begin[c];
+    }
+    // The tile grid covers the owned chains' reach.
+    double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
+    for (const auto& s : segs) {
+        if (!chains[s.chain].owned) {
+            continue;
+        }
+        x0 = std::min({x0, s.ax - s.r, s.bx - s.r});
+        y0 = std::min({y0, s.ay - s.r, s.by - s.r});
+        x1 = std::max({x1, s.ax + s.r, s.bx + s.r});
+        y1 = std::max({y1, s.ay + s.r, s.by + s.r});
+    }
+    if (!(x0 <= x1)) {
+        return out;
+    }
+    const double size = opt.tile_pixels * out.pixel;
+    const auto nx = static_cast<uint64_t>(std::ceil((x1 - x0) / size)) + (x1 == x0 ? 1 : 0);
+    const auto ny = static_cast<uint64_t>(std::ceil((y1 - y0) / size)) + (y1 == y0 ? 1 : 0);
+    // Members of each top-level tile, from each segment's reach.
+    std::vector<std::pair<uint64_t, uint32_t>> member_of;
+    for (const auto& s : segs) {
+        const auto tx0 = static_cast<int64_t>(std::floor((std::min(s.ax, s.bx) - s.r - x0) / size));
+        const auto tx1 = static_cast<int64_t>(std::floor((std::max(s.ax, s.bx) + s.r - x0) / size));
+        const auto ty0 = static_cast<int64_t>(std::floor((std::min(s.ay, s.by) - s.r - y0) / size));
+        const auto ty1 = static_cast<int64_t>(std::floor((std::max(s.ay, s.by) + s.r - y0) / size));
+        for (int64_t ty = std::max<int64_t>(ty0, 0); ty <= std::min<int64_t>(ty1, int64_t(ny) - 1); ++ty) {
+            for (int64_t tx = std::max<int64_t>(tx0, 0); tx <= std::min<int64_t>(tx1, int64_t(nx) - 1); ++tx) {
+                member_of.emplace_back(uint64_t(ty) * nx + uint64_t(tx), s.chain);
+            }
+        }
+    }
+    std::sort(member_of.begin(), member_of.end());
+    member_of.erase(std::unique(member_of.begin(), member_of.end()), member_of.end());
+    for (size_t b = 0; b < member_of.size();) {
+        size_t e = b;
+        std::vector<uint32_t> members;
+        while (e < member_of.size() && member_of[e].first == member_of[b].first) {
+            members.push_back(member_of[e].second);
+            ++e;
+        }
+        const uint64_t t = member_of[b].first;
+        TileSpec spec;
+        spec.pixel = out.pixel;
+        spec.width = spec.height = opt.tile_pixels;
+        spec.x0 = x0 + double(t % nx) * size;
+        spec.y0 = y0 + double(t / nx) * size;
+        tiler.color(spec, std::move(members), 0);
+        b = e;
+    }
+    size_t sum = 0;
+    for (const auto& t : out.tiles) {
+        const uint32_t m = t.classes.empty() ? 0 : *std::max_element(t.classes.begin(), t.classes.end());
+        out.max_classes_used = std::max(out.max_classes_used, m);
+        sum += m;
+    }
+    out.mean_classes = out.tiles.empty() ? 0 : double(sum) / double(out.tiles.size());
+    return out;
+}
+
+} // namespace tigerlod::simplify

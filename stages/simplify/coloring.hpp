@@ -1,0 +1,68 @@
+#pragma once
+/// @file coloring.hpp
+/// Render tiles and stencil classes (tigerlod-color): the tiles a store is
+/// drawn in at one tolerance, and per tile a colouring of the chains that
+/// touch it into classes 1..max_classes such that chains whose tolerance
+/// neighbourhoods can overlap never share a class.
+
+#include "core/geometry.hpp"
+#include "stages/simplify/metric.hpp"
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+namespace tigerlod::simplify {
+
+/// One chain as the colouring sees it.
+struct ChainGeom {
+    std::span<const GridPoint> points;
+    double eps = 0;     ///< tolerance in grid units
+    bool owned = false; ///< simplified here (not halo)
+};
+
+/// A render tile: pixel (i, j) covers [x0 + i p, x0 + (i+1) p) x [y0 + j p, ...).
+struct TileSpec {
+    double x0 = 0, y0 = 0, pixel = 1;
+    uint32_t width = 0, height = 0;
+};
+
+struct ColoredTile {
+    TileSpec spec;
+    std::vector<uint32_t> chains; ///< indices of the chains drawn in it, ascending
+    std::vector<uint8_t> classes; ///< class of each, 1..max_classes
+    uint32_t depth = 0;           ///< times split
+};
+
+struct ColorOptions {
+    Metric metric = Metric::l2;
+    double pixel_fraction = 0.25; ///< pixel size as a fraction of the smallest eps
+    uint32_t tile_pixels = 4096;  ///< tile width and height before splitting
+    uint32_t min_tile_pixels = 16;
+    uint32_t max_classes = 255;
+    double margin_px = 2.0; ///< added to eps_i + eps_j in the conflict test, and to tents
+};
+
+struct ColorResult {
+    double pixel = 0; ///< pixel size in grid units
+    std::vector<ColoredTile> tiles;
+    size_t conflict_edges = 0;
+    size_t splits = 0;
+    uint32_t max_classes_used = 0;
+    double mean_classes = 0;
+};
+
+/// Radius in grid units around a chain of tolerance `eps` that its tent and
+/// its candidates can touch: eps in the metric, as an L2 distance, plus the margin.
+double reach_radius(double eps, double pixel, const ColorOptions& opt) noexcept;
+
+/// Tile the owned chains and colour each tile; split tiles that need more
+/// than max_classes. Deterministic. Throws input_error naming the place when
+/// a tile at min_tile_pixels still needs more classes.
+ColorResult color_tiles(std::span<const ChainGeom> chains, const ColorOptions& opt, unsigned threads);
+
+/// DSatur colouring of a graph given as sorted adjacency lists; colours from
+/// 1. Returns false if more than max_colors would be needed.
+bool dsatur(const std::vector<std::vector<uint32_t>>& adj, uint32_t max_colors, std::vector<uint8_t>& colors);
+
+} // namespace tigerlod::simplify

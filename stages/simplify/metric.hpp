@@ -1,0 +1,43 @@
+#pragma once
+/// @file metric.hpp
+/// Distance metrics and the exact proximity test behind every candidate.
+///
+/// Tolerances are integers here: a tolerance of eps grid units is tested as
+/// "squared distance <= floor(eps^2)" (L2) or "distance <= floor(eps)" (L1,
+/// Linf), always in exact integer arithmetic, so a simplified chain is within
+/// its tolerance bit for bit, not up to rounding.
+
+#include "core/geometry.hpp"
+
+#include <cstdint>
+#include <optional>
+#include <string>
+
+namespace tigerlod::simplify {
+
+enum class Metric : uint8_t { l2 = 0, l1 = 1, linf = 2 };
+
+const char* metric_name(Metric m) noexcept;
+std::optional<Metric> parse_metric(const std::string& name) noexcept;
+
+/// Radius of the smallest L2 disc holding the metric's unit ball (1 or sqrt 2).
+double l2_reach(Metric m) noexcept;
+
+/// A tolerance in grid units with its exact integer threshold.
+struct Tolerance {
+    double eps = 0;       ///< grid units
+    int128 threshold = 0; ///< floor(eps^2) for L2, floor(eps) for L1 and Linf
+    Metric metric = Metric::l2;
+    Tolerance() = default;
+    Tolerance(double eps_grid, Metric m);
+};
+
+/// Whether point p lies within the tolerance of the closed segment ab
+/// (a may equal b). Exact.
+bool within(GridPoint p, GridPoint a, GridPoint b, const Tolerance& tol) noexcept;
+
+/// Squared L2 / L1 / Linf distance from p to segment ab, as a double (for
+/// reports and the conflict graph; never for decisions that must be exact).
+double distance(GridPoint p, GridPoint a, GridPoint b, Metric m) noexcept;
+
+} // namespace tigerlod::simplify

@@ -1,0 +1,461 @@
+#include "stages/simplify/raster.hpp"
+
+#include "core/errors.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <string>
+
+namespace tigerlod::simplify {
+
+namespace {
+
+constexpr const char* distance_glsl = R"(
+uniform int u_metric; // 0 L2, 1 L1, 2 Linf
+float metric_len(vec2 v) {
+    if (u_metric == 1) return abs(v.x) + abs(v.y);
+    if (u_metric == 2) return max(abs(v.x), abs(v.y));
+    return length(v);
+}
+// Distance from p to segment ab in the metric: the minimum of a convex
+// function of t over [0, 1], reached at t = 0, 1 or a breakpoint.
+float seg_distance(vec2 p, vec2 a, vec2 b) {
+    vec2 u = p - a, d = b - a;
+    float best = min(metric_len(u), metric_len(u - d));
+    float len2 = dot(d, d);
+    if (len2 > 0.0) {
+        float ts[5];
+        ts[0] = dot(u, d) / len2;
+        ts[1] = d.x != 0.0 ? u.x / d.x : 0.0;
+        ts[2] = d.y != 0.0 ? u.y / d.y : 0.0;
+        ts[3] = (d.x - d.y) != 0.0 ? (u.x - u.y) / (d.x - d.y) : 0.0;
+        ts[4] = (d.x + d.y) != 0.0 ? (u.x + u.y) / (d.x + d.y) : 0.0;
+        for (int i = 0; i < 5; ++i) {
+            best = min(best, metric_len(u - clamp(ts[i], 0.0, 1.0) * d));
+        }
+    }
+    return best;
+}
+)";
+
+constexpr const char* tent_vs = R"(#version 450 core
+layout(location = 0) in vec4 a_seg; // a.xy, b.xy in tile pixels
+layout(location = 1) in float a_eps; // pixels
+uniform vec2 u_size;
+uniform float u_reach;
+uniform float u_pad;
+flat out vec4 v_seg;
+flat out float v_eps;
+void main() {
+    vec2 a = a_seg.xy, b = a_seg.zw, d = b - a;
+    float len = length(d);
+    vec2 u = len > 0.0 ? d / len : vec2(1.0, 0.0);
+    vec2 n = vec2(-u.y, u.x);
+    float r = a_eps * u_reach + u_pad;
+    vec2 p = (gl_VertexID < 2 ? a - u * r : b + u * r) + ((gl_VertexID & 1) == 0 ? n * r : -n * r);
+    gl_Position = vec4(p / u_size * 2.0 - 1.0, 0.0, 1.0);
+    v_seg = a_seg;
+    v_eps = a_eps;
+}
+)";
+
+constexpr const char* tent_fs_head = R"(#version 450 core
+flat in vec4 v_seg;
+flat in float v_eps;
+uniform float u_depth_scale;
+uniform int u_reset;
+layout(location = 0) out vec4 o_color;
+)";
+
+constexpr const char* tent_fs_main = R"(
+void main() {
+    o_color = vec4(0.0);
+    if (u_reset == 1) {
+        gl_FragDepth = 1.0;
+        return;
+    }
+    float d = seg_distance(gl_FragCoord.xy, v_seg.xy, v_seg.zw);
+    if (d > v_eps) discard;
+    gl_FragDepth = d / u_depth_scale;
+}
+)";
+
+constexpr const char* test_vs = R"(#version 450 core
+layout(location = 0) in vec4 a_seg;
+layout(location = 1) in uint a_id;
+uniform vec2 u_size;
+uniform float u_half_width;
+flat out vec4 v_seg;
+flat out uint v_id;
+void main() {
+    vec2 a = a_seg.xy, b = a_seg.zw, d = b - a;
+    float len = length(d);
+    vec2 u = len > 0.0 ? d / len : vec2(1.0, 0.0);
+    vec2 n = vec2(-u.y, u.x) * u_half_width;
+    vec2 p = (gl_VertexID < 2 ? a : b) + ((gl_VertexID & 1) == 0 ? n : -n);
+    gl_Position = vec4(p / u_size * 2.0 - 1.0, 0.0, 1.0);
+    v_seg = a_seg;
+    v_id = a_id;
+}
+)";
+
+constexpr const char* test_fs_ssbo = R"(#version 450 core
+layout(early_fragment_tests) in;
+layout(std430, binding = 0) buffer Flags { uint flags[]; };
+flat in vec4 v_seg;
+flat in uint v_id;
+uniform float u_end_margin;
+void main() {
+    vec2 p = gl_FragCoord.xy;
+    if (distance(p, v_seg.xy) < u_end_margin || distance(p, v_seg.zw) < u_end_margin) return;
+    flags[v_id] = 1u;
+}
+)";
+
+constexpr const char* test_fs_readback = R"(#version 450 core
+flat in vec4 v_seg;
+flat in uint v_id;
+uniform float u_end_margin;
+layout(location = 0) out vec4 o_color;
+void main() {
+    vec2 p = gl_FragCoord.xy;
+    if (distance(p, v_seg.xy) < u_end_margin || distance(p, v_seg.zw) < u_end_margin) discard;
+    uint c = v_id + 1u;
+    o_color = vec4(float(c & 255u), float((c >> 8) & 255u), float((c >> 16) & 255u), 255.0) / 255.0;
+}
+)";
+
+double seconds_since(std::chrono::steady_clock::time_point t0)
+{
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+struct TentInstance {
+    float ax, ay, bx, by, eps;
+};
+struct TestInstance {
+    float ax, ay, bx, by;
+    uint32_t id;
+};
+
+} // namespace
+
+struct Raster::Impl {
+    const gl::Api& gl;
+    GLuint tent_prog = 0, test_prog = 0;
+    GLuint vao_tent = 0, vao_test = 0, vbo_tent = 0, vbo_test = 0, ssbo = 0;
+    GLuint fbo = 0, rb_depth = 0, rb_color = 0;
+    explicit Impl(const gl::Api& api) : gl(api) {}
+
+    GLuint compile(GLenum type, const std::string& src)
+    {
+        GLuint s = gl.CreateShader(type);
+        const char* p = src.c_str();
+        gl.ShaderSource(s, 1, &p, nullptr);
+        gl.CompileShader(s);
+        GLint ok = 0;
+        gl.GetShaderiv(s, GL_COMPILE_STATUS, &ok);
+        if (!ok) {
+            std::string log(4096, '\0');
+            GLsizei n = 0;
+            gl.GetShaderInfoLog(s, GLsizei(log.size()), &n, log.data());
+            log.resize(size_t(n));
+            gl.DeleteShader(s);
+            throw environment_error("OpenGL shader does not compile on this driver: " + log);
+        }
+        return s;
+    }
+    GLuint link(const std::string& vs, const std::string& fs)
+    {
+        GLuint v = compile(GL_VERTEX_SHADER, vs), f = compile(GL_FRAGMENT_SHADER, fs);
+        GLuint p = gl.CreateProgram();
+        gl.AttachShader(p, v);
+        gl.AttachShader(p, f);
+        gl.LinkProgram(p);
+        gl.DeleteShader(v);
+        gl.DeleteShader(f);
+        GLint ok = 0;
+        gl.GetProgramiv(p, GL_LINK_STATUS, &ok);
+        if (!ok) {
+            std::string log(4096, '\0');
+            GLsizei n = 0;
+            gl.GetProgramInfoLog(p, GLsizei(log.size()), &n, log.data());
+            log.resize(size_t(n));
+            throw environment_error("OpenGL program does not link on this driver: " + log);
+        }
+        return p;
+    }
+    GLint loc(GLuint prog, const char* name) const { return gl.GetUniformLocation(prog, name); }
+};
+
+Raster::Raster(gl::Context& ctx, const RasterOptions& opt)
+    : m_ctx(ctx), m_opt(opt), m_impl(std::make_unique<Impl>(ctx.api()))
+{
+    auto& I = *m_impl;
+    const auto& gl = ctx.api();
+    I.tent_prog = I.link(tent_vs, std::string(tent_fs_head) + distance_glsl + tent_fs_main);
+    I.test_prog = I.link(test_vs, opt.compliance == Compliance::ssbo ? test_fs_ssbo : test_fs_readback);
+
+    gl.GenVertexArrays(1, &I.vao_tent);
+    gl.GenBuffers(1, &I.vbo_tent);
+    gl.BindVertexArray(I.vao_tent);
+    gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_tent);
+    gl.VertexAttribPointer(0, 4, GL_FLOAT, GL_FALSE, sizeof(TentInstance), nullptr);
+    gl.VertexAttribPointer(1, 1, GL_FLOAT, GL_FALSE, sizeof(TentInstance),
+                           reinterpret_cast<const void*>(offsetof(TentInstance, eps)));
+    gl.EnableVertexAttribArray(0);
+    gl.EnableVertexAttribArray(1);
+    gl.VertexAttribDivisor(0, 1);
+    gl.VertexAttribDivisor(1, 1);
+
+    gl.GenVertexArrays(1, &I.vao_test);
+    gl.GenBuffers(1, &I.vbo_test);
+    gl.BindVertexArray(I.vao_test);
+    gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_test);
+    gl.VertexAttribPointer(0, 4, GL_FLOAT, GL_FALSE, sizeof(TestInstance), nullptr);
+    gl.VertexAttribIPointer(1, 1, GL_UNSIGNED_INT, sizeof(TestInstance),
+                            reinterpret_cast<const void*>(offsetof(TestInstance, id)));
+    gl.EnableVertexAttribArray(0);
+    gl.EnableVertexAttribArray(1);
+    gl.VertexAttribDivisor(0, 1);
+    gl.VertexAttribDivisor(1, 1);
+    gl.BindVertexArray(0);
+    gl.GenBuffers(1, &I.ssbo);
+
+    const auto s = static_cast<GLsizei>(opt.max_tile_pixels);
+    gl.GenFramebuffers(1, &I.fbo);
+    gl.BindFramebuffer(GL_FRAMEBUFFER, I.fbo);
+    gl.GenRenderbuffers(1, &I.rb_depth);
+    gl.BindRenderbuffer(GL_RENDERBUFFER, I.rb_depth);
+    gl.RenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH24_STENCIL8, s, s);
+    gl.FramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_STENCIL_ATTACHMENT, GL_RENDERBUFFER, I.rb_depth);
+    if (opt.compliance == Compliance::readback) {
+        gl.GenRenderbuffers(1, &I.rb_color);
+        gl.BindRenderbuffer(GL_RENDERBUFFER, I.rb_color);
+        gl.RenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, s, s);
+        gl.FramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, I.rb_color);
+        const GLenum buf = GL_COLOR_ATTACHMENT0;
+        gl.DrawBuffers(1, &buf);
+        gl.ReadBuffer(GL_COLOR_ATTACHMENT0);
+    } else {
+        const GLenum none = GL_NONE;
+        gl.DrawBuffers(1, &none);
+        gl.ReadBuffer(GL_NONE);
+    }
+    if (gl.CheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
+        throw environment_error("OpenGL: a " + std::to_string(s) + "x" + std::to_string(s) +
+                                " depth-stencil framebuffer is not supported by " + ctx.describe());
+    }
+    gl.Viewport(0, 0, s, s);
+    gl.ClearDepth(1.0);
+    gl.ClearStencil(0);
+    gl.ClearColor(0, 0, 0, 0);
+    gl.Clear(GL_DEPTH_BUFFER_BIT | GL_STENCIL_BUFFER_BIT | GL_COLOR_BUFFER_BIT);
+    gl.Enable(GL_STENCIL_TEST);
+    if (gl.GetError() != GL_NO_ERROR) {
+        throw environment_error("OpenGL: setting up the raster engine failed on " + ctx.describe());
+    }
+}
+
+Raster::~Raster()
+{
+    auto& I = *m_impl;
+    const auto& gl = I.gl;
+    gl.DeleteProgram(I.tent_prog);
+    gl.DeleteProgram(I.test_prog);
+    gl.DeleteVertexArrays(1, &I.vao_tent);
+    gl.DeleteVertexArrays(1, &I.vao_test);
+    gl.DeleteBuffers(1, &I.vbo_tent);
+    gl.DeleteBuffers(1, &I.vbo_test);
+    gl.DeleteBuffers(1, &I.ssbo);
+    gl.DeleteFramebuffers(1, &I.fbo);
+    gl.DeleteRenderbuffers(1, &I.rb_depth);
+    if (I.rb_color) {
+        gl.DeleteRenderbuffers(1, &I.rb_color);
+    }
+}
+
+void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, std::span<const TestSegment> segs,
+                      std::vector<uint8_t>& fails)
+{
+    auto& I = *m_impl;
+    const auto& gl = I.gl;
+    if (tile.width > m_opt.max_tile_pixels || tile.height > m_opt.max_tile_pixels) {
+        throw std::logic_error("tile larger than the framebuffer");
+    }
+    ++m_stats.tiles;
+    const double inv = 1.0 / tile.pixel;
+    auto px = [&](GridPoint p, float& x, float& y) {
+        x = static_cast<float>((double(p.x) - tile.x0) * inv);
+        y = static_cast<float>((double(p.y) - tile.y0) * inv);
+    };
+    const auto t0 = std::chrono::steady_clock::now();
+
+    // Tent instances grouped by class; one draw call per class sets the stencil reference.
+    std::vector<uint32_t> order(tents.size());
+    for (uint32_t i = 0; i < order.size(); ++i) {
+        order[i] = i;
+    }
+    std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return tents[a].cls < tents[b].cls; });
+    std::vector<TentInstance> inst;
+    std::vector<std::pair<uint8_t, std::pair<GLuint, GLsizei>>> ranges; // class -> (first, count)
+    double eps_max = 0;
+    for (uint32_t i : order) {
+        const auto& t = tents[i];
+        const auto eps_px = static_cast<float>(t.eps * inv);
+        eps_max = std::max(eps_max, double(eps_px));
+        const auto first = static_cast<GLuint>(inst.size());
+        for (size_t k = 0; k + 1 < t.points.size(); ++k) {
+            TentInstance ti{};
+            px(t.points[k], ti.ax, ti.ay);
+            px(t.points[k + 1], ti.bx, ti.by);
+            ti.eps = eps_px;
+            inst.push_back(ti);
+        }
+        const auto count = static_cast<GLsizei>(inst.size() - first);
+        if (!ranges.empty() && ranges.back().first == t.cls) {
+            ranges.back().second.second += count;
+        } else {
+            ranges.push_back({t.cls, {first, count}});
+        }
+    }
+    m_stats.tent_segments += inst.size();
+    const auto w = static_cast<GLsizei>(tile.width), h = static_cast<GLsizei>(tile.height);
+    gl.Viewport(0, 0, w, h);
+
+    // Step 1: lower envelope of the distance tents; the stencil gets the class.
+    gl.UseProgram(I.tent_prog);
+    gl.Uniform2f(I.loc(I.tent_prog, "u_size"), float(w), float(h));
+    gl.Uniform1f(I.loc(I.tent_prog, "u_reach"), float(l2_reach(m_opt.metric)));
+    gl.Uniform1f(I.loc(I.tent_prog, "u_pad"), float(m_opt.margin_px));
+    gl.Uniform1i(I.loc(I.tent_prog, "u_metric"), int(m_opt.metric));
+    gl.Uniform1f(I.loc(I.tent_prog, "u_depth_scale"), float(eps_max * 1.001 + 1e-6));
+    gl.Uniform1i(I.loc(I.tent_prog, "u_reset"), 0);
+    gl.BindVertexArray(I.vao_tent);
+    gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_tent);
+    gl.BufferData(GL_ARRAY_BUFFER, GLsizeiptr(inst.size() * sizeof(TentInstance)), inst.data(), GL_STREAM_DRAW);
+    gl.Enable(GL_DEPTH_TEST);
+    gl.DepthFunc(GL_LESS);
+    gl.DepthMask(GL_TRUE);
+    gl.ColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
+    gl.StencilMask(0xFF);
+    gl.StencilOp(GL_KEEP, GL_KEEP, GL_REPLACE);
+    for (const auto& [cls, range] : ranges) {
+        gl.StencilFunc(GL_ALWAYS, cls, 0xFF);
+        gl.DrawArraysInstancedBaseInstance(GL_TRIANGLE_STRIP, 0, 4, range.second, range.first);
+    }
+    m_stats.voronoi_seconds += seconds_since(t0);
+
+    // Step 2: shortcuts under stencil != class.
+    const auto t1 = std::chrono::steady_clock::now();
+    std::vector<uint32_t> sorder(segs.size());
+    for (uint32_t i = 0; i < sorder.size(); ++i) {
+        sorder[i] = i;
+    }
+    std::stable_sort(sorder.begin(), sorder.end(), [&](uint32_t a, uint32_t b) { return segs[a].cls < segs[b].cls; });
+    std::vector<TestInstance> tinst(segs.size());
+    std::vector<std::pair<uint8_t, std::pair<GLuint, GLsizei>>> sranges;
+    for (uint32_t k = 0; k < sorder.size(); ++k) {
+        const auto& s = segs[sorder[k]];
+        px(s.a, tinst[k].ax, tinst[k].ay);
+        px(s.b, tinst[k].bx, tinst[k].by);
+        tinst[k].id = k; // local index; mapped back below
+        if (!sranges.empty() && sranges.back().first == s.cls) {
+            ++sranges.back().second.second;
+        } else {
+            sranges.push_back({s.cls, {k, 1}});
+        }
+    }
+    m_stats.drawn_segments += segs.size();
+    gl.Disable(GL_DEPTH_TEST);
+    gl.DepthMask(GL_FALSE);
+    gl.StencilMask(0);
+    gl.StencilOp(GL_KEEP, GL_KEEP, GL_KEEP);
+    gl.UseProgram(I.test_prog);
+    gl.Uniform2f(I.loc(I.test_prog, "u_size"), float(w), float(h));
+    gl.Uniform1f(I.loc(I.test_prog, "u_half_width"), 0.5f);
+    gl.Uniform1f(I.loc(I.test_prog, "u_end_margin"), float(m_opt.endpoint_margin_px));
+    gl.BindVertexArray(I.vao_test);
+    gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_test);
+    gl.BufferData(GL_ARRAY_BUFFER, GLsizeiptr(tinst.size() * sizeof(TestInstance)), tinst.data(), GL_STREAM_DRAW);
+    if (!segs.empty() && m_opt.compliance == Compliance::ssbo) {
+        std::vector<uint32_t> flags(segs.size(), 0);
+        gl.BindBuffer(GL_SHADER_STORAGE_BUFFER, I.ssbo);
+        gl.BufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(flags.size() * 4), flags.data(), GL_STREAM_READ);
+        gl.BindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, I.ssbo);
+        for (const auto& [cls, range] : sranges) {
+            gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
+            gl.DrawArraysInstancedBaseInstance(GL_TRIANGLE_STRIP, 0, 4, range.second, range.first);
+        }
+        gl.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+        gl.GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(flags.size() * 4), flags.data());
+        for (uint32_t k = 0; k < flags.size(); ++k) {
+            if (flags[k]) {
+                fails[segs[sorder[k]].id] = 1;
+            }
+        }
+    } else if (!segs.empty()) {
+        // Algorithm 5.1: unique colours, read back, drop the colours seen,
+        // repeat until nothing changes (a segment may hide another).
+        gl.ColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+        std::vector<uint8_t> removed(segs.size(), 0);
+        std::vector<uint8_t> pixels(size_t(w) * size_t(h) * 4);
+        for (;;) {
+            ++m_stats.readback_rounds;
+            gl.Clear(GL_COLOR_BUFFER_BIT);
+            for (const auto& [cls, range] : sranges) {
+                gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
+                for (GLuint k = range.first; k < range.first + GLuint(range.second); ++k) {
+                    if (!removed[k]) {
+                        gl.DrawArraysInstancedBaseInstance(GL_TRIANGLE_STRIP, 0, 4, 1, k);
+                    }
+                }
+            }
+            gl.PixelStorei(GL_PACK_ALIGNMENT, 1);
+            gl.ReadPixels(0, 0, w, h, GL_RGBA, GL_UNSIGNED_BYTE, pixels.data());
+            bool changed = false;
+            for (size_t i = 0; i < pixels.size(); i += 4) {
+                const uint32_t c =
+                    uint32_t(pixels[i]) | (uint32_t(pixels[i + 1]) << 8) | (uint32_t(pixels[i + 2]) << 16);
+                if (c != 0 && !removed[c - 1]) {
+                    removed[c - 1] = 1;
+                    changed = true;
+                }
+            }
+            if (!changed) {
+                break;
+            }
+        }
+        for (uint32_t k = 0; k < removed.size(); ++k) {
+            if (removed[k]) {
+                fails[segs[sorder[k]].id] = 1;
+            }
+        }
+        gl.ColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
+    }
+    m_stats.compliance_seconds += seconds_since(t1);
+
+    // Restore the buffer where the tents were drawn: depth 1, stencil 0.
+    const auto t2 = std::chrono::steady_clock::now();
+    gl.UseProgram(I.tent_prog);
+    gl.Uniform1i(I.loc(I.tent_prog, "u_reset"), 1);
+    gl.BindVertexArray(I.vao_tent);
+    gl.Enable(GL_DEPTH_TEST);
+    gl.DepthFunc(GL_ALWAYS);
+    gl.DepthMask(GL_TRUE);
+    gl.StencilMask(0xFF);
+    gl.StencilFunc(GL_ALWAYS, 0, 0xFF);
+    gl.StencilOp(GL_REPLACE, GL_REPLACE, GL_REPLACE);
+    if (!inst.empty()) {
+        gl.DrawArraysInstanced(GL_TRIANGLE_STRIP, 0, 4, GLsizei(inst.size()));
+    }
+    const GLenum err = gl.GetError();
+    if (err != GL_NO_ERROR) {
+        throw environment_error("OpenGL error " + std::to_string(err) + " while rendering a tile on " +
+                                m_ctx.describe());
+    }
+    m_stats.voronoi_seconds += seconds_since(t2);
+}
+
+} // namespace tigerlod::simplify

@@ -1,0 +1,78 @@
+#pragma once
+/// @file raster.hpp
+/// Steps 1 and 2 of the paper on OpenGL: the eps-Voronoi diagram of the
+/// chains in the stencil buffer, then the compliance test of shortcuts drawn
+/// under "stencil != own class".
+///
+/// Work per tile is proportional to the geometry, not to the tile's area:
+/// the depth-stencil buffer is cleared once, and after each tile the tents'
+/// footprints are drawn again to restore it (depth 1, stencil 0), so a
+/// county at a 25 cm pixel never pays for clearing billions of pixels.
+
+#include "gl/context.hpp"
+#include "stages/simplify/coloring.hpp"
+#include "stages/simplify/metric.hpp"
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+namespace tigerlod::simplify {
+
+enum class Compliance { ssbo, readback };
+
+struct RasterOptions {
+    Metric metric = Metric::l2;
+    Compliance compliance = Compliance::ssbo;
+    uint32_t max_tile_pixels = 4096; ///< framebuffer size
+    double margin_px = 2.0;          ///< tents' quads reach this far beyond eps (pixels)
+    double endpoint_margin_px = 1.5; ///< fragments this close to a shortcut's ends are not tested
+};
+
+/// A chain drawn into the Voronoi diagram.
+struct TentChain {
+    std::span<const GridPoint> points;
+    double eps = 0; ///< grid units
+    uint8_t cls = 0;
+};
+
+/// A shortcut to test; `id` indexes the caller's result vector.
+struct TestSegment {
+    GridPoint a, b;
+    uint8_t cls = 0;
+    uint32_t id = 0;
+};
+
+struct RasterStats {
+    size_t tiles = 0;
+    size_t tent_segments = 0;
+    size_t drawn_segments = 0;
+    size_t readback_rounds = 0;
+    double voronoi_seconds = 0;
+    double compliance_seconds = 0;
+};
+
+class Raster {
+  public:
+    /// Compiles the shaders and makes the framebuffer. Throws environment_error.
+    Raster(gl::Context& ctx, const RasterOptions& opt);
+    ~Raster();
+    Raster(const Raster&) = delete;
+    Raster& operator=(const Raster&) = delete;
+
+    /// Draw the eps-Voronoi diagram of `tents` in `tile`, test `segs`, and set
+    /// fails[seg.id] = 1 for each that leaves its chain's region.
+    void run_tile(const TileSpec& tile, std::span<const TentChain> tents, std::span<const TestSegment> segs,
+                  std::vector<uint8_t>& fails);
+
+    const RasterStats& stats() const noexcept { return m_stats; }
+
+  private:
+    struct Impl;
+    gl::Context& m_ctx;
+    RasterOptions m_opt;
+    RasterStats m_stats;
+    std::unique_ptr<Impl> m_impl;
+}; // class Raster
+
+} // namespace tigerlod::simplify

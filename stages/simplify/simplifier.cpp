@@ -1,0 +1,551 @@
+#include "stages/simplify/simplifier.hpp"
+
+#include "core/projection.hpp"
+#include "core/segment_grid.hpp"
+#include "stages/simplify/candidates.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <thread>
+
+namespace tigerlod::simplify {
+
+using chains::ChainStore;
+
+void ToleranceStats::add(const ToleranceStats& o)
+{
+    chains += o.chains;
+    input_vertices += o.input_vertices;
+    output_vertices += o.output_vertices;
+    candidates += o.candidates;
+    drawn_segments += o.drawn_segments;
+    banned_raster += o.banned_raster;
+    banned_exact += o.banned_exact;
+    banned_points += o.banned_points;
+    self_intersection_repairs += o.self_intersection_repairs;
+    orientation_repairs += o.orientation_repairs;
+    input_conflicts += o.input_conflicts;
+    rounds += o.rounds;
+    tiles += o.tiles;
+    splits += o.splits;
+    max_classes = std::max(max_classes, o.max_classes);
+    seconds_color += o.seconds_color;
+    seconds_candidates += o.seconds_candidates;
+    seconds_voronoi += o.seconds_voronoi;
+    seconds_compliance += o.seconds_compliance;
+    seconds_constraints += o.seconds_constraints;
+    seconds_shortest_path += o.seconds_shortest_path;
+    seconds_exact += o.seconds_exact;
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0)
+{
+    return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+/// Run fn(i) for i in [0, n) on `threads` threads; each i is independent.
+template <class F> void parallel_for(size_t n, unsigned threads, F&& fn)
+{
+    threads = std::max(1U, std::min<unsigned>(threads, static_cast<unsigned>(std::max<size_t>(n, 1))));
+    if (threads == 1) {
+        for (size_t i = 0; i < n; ++i) {
+            fn(i);
+        }
+        return;
+    }
+    std::atomic<size_t> next{0};
+    std::vector<std::jthread> pool;
+    for (unsigned t = 0; t < threads; ++t) {
+        pool.emplace_back([&] {
+            for (size_t i; (i = next.fetch_add(1)) < n;) {
+                fn(i);
+            }
+        });
+    }
+}
+
+enum State : uint8_t { unknown = 0, good = 1, bad_raster = 2, bad_exact = 3 };
+
+/// Per owned chain.
+struct Work {
+    uint32_t chain = 0; ///< index in store.chains
+    Tolerance tol;
+    bool ring = false;
+    bool fixed = false; ///< problem chain: kept as it is
+    std::vector<Shortcut> cand;
+    std::vector<uint32_t> first; ///< CSR: shortcuts from vertex v are cand[first[v], first[v+1])
+    std::vector<uint8_t> state;
+    std::vector<uint32_t> path;      ///< vertex indices
+    std::vector<uint32_t> path_cand; ///< candidate index of each path edge, UINT32_MAX for an original edge
+    bool dirty = true;               ///< path must be recomputed
+};
+
+int128 signed_area2(std::span<const GridPoint> pts, const std::vector<uint32_t>& idx)
+{
+    int128 a = 0;
+    for (size_t i = 0; i + 1 < idx.size(); ++i) {
+        const GridPoint p = pts[idx[i]], q = pts[idx[i + 1]];
+        a += int128{p.x} * q.y - int128{q.x} * p.y;
+    }
+    return a;
+}
+
+/// Fewest-vertex path 0 -> n-1 over original edges and the candidates not
+/// banned, with at least `min_edges` edges; among shortest paths, the
+/// lexicographically largest vertex sequence (a total order, so lazy and
+/// exhaustive testing choose the same path).
+void shortest_path(Work& w, size_t n)
+{
+    const uint32_t R = w.ring ? 3 : 1;
+    constexpr uint32_t inf = UINT32_MAX / 2;
+    std::vector<uint32_t> f((R + 1) * n, inf), next((R + 1) * n, 0), via((R + 1) * n, UINT32_MAX);
+    auto at = [n](uint32_t r, size_t v) { return r * n + v; };
+    f[at(0, n - 1)] = 0;
+    for (size_t vv = n - 1; vv-- > 0;) {
+        const auto v = static_cast<uint32_t>(vv);
+        for (uint32_t r = 0; r <= R; ++r) {
+            const uint32_t rr = r > 0 ? r - 1 : 0;
+            uint32_t best = inf, bk = 0, bc = UINT32_MAX;
+            // Candidates from v, farthest first; ties keep the farthest.
+            for (uint32_t c = w.first[v + 1]; c-- > w.first[v];) {
+                if (w.state[c] >= bad_raster) {
+                    continue;
+                }
+                const uint32_t k = w.cand[c].to;
+                if (f[at(rr, k)] + 1 < best) {
+                    best = f[at(rr, k)] + 1;
+                    bk = k;
+                    bc = c;
+                }
+            }
+            if (f[at(rr, v + 1)] + 1 < best) {
+                best = f[at(rr, v + 1)] + 1;
+                bk = v + 1;
+                bc = UINT32_MAX;
+            }
+            f[at(r, v)] = best;
+            next[at(r, v)] = bk;
+            via[at(r, v)] = bc;
+        }
+    }
+    w.path.clear();
+    w.path_cand.clear();
+    uint32_t v = 0, r = R;
+    w.path.push_back(0);
+    while (v != n - 1) {
+        const uint32_t k = next[at(r, v)];
+        w.path_cand.push_back(via[at(r, v)]);
+        r = r > 0 ? r - 1 : 0;
+        v = k;
+        w.path.push_back(v);
+    }
+}
+
+/// Points that constrain chain `self`: near it, and not its own representative.
+struct PointIndex {
+    struct Entry {
+        GridPoint p;
+        uint32_t owner; ///< chain whose representative it is, or UINT32_MAX
+    };
+    std::vector<Entry> entries; // sorted by x
+    void finish()
+    {
+        std::sort(entries.begin(), entries.end(), [](const Entry& a, const Entry& b) {
+            return std::tie(a.p.x, a.p.y, a.owner) < std::tie(b.p.x, b.p.y, b.owner);
+        });
+    }
+    std::vector<GridPoint> near(const GridBox& box, uint32_t self) const
+    {
+        std::vector<GridPoint> out;
+        auto it = std::lower_bound(entries.begin(), entries.end(), box.min_x,
+                                   [](const Entry& e, int64_t x) { return e.p.x < x; });
+        for (; it != entries.end() && it->p.x <= box.max_x; ++it) {
+            if (it->p.y >= box.min_y && it->p.y <= box.max_y && it->owner != self) {
+                out.push_back(it->p);
+            }
+        }
+        return out;
+    }
+};
+
+} // namespace
+
+std::vector<double> chain_tolerances(const ChainStore& store, double eps_m, const SimplifyOptions& opt)
+{
+    const Projection proj(store.projection);
+    const double base = eps_m / store.projection.grid_m;
+    const bool conformal = store.projection.kind != ProjectionParams::Kind::albers;
+    std::vector<double> eps(store.chains.size());
+    for (size_t i = 0; i < store.chains.size(); ++i) {
+        const auto& c = store.chains[i];
+        double e = base;
+        if (!opt.class_scale.empty()) {
+            const auto it = opt.class_scale.find(store.strings[c.feature_class]);
+            if (it != opt.class_scale.end()) {
+                e *= it->second;
+            }
+        }
+        if (opt.projection_scale) {
+            GridBox box;
+            for (const GridPoint p : store.chain_points(c)) {
+                box.extend(p);
+            }
+            double lon = 0, lat = 0;
+            proj.to_lonlat(0.5 * double(box.min_x + box.max_x), 0.5 * double(box.min_y + box.max_y), lon, lat);
+            const double k = proj.scale(lon, lat);
+            // Ground length = projected / k (conformal); for the equal-area
+            // Albers it is between projected * k and projected / k: take the
+            // smaller eps so no direction exceeds eps_m on the ground.
+            e *= conformal ? k : std::min(k, 1.0 / k);
+        }
+        eps[i] = e;
+    }
+    return eps;
+}
+
+ColorResult color_store(const ChainStore& store, double eps_m, const SimplifyOptions& opt)
+{
+    const auto eps = chain_tolerances(store, eps_m, opt);
+    std::vector<ChainGeom> geoms(store.chains.size());
+    for (size_t i = 0; i < store.chains.size(); ++i) {
+        geoms[i] = {store.chain_points(store.chains[i]), eps[i], !(store.chains[i].flags & chains::chain_halo)};
+    }
+    ColorOptions copt = opt.color;
+    copt.metric = opt.metric;
+    return color_tiles(geoms, copt, opt.threads);
+}
+
+ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyOptions& opt, Raster& raster,
+                          const ColorResult* colors, ToleranceStats& st)
+{
+    st.eps_m = eps_m;
+    const auto eps = chain_tolerances(store, eps_m, opt);
+    auto t0 = Clock::now();
+    ColorResult own_colors;
+    if (!colors) {
+        own_colors = color_store(store, eps_m, opt);
+        colors = &own_colors;
+    }
+    st.seconds_color += since(t0);
+    st.tiles += colors->tiles.size();
+    st.splits += colors->splits;
+    st.max_classes = std::max(st.max_classes, colors->max_classes_used);
+
+    // Owned chains to simplify.
+    std::vector<Work> work;
+    for (uint32_t i = 0; i < store.chains.size(); ++i) {
+        const auto& c = store.chains[i];
+        if (c.flags & chains::chain_halo) {
+            continue;
+        }
+        Work w;
+        w.chain = i;
+        w.tol = Tolerance(eps[i], opt.metric);
+        w.ring = (c.flags & chains::chain_closed) != 0;
+        w.fixed = (c.flags & chains::chain_problem) != 0;
+        work.push_back(std::move(w));
+        ++st.chains;
+        st.input_vertices += c.count;
+    }
+    auto points_of = [&](const Work& w) { return store.chain_points(store.chains[w.chain]); };
+
+    // Candidates (exact proximity).
+    t0 = Clock::now();
+    parallel_for(work.size(), opt.threads, [&](size_t i) {
+        Work& w = work[i];
+        if (!w.fixed) {
+            w.cand = proximate_shortcuts(points_of(w), w.tol, opt.max_reach);
+        }
+    });
+    st.seconds_candidates += since(t0);
+
+    // Step 3's point constraints, culled up front: units' internal points,
+    // user points, and one vertex of every other chain (an island keeps its side).
+    t0 = Clock::now();
+    PointIndex index;
+    if (opt.point_constraints) {
+        for (const auto& cp : store.constraints) {
+            index.entries.push_back({cp.p, UINT32_MAX});
+        }
+        if (!opt.user_points.empty()) {
+            const Projection proj(store.projection);
+            for (const auto& u : opt.user_points) {
+                if (const auto g = proj.to_grid(u.lon, u.lat)) {
+                    index.entries.push_back({*g, UINT32_MAX});
+                }
+            }
+        }
+    }
+    for (uint32_t i = 0; i < store.chains.size(); ++i) {
+        const auto pts = store.chain_points(store.chains[i]);
+        if (pts.size() >= 3) {
+            index.entries.push_back({pts[pts.size() / 2], i});
+        }
+    }
+    index.finish();
+    std::vector<size_t> culled(work.size(), 0);
+    parallel_for(work.size(), opt.threads, [&](size_t i) {
+        Work& w = work[i];
+        if (w.cand.empty()) {
+            return;
+        }
+        const auto pts = points_of(w);
+        GridBox box;
+        for (const GridPoint p : pts) {
+            box.extend(p);
+        }
+        const auto r = static_cast<int64_t>(std::ceil(2 * w.tol.eps * l2_reach(opt.metric))) + 1;
+        box.min_x -= r;
+        box.min_y -= r;
+        box.max_x += r;
+        box.max_y += r;
+        culled[i] = cull_by_points(pts, w.cand, index.near(box, w.chain));
+    });
+    for (size_t i = 0; i < work.size(); ++i) {
+        Work& w = work[i];
+        st.banned_points += culled[i];
+        st.candidates += w.cand.size();
+        const size_t n = points_of(w).size();
+        w.first.assign(n + 1, 0);
+        for (const auto& s : w.cand) {
+            ++w.first[s.from + 1];
+        }
+        for (size_t v = 0; v < n; ++v) {
+            w.first[v + 1] += w.first[v];
+        }
+        w.state.assign(w.cand.size(), unknown);
+    }
+    st.seconds_constraints += since(t0);
+
+    // Tiles each owned chain is drawn in, and its class there.
+    std::vector<uint32_t> work_of(store.chains.size(), UINT32_MAX);
+    for (uint32_t i = 0; i < work.size(); ++i) {
+        work_of[work[i].chain] = i;
+    }
+    std::vector<std::vector<std::pair<uint32_t, uint8_t>>> tiles_of(work.size());
+    for (uint32_t t = 0; t < colors->tiles.size(); ++t) {
+        const auto& tile = colors->tiles[t];
+        for (size_t m = 0; m < tile.chains.size(); ++m) {
+            const uint32_t wi = work_of[tile.chains[m]];
+            if (wi != UINT32_MAX) {
+                tiles_of[wi].emplace_back(t, tile.classes[m]);
+            }
+        }
+    }
+
+    // Raster test of (work, candidate) pairs, tile by tile.
+    auto raster_test = [&](const std::vector<std::pair<uint32_t, uint32_t>>& tests) {
+        const auto before = raster.stats();
+        std::vector<std::vector<TestSegment>> per_tile(colors->tiles.size());
+        for (uint32_t id = 0; id < tests.size(); ++id) {
+            const auto [wi, ci] = tests[id];
+            const auto pts = points_of(work[wi]);
+            const GridPoint a = pts[work[wi].cand[ci].from], b = pts[work[wi].cand[ci].to];
+            for (const auto& [t, cls] : tiles_of[wi]) {
+                const TileSpec& s = colors->tiles[t].spec;
+                const double x1 = s.x0 + s.width * s.pixel, y1 = s.y0 + s.height * s.pixel;
+                if (std::max(a.x, b.x) + s.pixel < s.x0 || std::min(a.x, b.x) - s.pixel > x1 ||
+                    std::max(a.y, b.y) + s.pixel < s.y0 || std::min(a.y, b.y) - s.pixel > y1) {
+                    continue;
+                }
+                per_tile[t].push_back({a, b, cls, id});
+            }
+        }
+        std::vector<uint8_t> fails(tests.size(), 0);
+        for (uint32_t t = 0; t < per_tile.size(); ++t) {
+            if (per_tile[t].empty()) {
+                continue;
+            }
+            const auto& tile = colors->tiles[t];
+            std::vector<TentChain> tents(tile.chains.size());
+            for (size_t m = 0; m < tile.chains.size(); ++m) {
+                tents[m] = {store.chain_points(store.chains[tile.chains[m]]), eps[tile.chains[m]], tile.classes[m]};
+            }
+            raster.run_tile(tile.spec, tents, per_tile[t], fails);
+        }
+        for (uint32_t id = 0; id < tests.size(); ++id) {
+            const auto [wi, ci] = tests[id];
+            work[wi].state[ci] = fails[id] ? bad_raster : good;
+            st.banned_raster += fails[id];
+        }
+        const auto& after = raster.stats();
+        st.drawn_segments += after.drawn_segments - before.drawn_segments;
+        st.seconds_voronoi += after.voronoi_seconds - before.voronoi_seconds;
+        st.seconds_compliance += after.compliance_seconds - before.compliance_seconds;
+    };
+
+    if (!opt.lazy) {
+        std::vector<std::pair<uint32_t, uint32_t>> all;
+        for (uint32_t wi = 0; wi < work.size(); ++wi) {
+            for (uint32_t ci = 0; ci < work[wi].cand.size(); ++ci) {
+                all.emplace_back(wi, ci);
+            }
+        }
+        raster_test(all);
+    }
+
+    for (;;) {
+        // Step 4 for the chains whose candidates changed, then test what the
+        // paths use and has not been tested (lazy), until every path is clean.
+        for (;;) {
+            ++st.rounds;
+            t0 = Clock::now();
+            parallel_for(work.size(), opt.threads, [&](size_t i) {
+                Work& w = work[i];
+                if (!w.dirty) {
+                    return;
+                }
+                const auto pts = points_of(w);
+                shortest_path(w, pts.size());
+                if (w.ring) {
+                    // Keep the ring's orientation: ban the longest shortcut until it holds.
+                    const int128 orig = signed_area2(pts, [&] {
+                        std::vector<uint32_t> all(pts.size());
+                        for (uint32_t k = 0; k < all.size(); ++k) {
+                            all[k] = k;
+                        }
+                        return all;
+                    }());
+                    for (;;) {
+                        const int128 now = signed_area2(pts, w.path);
+                        if ((now > 0) == (orig > 0) && now != 0) {
+                            break;
+                        }
+                        uint32_t worst = UINT32_MAX, span = 0;
+                        for (const uint32_t c : w.path_cand) {
+                            if (c != UINT32_MAX && w.cand[c].to - w.cand[c].from > span) {
+                                span = w.cand[c].to - w.cand[c].from;
+                                worst = c;
+                            }
+                        }
+                        if (worst == UINT32_MAX) {
+                            break;
+                        }
+                        w.state[worst] = bad_exact;
+                        ++st.orientation_repairs;
+                        shortest_path(w, pts.size());
+                    }
+                }
+            });
+            st.seconds_shortest_path += since(t0);
+            std::vector<std::pair<uint32_t, uint32_t>> tests;
+            for (uint32_t wi = 0; wi < work.size(); ++wi) {
+                Work& w = work[wi];
+                if (!w.dirty) {
+                    continue;
+                }
+                for (const uint32_t c : w.path_cand) {
+                    if (c != UINT32_MAX && w.state[c] == unknown) {
+                        tests.emplace_back(wi, c);
+                    }
+                }
+            }
+            if (tests.empty()) {
+                for (Work& w : work) {
+                    w.dirty = false;
+                }
+                break;
+            }
+            raster_test(tests);
+            // Chains whose tested shortcuts all passed keep their paths.
+            std::vector<uint8_t> failed(work.size(), 0);
+            for (const auto& [wi, ci] : tests) {
+                failed[wi] |= work[wi].state[ci] != good;
+            }
+            for (uint32_t wi = 0; wi < work.size(); ++wi) {
+                work[wi].dirty = failed[wi] != 0;
+            }
+        }
+
+        // Exact safety net: simplified owned chains against each other and the halo.
+        t0 = Clock::now();
+        std::vector<Segment> segs;
+        struct Tag {
+            uint32_t work; ///< UINT32_MAX for a halo chain
+            uint32_t cand; ///< candidate index, UINT32_MAX for an original edge
+            uint32_t chain;
+        };
+        std::vector<Tag> tags;
+        for (uint32_t wi = 0; wi < work.size(); ++wi) {
+            const auto pts = points_of(work[wi]);
+            const auto& w = work[wi];
+            for (size_t e = 0; e + 1 < w.path.size(); ++e) {
+                segs.push_back({pts[w.path[e]], pts[w.path[e + 1]], static_cast<uint32_t>(tags.size())});
+                tags.push_back({wi, w.path_cand[e], w.chain});
+            }
+        }
+        for (uint32_t i = 0; i < store.chains.size(); ++i) {
+            if (!(store.chains[i].flags & chains::chain_halo)) {
+                continue;
+            }
+            const auto pts = store.chain_points(store.chains[i]);
+            for (size_t e = 0; e + 1 < pts.size(); ++e) {
+                segs.push_back({pts[e], pts[e + 1], static_cast<uint32_t>(tags.size())});
+                tags.push_back({UINT32_MAX, UINT32_MAX, i});
+            }
+        }
+        bool banned_any = false;
+        for (const auto& x : find_intersections(segs, opt.threads)) {
+            const Tag& a = tags[segs[x.first].tag];
+            const Tag& b = tags[segs[x.second].tag];
+            bool banned = false;
+            for (const Tag* t : {&a, &b}) {
+                if (t->work != UINT32_MAX && t->cand != UINT32_MAX) {
+                    Work& w = work[t->work];
+                    if (w.state[t->cand] != bad_exact) {
+                        w.state[t->cand] = bad_exact;
+                        w.dirty = true;
+                        ++st.banned_exact;
+                    }
+                    banned = true;
+                }
+            }
+            if (!banned) {
+                ++st.input_conflicts;
+            } else if (a.chain == b.chain) {
+                ++st.self_intersection_repairs;
+            }
+            banned_any |= banned;
+        }
+        st.seconds_exact += since(t0);
+        if (!banned_any) {
+            break;
+        }
+    }
+
+    ChainStore out;
+    out.level_index = store.level_index;
+    out.level_count = store.level_count;
+    out.level_name = store.level_name;
+    out.partition = store.partition;
+    out.projection = store.projection;
+    out.halo_m = store.halo_m;
+    out.eps_m = eps_m;
+    out.metric = static_cast<uint8_t>(opt.metric);
+    out.strings = store.strings;
+    for (const auto& s : store.strings) {
+        out.intern(s);
+    }
+    out.junctions = store.junctions;
+    out.constraints = store.constraints;
+    std::vector<GridPoint> buf;
+    for (const Work& w : work) {
+        const auto pts = points_of(w);
+        buf.clear();
+        for (const uint32_t v : w.path) {
+            buf.push_back(pts[v]);
+        }
+        chains::ChainInfo info = store.chains[w.chain];
+        out.add_chain(info, buf);
+        st.output_vertices += buf.size();
+    }
+    out.canonicalize();
+    return out;
+}
+
+} // namespace tigerlod::simplify

@@ -1,0 +1,69 @@
+#pragma once
+/// @file simplifier.hpp
+/// One chain store at one tolerance: the paper's Steps 1-4 with lazy
+/// compliance and an exact safety net (see README.md beside this file).
+
+#include "formats/chains/chain_store.hpp"
+#include "stages/simplify/coloring.hpp"
+#include "stages/simplify/metric.hpp"
+#include "stages/simplify/raster.hpp"
+
+#include <map>
+#include <string>
+#include <vector>
+
+namespace tigerlod::simplify {
+
+/// A user point constraint in lon/lat degrees.
+struct LonLat {
+    double lon = 0, lat = 0;
+};
+
+struct SimplifyOptions {
+    Metric metric = Metric::l2;
+    std::map<std::string, double> class_scale; ///< eps multiplier by feature class
+    bool projection_scale = true;              ///< eps in ground metres through the local projection scale
+    uint32_t max_reach = 0;                    ///< cap on a shortcut's reach in vertices (0: none)
+    bool point_constraints = true;             ///< units' internal points and user points keep their side
+    std::vector<LonLat> user_points;
+    bool lazy = true; ///< test only shortcuts on shortest paths
+    ColorOptions color;
+    unsigned threads = 1;
+};
+
+/// What happened at one tolerance (summed over stores by the caller).
+struct ToleranceStats {
+    double eps_m = 0;
+    size_t chains = 0;
+    size_t input_vertices = 0;
+    size_t output_vertices = 0;
+    size_t candidates = 0;
+    size_t drawn_segments = 0;
+    size_t banned_raster = 0;
+    size_t banned_exact = 0;
+    size_t banned_points = 0;
+    size_t self_intersection_repairs = 0;
+    size_t orientation_repairs = 0;
+    size_t input_conflicts = 0; ///< intersections between original segments (ingest problems), left as they are
+    size_t rounds = 0;
+    size_t tiles = 0;
+    size_t splits = 0;
+    uint32_t max_classes = 0;
+    double seconds_color = 0, seconds_candidates = 0, seconds_voronoi = 0, seconds_compliance = 0,
+           seconds_constraints = 0, seconds_shortest_path = 0, seconds_exact = 0;
+    void add(const ToleranceStats& o);
+};
+
+/// The tolerance of each chain of `store` in grid units for `eps_m` ground metres.
+std::vector<double> chain_tolerances(const chains::ChainStore& store, double eps_m, const SimplifyOptions& opt);
+
+/// Colour `store` at `eps_m` (what tigerlod-color writes).
+ColorResult color_store(const chains::ChainStore& store, double eps_m, const SimplifyOptions& opt);
+
+/// Simplify the owned chains of `store` at `eps_m`. `colors`, if given, must
+/// come from color_store with the same options. The result holds the owned
+/// chains only, simplified, with the store's junctions and constraints.
+chains::ChainStore simplify_store(const chains::ChainStore& store, double eps_m, const SimplifyOptions& opt,
+                                  Raster& raster, const ColorResult* colors, ToleranceStats& stats);
+
+} // namespace tigerlod::simplify

@@ -1,0 +1,301 @@
+#include "stages/simplify/simplify_stage.hpp"
+
+#include "core/errors.hpp"
+#include "core/fs.hpp"
+#include "gl/context.hpp"
+#include "stages/simplify/color_io.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cctype>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+namespace fs = std::filesystem;
+using json = nlohmann::ordered_json;
+
+namespace tigerlod::simplify {
+
+void SimplifyStage::add_args(ArgSet& args)
+{
+    m_common.add(args);
+    args.group("Simplification");
+    args.add("max-reach", &m_max_reach, "longest shortcut in vertices, 0 for no cap (the paper's heuristic)", "N");
+    args.add("no-point-constraints", &m_no_point_constraints,
+             "do not keep the units' internal points and user points on their side");
+    args.add("points", &m_points, "user point constraints: GeoJSON points or CSV with lon,lat columns", "FILE");
+    args.add("exhaustive", &m_exhaustive,
+             "test every proximate shortcut on the raster; by default only those on shortest paths\n"
+             "      are tested (same result, far fewer segments drawn)");
+    args.add("compliance", &m_compliance,
+             "ssbo: one pass setting a flag per shortcut in a storage buffer; readback: the paper's\n"
+             "      unique-colour read-back loop (Algorithm 5.1)",
+             "MODE");
+    args.add("gl", &m_gl, "OpenGL backend: osmesa (llvmpipe, everywhere) or egl (a GPU, or Mesa's device)", "NAME");
+    args.add("colors", &m_colors, "use the tiles and classes tigerlod-color wrote to DIR instead of computing them",
+             "DIR");
+}
+
+void SimplifyStage::initialize()
+{
+    m_common.initialize(name);
+    if (m_max_reach < 0) {
+        throw usage_error("simplify: option '--max-reach' must be >= 0");
+    }
+    if (m_compliance != "ssbo" && m_compliance != "readback") {
+        throw usage_error("simplify: option '--compliance' must be ssbo or readback, not '" + m_compliance + "'");
+    }
+    if (!gl::parse_backend(m_gl)) {
+        throw usage_error("simplify: option '--gl' must be osmesa or egl, not '" + m_gl + "'");
+    }
+    auto& o = m_common.options;
+    o.max_reach = static_cast<uint32_t>(m_max_reach);
+    o.point_constraints = !m_no_point_constraints;
+    o.lazy = !m_exhaustive;
+}
+
+std::string SimplifyStage::help_notes() const
+{
+    return "Outputs:\n"
+           "  OUTPUT/eps-<E>m/<level>/<partition>.tlc  the owned chains simplified at tolerance E (chain store 1.1)\n"
+           "  OUTPUT/simplify-report.json              per tolerance: vertices, candidates, bans, repairs, seconds\n"
+           "Exit codes: 0 done; 1 bad input data (corrupt store, a tile past 255 classes, bad points file);\n"
+           "  2 usage error; 3 environment (no OpenGL context, cannot write).\n";
+}
+
+namespace {
+
+std::vector<std::string> split_csv_line(const std::string& line)
+{
+    std::vector<std::string> out;
+    std::string cur;
+    bool quoted = false;
+    for (char c : line) {
+        if (c == '"') {
+            quoted = !quoted;
+        } else if (c == ',' && !quoted) {
+            out.push_back(cur);
+            cur.clear();
+        } else if (c != '\r') {
+            cur += c;
+        }
+    }
+    out.push_back(cur);
+    return out;
+}
+
+} // namespace
+
+std::vector<LonLat> read_points(const std::string& path)
+{
+    std::ifstream in(path, std::ios::binary);
+    if (!in) {
+        throw usage_error(path + ": cannot open the points file");
+    }
+    std::stringstream ss;
+    ss << in.rdbuf();
+    const std::string text = ss.str();
+    std::vector<LonLat> out;
+    auto check = [&](double lon, double lat, const std::string& where) {
+        if (!(lon >= -180 && lon <= 180 && lat >= -90 && lat <= 90)) {
+            throw input_error(path + ": " + where + ": lon/lat (" + std::to_string(lon) + ", " + std::to_string(lat) +
+                              ") out of range");
+        }
+        out.push_back({lon, lat});
+    };
+    const auto first = text.find_first_not_of(" \t\r\n");
+    if (first != std::string::npos && text[first] == '{') {
+        json j;
+        try {
+            j = json::parse(text);
+        } catch (const json::exception& e) {
+            throw input_error(path + ": invalid GeoJSON: " + e.what());
+        }
+        const json features =
+            j.value("type", "") == "FeatureCollection" ? j.value("features", json::array()) : json::array({j});
+        size_t i = 0;
+        for (const auto& f : features) {
+            const std::string where = "feature " + std::to_string(i++);
+            const json& g = f.contains("geometry") ? f["geometry"] : f;
+            try {
+                const std::string type = g.at("type");
+                if (type == "Point") {
+                    check(g.at("coordinates").at(0), g.at("coordinates").at(1), where);
+                } else if (type == "MultiPoint") {
+                    for (const auto& c : g.at("coordinates")) {
+                        check(c.at(0), c.at(1), where);
+                    }
+                } else {
+                    throw input_error(path + ": " + where + ": geometry type " + type +
+                                      ", expected Point or MultiPoint");
+                }
+            } catch (const json::exception& e) {
+                throw input_error(path + ": " + where + ": " + e.what());
+            }
+        }
+        return out;
+    }
+    std::istringstream lines(text);
+    std::string line;
+    size_t lineno = 0;
+    int ilon = -1, ilat = -1;
+    while (std::getline(lines, line)) {
+        ++lineno;
+        if (line.find_first_not_of(" \t\r") == std::string::npos) {
+            continue;
+        }
+        const auto cols = split_csv_line(line);
+        if (ilon < 0) {
+            for (int c = 0; c < int(cols.size()); ++c) {
+                std::string h = cols[size_t(c)];
+                std::transform(h.begin(), h.end(), h.begin(), [](unsigned char ch) { return std::tolower(ch); });
+                if (h == "lon" || h == "lng" || h == "longitude" || h == "x") {
+                    ilon = c;
+                } else if (h == "lat" || h == "latitude" || h == "y") {
+                    ilat = c;
+                }
+            }
+            if (ilon < 0 || ilat < 0) {
+                throw input_error(path + ": line " + std::to_string(lineno) +
+                                  ": the header needs lon and lat columns (lon/lng/longitude/x, lat/latitude/y)");
+            }
+            continue;
+        }
+        const std::string where = "line " + std::to_string(lineno);
+        if (int(cols.size()) <= std::max(ilon, ilat)) {
+            throw input_error(path + ": " + where + ": too few columns");
+        }
+        try {
+            size_t p1 = 0, p2 = 0;
+            const double lon = std::stod(cols[size_t(ilon)], &p1), lat = std::stod(cols[size_t(ilat)], &p2);
+            if (p1 != cols[size_t(ilon)].size() || p2 != cols[size_t(ilat)].size()) {
+                throw std::invalid_argument("trailing text");
+            }
+            check(lon, lat, where);
+        } catch (const std::logic_error&) {
+            throw input_error(path + ": " + where + ": lon/lat are not numbers");
+        }
+    }
+    return out;
+}
+
+int SimplifyStage::run(const StageContext& ctx)
+{
+    auto& o = m_common.options;
+    const auto stores = list_stores(m_common.input, m_common.level);
+    if (!m_points.empty()) {
+        o.user_points = read_points(m_points);
+    }
+    OutputDir out(m_common.output, m_common.overwrite);
+    auto context = gl::Context::create(*gl::parse_backend(m_gl));
+    RasterOptions ropt;
+    ropt.metric = o.metric;
+    ropt.compliance = m_compliance == "ssbo" ? Compliance::ssbo : Compliance::readback;
+    ropt.max_tile_pixels = o.color.tile_pixels;
+    ropt.margin_px = o.color.margin_px;
+    Raster raster(*context, ropt);
+    ctx.log.info("simplify: " + std::to_string(stores.size()) + " stores, " + context->describe());
+
+    const auto t_start = std::chrono::steady_clock::now();
+    std::vector<ToleranceStats> totals(m_common.tolerances.size());
+    for (const auto& sf : stores) {
+        const auto store = chains::read(sf.path);
+        for (size_t ti = 0; ti < m_common.tolerances.size(); ++ti) {
+            const double eps_m = m_common.tolerances[ti];
+            ColorResult given;
+            const ColorResult* colors = nullptr;
+            if (!m_colors.empty()) {
+                const auto eps = chain_tolerances(store, eps_m, o);
+                double eps_min = 0;
+                for (double e : eps) {
+                    eps_min = (eps_min == 0 || e < eps_min) ? e : eps_min;
+                }
+                given = colors_from_json(fs::path(m_colors) / tolerance_dir(eps_m) / sf.level /
+                                             (sf.partition + ".colors.json"),
+                                         store, eps_m, o.metric, eps_min * o.color.pixel_fraction);
+                colors = &given;
+            }
+            ToleranceStats st;
+            chains::ChainStore result;
+            try {
+                result = simplify_store(store, eps_m, o, raster, colors, st);
+            } catch (const input_error& e) {
+                throw input_error(sf.path.string() + " at eps " + std::to_string(eps_m) + " m: " + e.what());
+            }
+            const fs::path dir = out.path() / tolerance_dir(eps_m) / sf.level;
+            fs::create_directories(dir);
+            chains::write(dir / (sf.partition + ".tlc"), result);
+            totals[ti].add(st);
+            totals[ti].eps_m = eps_m;
+        }
+        ctx.log.info("simplify: " + sf.level + "/" + sf.partition + " done");
+    }
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+
+    json report;
+    report["schema"] = "tigerlod.simplify-report/1";
+    report["input"] = m_common.input;
+    report["stores"] = stores.size();
+    report["gl"] = context->describe();
+    report["options"] = {{"metric", metric_name(o.metric)},
+                         {"projection_scale", o.projection_scale},
+                         {"class_scale", o.class_scale},
+                         {"max_reach", o.max_reach},
+                         {"point_constraints", o.point_constraints},
+                         {"user_points", o.user_points.size()},
+                         {"lazy", o.lazy},
+                         {"compliance", m_compliance},
+                         {"pixel_fraction", o.color.pixel_fraction},
+                         {"tile_pixels", o.color.tile_pixels},
+                         {"max_classes", o.color.max_classes},
+                         {"threads", o.threads}};
+    json tols = json::array();
+    for (const auto& t : totals) {
+        json j;
+        j["eps_m"] = t.eps_m;
+        j["chains"] = t.chains;
+        j["input_vertices"] = t.input_vertices;
+        j["output_vertices"] = t.output_vertices;
+        j["candidates"] = t.candidates;
+        j["drawn_segments"] = t.drawn_segments;
+        j["banned"] = {{"raster", t.banned_raster}, {"exact", t.banned_exact}, {"point_constraints", t.banned_points}};
+        j["self_intersection_repairs"] = t.self_intersection_repairs;
+        j["orientation_repairs"] = t.orientation_repairs;
+        j["input_conflicts"] = t.input_conflicts;
+        j["rounds"] = t.rounds;
+        j["tiles"] = t.tiles;
+        j["tile_splits"] = t.splits;
+        j["max_classes"] = t.max_classes;
+        j["seconds"] = {{"color", t.seconds_color},
+                        {"candidates", t.seconds_candidates},
+                        {"step1_voronoi", t.seconds_voronoi},
+                        {"step2_compliance", t.seconds_compliance},
+                        {"step3_constraints", t.seconds_constraints},
+                        {"step4_shortest_path", t.seconds_shortest_path},
+                        {"exact_check", t.seconds_exact}};
+        tols.push_back(std::move(j));
+    }
+    report["tolerances"] = std::move(tols);
+    report["seconds"] = seconds;
+    write_file_atomic(out.path() / "simplify-report.json", report.dump(2) + "\n");
+    out.commit();
+
+    {
+        std::printf("simplify: %zu stores in %.2f s on %s\n", stores.size(), seconds, context->describe().c_str());
+        for (const auto& t : totals) {
+            std::printf("  eps %g m: %zu -> %zu vertices (%.1f%%), %zu candidates, %zu drawn, banned raster %zu "
+                        "exact %zu points %zu\n",
+                        t.eps_m, t.input_vertices, t.output_vertices,
+                        t.input_vertices ? 100.0 * double(t.output_vertices) / double(t.input_vertices) : 0.0,
+                        t.candidates, t.drawn_segments, t.banned_raster, t.banned_exact, t.banned_points);
+        }
+        std::printf("outputs in %s\n", m_common.output.c_str());
+    }
+    return exit_ok;
+}
+
+} // namespace tigerlod::simplify

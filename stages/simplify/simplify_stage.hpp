@@ -1,0 +1,38 @@
+#pragma once
+/// @file simplify_stage.hpp
+/// tigerlod-simplify: every chain store of an ingest output at every
+/// tolerance of the ladder, on OpenGL.
+
+#include "core/stage.hpp"
+#include "stages/simplify/stage_options.hpp"
+
+namespace tigerlod::simplify {
+
+class SimplifyStage final : public Stage {
+  public:
+    static constexpr const char* name = "simplify";
+    static constexpr const char* description =
+        "Simplify chain stores at a ladder of tolerances with the eps-Voronoi diagram drawn by OpenGL:\n"
+        "every chain stays within eps of its original, no two chains cross, every constraint point keeps its side.";
+    void add_args(ArgSet& args) override;
+    void initialize() override;
+    int run(const StageContext& ctx) override;
+    std::string help_notes() const override;
+
+  private:
+    CommonOptions m_common;
+    std::string m_points;
+    std::string m_compliance = "ssbo";
+    std::string m_gl = "osmesa";
+    std::string m_colors;
+    bool m_exhaustive = false;
+    bool m_no_point_constraints = false;
+    int m_max_reach = 0;
+}; // class SimplifyStage
+
+/// Read user point constraints: GeoJSON (Point / MultiPoint features) or CSV
+/// with lon and lat columns (header names lon/lng/longitude/x and lat/latitude/y).
+/// Throws input_error naming the file and line or feature.
+std::vector<LonLat> read_points(const std::string& path);
+
+} // namespace tigerlod::simplify

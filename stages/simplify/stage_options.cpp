@@ -1,0 +1,135 @@
+#include "stages/simplify/stage_options.hpp"
+
+#include "core/errors.hpp"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <sstream>
+#include <thread>
+
+namespace fs = std::filesystem;
+
+namespace tigerlod::simplify {
+
+void CommonOptions::add(ArgSet& args)
+{
+    args.positional("INPUT", &input, "a tigerlod-ingest output folder (INPUT/<level>/<partition>.tlc)");
+    args.positional("OUTPUT", &output, "the output folder, written under a temporary name and renamed on success");
+    args.group("Tolerances");
+    args.add("tolerances", &m_tolerances, "the ladder: increasing tolerances in ground metres, comma-separated",
+             "LIST");
+    args.add("metric", &m_metric, "distance metric of the tolerance: l2, l1 or linf", "NAME");
+    args.add("class-scale", &m_class_scale, "scale eps by feature class, e.g. S1400=0.5,H3010=2 (other classes: 1)",
+             "LIST");
+    args.add("no-projection-scale", &m_no_projection_scale,
+             "use eps in projected metres; by default it is corrected by the local projection scale\n"
+             "      so it means ground metres everywhere");
+    args.group("Rendering");
+    args.add("pixel-fraction", &m_pixel_fraction, "pixel size as a fraction of the smallest eps (at most 0.5)", "F");
+    args.add("tile-pixels", &m_tile_pixels, "render tile width and height in pixels (64..16384)", "N");
+    args.add("max-classes", &m_max_classes, "stencil classes per tile (2..255); a tile needing more is split", "N");
+    args.group("Run");
+    args.add("level", &level, "only this level (default: all)", "NAME");
+    args.add("threads", &m_threads, "worker threads, 0 for all cores", "N");
+    args.add("overwrite", &overwrite, "replace OUTPUT if it exists");
+}
+
+void CommonOptions::initialize(const std::string& stage)
+{
+    auto fail = [&](const std::string& opt, const std::string& what) {
+        throw usage_error(stage + ": option '--" + opt + "' " + what);
+    };
+    tolerances.clear();
+    std::stringstream ss(m_tolerances);
+    std::string item;
+    while (std::getline(ss, item, ',')) {
+        double v = 0;
+        const auto [p, ec] = std::from_chars(item.data(), item.data() + item.size(), v);
+        if (item.empty() || ec != std::errc() || p != item.data() + item.size()) {
+            fail("tolerances", "has '" + item + "', not a number");
+        }
+        if (!(v > 0) || !std::isfinite(v)) {
+            fail("tolerances", "has " + item + "; every tolerance must be > 0");
+        }
+        if (!tolerances.empty() && v <= tolerances.back()) {
+            fail("tolerances", "must increase: " + item + " follows " + std::to_string(tolerances.back()));
+        }
+        tolerances.push_back(v);
+    }
+    if (tolerances.empty()) {
+        fail("tolerances", "is empty: give at least one tolerance in metres");
+    }
+    const auto metric = parse_metric(m_metric);
+    if (!metric) {
+        fail("metric", "must be l2, l1 or linf, not '" + m_metric + "'");
+    }
+    options.metric = *metric;
+    options.class_scale.clear();
+    std::stringstream cs(m_class_scale);
+    while (std::getline(cs, item, ',')) {
+        const auto eq = item.find('=');
+        double v = 0;
+        if (eq == std::string::npos || eq == 0 ||
+            std::from_chars(item.data() + eq + 1, item.data() + item.size(), v).ptr != item.data() + item.size() ||
+            !(v > 0)) {
+            fail("class-scale", "has '" + item + "'; expected CLASS=FACTOR with FACTOR > 0");
+        }
+        options.class_scale[item.substr(0, eq)] = v;
+    }
+    options.projection_scale = !m_no_projection_scale;
+    if (!(m_pixel_fraction > 0 && m_pixel_fraction <= 0.5)) {
+        fail("pixel-fraction", "must be in (0, 0.5]");
+    }
+    if (m_tile_pixels < 64 || m_tile_pixels > 16384) {
+        fail("tile-pixels", "must be in 64..16384");
+    }
+    if (m_max_classes < 2 || m_max_classes > 255) {
+        fail("max-classes", "must be in 2..255");
+    }
+    if (m_threads < 0 || m_threads > 256) {
+        fail("threads", "must be in 0..256");
+    }
+    options.color.pixel_fraction = m_pixel_fraction;
+    options.color.tile_pixels = static_cast<uint32_t>(m_tile_pixels);
+    options.color.max_classes = static_cast<uint32_t>(m_max_classes);
+    options.color.metric = options.metric;
+    options.threads = m_threads == 0 ? std::max(1U, std::thread::hardware_concurrency()) : unsigned(m_threads);
+}
+
+std::string tolerance_dir(double eps_m)
+{
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "eps-%gm", eps_m);
+    return buf;
+}
+
+std::vector<StoreFile> list_stores(const fs::path& input, const std::string& level)
+{
+    std::error_code ec;
+    if (!fs::is_directory(input, ec)) {
+        throw usage_error(input.string() + ": not a folder (expected a tigerlod-ingest output)");
+    }
+    std::vector<StoreFile> out;
+    for (const auto& d : fs::directory_iterator(input)) {
+        if (!d.is_directory() || (!level.empty() && d.path().filename() != level)) {
+            continue;
+        }
+        for (const auto& f : fs::directory_iterator(d.path())) {
+            if (f.is_regular_file() && f.path().extension() == ".tlc") {
+                out.push_back({d.path().filename().string(), f.path().stem().string(), f.path()});
+            }
+        }
+    }
+    std::sort(out.begin(), out.end(), [](const StoreFile& a, const StoreFile& b) {
+        return std::tie(a.level, a.partition) < std::tie(b.level, b.partition);
+    });
+    if (out.empty()) {
+        throw usage_error(input.string() + ": no chain store" +
+                          (level.empty() ? std::string() : " of level '" + level + "'") +
+                          " (expected <level>/<partition>.tlc files)");
+    }
+    return out;
+}
+
+} // namespace tigerlod::simplify

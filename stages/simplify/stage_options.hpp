@@ -1,0 +1,51 @@
+#pragma once
+/// @file stage_options.hpp
+/// Options shared by tigerlod-color and tigerlod-simplify, and the layout of
+/// their inputs and outputs.
+
+#include "core/stage.hpp"
+#include "stages/simplify/simplifier.hpp"
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace tigerlod::simplify {
+
+/// A chain store of the input: INPUT/<level>/<partition>.tlc.
+struct StoreFile {
+    std::string level;
+    std::string partition; ///< the file name's stem
+    std::filesystem::path path;
+};
+
+class CommonOptions {
+  public:
+    void add(ArgSet& args);
+    /// Validate and resolve; throws usage_error naming the option.
+    void initialize(const std::string& stage);
+
+    std::vector<double> tolerances; ///< increasing, > 0, metres
+    SimplifyOptions options;
+    std::string input, output, level;
+    bool overwrite = false;
+
+  private:
+    std::string m_tolerances = "1,4,16,64";
+    std::string m_metric = "l2";
+    std::string m_class_scale;
+    bool m_no_projection_scale = false;
+    double m_pixel_fraction = 0.25;
+    int m_tile_pixels = 4096;
+    int m_max_classes = 255;
+    int m_threads = 0;
+}; // class CommonOptions
+
+/// Folder name of a tolerance: "eps-1m", "eps-0.5m".
+std::string tolerance_dir(double eps_m);
+
+/// The stores under `input`, sorted by (level, partition); only `level` if not empty.
+/// Throws usage_error if `input` is not a folder or holds no store.
+std::vector<StoreFile> list_stores(const std::filesystem::path& input, const std::string& level);
+
+} // namespace tigerlod::simplify
