@@ -12,30 +12,33 @@ namespace tigerlod::simplify {
 namespace {
 
 constexpr const char* distance_glsl = R"(
-uniform int u_metric; // 0 L2, 1 L1, 2 Linf
-float metric_len(vec2 v) {
-    if (u_metric == 1) return abs(v.x) + abs(v.y);
-    if (u_metric == 2) return max(abs(v.x), abs(v.y));
-    return length(v);
-}
-// Distance from p to segment ab in the metric: the minimum of a convex
-// function of t over [0, 1], reached at t = 0, 1 or a breakpoint.
+// Distance from p to segment ab in the metric chosen by METRIC (0 L2, 1 L1,
+// 2 Linf). L1 and Linf: the minimum of a convex function of t over [0, 1],
+// reached at t = 0, 1 or a breakpoint.
 float seg_distance(vec2 p, vec2 a, vec2 b) {
     vec2 u = p - a, d = b - a;
-    float best = min(metric_len(u), metric_len(u - d));
     float len2 = dot(d, d);
+#if METRIC == 0
+    float t = len2 > 0.0 ? clamp(dot(u, d) / len2, 0.0, 1.0) : 0.0;
+    return length(u - t * d);
+#else
+#if METRIC == 1
+#define MLEN(v) (abs((v).x) + abs((v).y))
+#else
+#define MLEN(v) max(abs((v).x), abs((v).y))
+#endif
+    float best = min(MLEN(u), MLEN(u - d));
     if (len2 > 0.0) {
-        float ts[5];
-        ts[0] = dot(u, d) / len2;
-        ts[1] = d.x != 0.0 ? u.x / d.x : 0.0;
-        ts[2] = d.y != 0.0 ? u.y / d.y : 0.0;
-        ts[3] = (d.x - d.y) != 0.0 ? (u.x - u.y) / (d.x - d.y) : 0.0;
-        ts[4] = (d.x + d.y) != 0.0 ? (u.x + u.y) / (d.x + d.y) : 0.0;
-        for (int i = 0; i < 5; ++i) {
-            best = min(best, metric_len(u - clamp(ts[i], 0.0, 1.0) * d));
+        vec4 ts = vec4(d.x != 0.0 ? u.x / d.x : 0.0, d.y != 0.0 ? u.y / d.y : 0.0,
+                       (d.x - d.y) != 0.0 ? (u.x - u.y) / (d.x - d.y) : 0.0,
+                       (d.x + d.y) != 0.0 ? (u.x + u.y) / (d.x + d.y) : 0.0);
+        for (int i = 0; i < 4; ++i) {
+            vec2 v = u - clamp(ts[i], 0.0, 1.0) * d;
+            best = min(best, MLEN(v));
         }
     }
     return best;
+#endif
 }
 )";
 
@@ -194,7 +197,8 @@ Raster::Raster(gl::Context& ctx, const RasterOptions& opt)
 {
     auto& I = *m_impl;
     const auto& gl = ctx.api();
-    I.tent_prog = I.link(tent_vs, std::string(tent_fs_head) + distance_glsl + tent_fs_main);
+    const std::string metric_define = "#define METRIC " + std::to_string(int(opt.metric)) + "\n";
+    I.tent_prog = I.link(tent_vs, std::string(tent_fs_head) + metric_define + distance_glsl + tent_fs_main);
     I.test_prog = I.link(test_vs, opt.compliance == Compliance::ssbo ? test_fs_ssbo : test_fs_readback);
 
     gl.GenVertexArrays(1, &I.vao_tent);
@@ -329,7 +333,6 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     gl.Uniform2f(I.loc(I.tent_prog, "u_size"), float(w), float(h));
     gl.Uniform1f(I.loc(I.tent_prog, "u_reach"), float(l2_reach(m_opt.metric)));
     gl.Uniform1f(I.loc(I.tent_prog, "u_pad"), float(m_opt.margin_px));
-    gl.Uniform1i(I.loc(I.tent_prog, "u_metric"), int(m_opt.metric));
     gl.Uniform1f(I.loc(I.tent_prog, "u_depth_scale"), float(eps_max * 1.001 + 1e-6));
     gl.Uniform1i(I.loc(I.tent_prog, "u_reset"), 0);
     gl.BindVertexArray(I.vao_tent);

@@ -82,7 +82,8 @@ struct Work {
     std::vector<uint8_t> state;
     std::vector<uint32_t> path;      ///< vertex indices
     std::vector<uint32_t> path_cand; ///< candidate index of each path edge, UINT32_MAX for an original edge
-    bool dirty = true;               ///< path must be recomputed
+    bool dirty = true;          ///< path must be recomputed
+    bool failed_before = false; ///< a shortcut on its path failed the raster test
 };
 
 int128 signed_area2(std::span<const GridPoint> pts, const std::vector<uint32_t>& idx)
@@ -433,10 +434,23 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
                 }
             });
             st.seconds_shortest_path += since(t0);
+            // A chain whose path failed before has all its untested shortcuts
+            // tested at once: the result is the same (the path is the
+            // smallest shortest path over the shortcuts that pass, whatever
+            // was tested), and the number of rounds, each a redraw of the
+            // Voronoi diagram of the tiles involved, stays small.
             std::vector<std::pair<uint32_t, uint32_t>> tests;
             for (uint32_t wi = 0; wi < work.size(); ++wi) {
                 Work& w = work[wi];
                 if (!w.dirty) {
+                    continue;
+                }
+                if (w.failed_before) {
+                    for (uint32_t c = 0; c < w.cand.size(); ++c) {
+                        if (w.state[c] == unknown) {
+                            tests.emplace_back(wi, c);
+                        }
+                    }
                     continue;
                 }
                 for (const uint32_t c : w.path_cand) {
@@ -459,6 +473,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             }
             for (uint32_t wi = 0; wi < work.size(); ++wi) {
                 work[wi].dirty = failed[wi] != 0;
+                work[wi].failed_before |= work[wi].dirty;
             }
         }
 
