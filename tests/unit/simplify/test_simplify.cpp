@@ -1,0 +1,505 @@
+// Hand-made maps with exact expectations for tigerlod-color and
+// tigerlod-simplify, on OSMesa (a dependency installed by scripts/setup).
+#include "core/errors.hpp"
+#include "core/segment_grid.hpp"
+#include "gl/context.hpp"
+#include "stages/simplify/candidates.hpp"
+#include "stages/simplify/coloring.hpp"
+#include "stages/simplify/raster.hpp"
+#include "stages/simplify/simplifier.hpp"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+using namespace tigerlod;
+using namespace tigerlod::simplify;
+using chains::ChainStore;
+
+namespace {
+
+using Pts = std::vector<GridPoint>;
+
+/// A store in grid units (1 cm); every chain owned unless `halo`.
+struct MapBuilder {
+    ChainStore s;
+    MapBuilder()
+    {
+        s.level_name = "test";
+        s.partition = "all";
+    }
+    MapBuilder& chain(uint64_t id, const Pts& pts, const std::string& left = "L", const std::string& right = "R",
+                      const std::string& cls = "", uint32_t flags = 0)
+    {
+        chains::ChainInfo c;
+        c.id = id;
+        c.left = s.intern(left);
+        c.right = s.intern(right);
+        c.feature_class = s.intern(cls);
+        c.flags = flags | (pts.front() == pts.back() ? chains::chain_closed : 0U);
+        s.add_chain(c, pts);
+        return *this;
+    }
+    MapBuilder& point(const std::string& unit, GridPoint p)
+    {
+        s.constraints.push_back({s.intern(unit), chains::constraint_internal, p});
+        return *this;
+    }
+};
+
+/// One OSMesa context and raster engine per mode, shared by the tests.
+Raster& raster(Compliance mode = Compliance::ssbo, Metric metric = Metric::l2)
+{
+    static std::unique_ptr<gl::Context> ctx = gl::Context::create(gl::Backend::osmesa);
+    static std::map<std::pair<int, int>, std::unique_ptr<Raster>> engines;
+    auto& r = engines[{int(mode), int(metric)}];
+    if (!r) {
+        RasterOptions o;
+        o.compliance = mode;
+        o.metric = metric;
+        o.max_tile_pixels = 1024;
+        r = std::make_unique<Raster>(*ctx, o);
+    }
+    return *r;
+}
+
+SimplifyOptions plain(Metric m = Metric::l2)
+{
+    SimplifyOptions o;
+    o.metric = m;
+    o.projection_scale = false; // eps_m / 0.01 grid units exactly
+    o.color.tile_pixels = 1024;
+    o.color.metric = m;
+    return o;
+}
+
+ChainStore run(const ChainStore& in, double eps_m, SimplifyOptions o = plain(), ToleranceStats* stats = nullptr,
+               Compliance mode = Compliance::ssbo)
+{
+    ToleranceStats st;
+    auto out = simplify_store(in, eps_m, o, raster(mode, o.metric), nullptr, st);
+    if (stats) {
+        *stats = st;
+    }
+    return out;
+}
+
+Pts points_of(const ChainStore& s, uint64_t id)
+{
+    for (const auto& c : s.chains) {
+        if (c.id == id) {
+            const auto p = s.chain_points(c);
+            return {p.begin(), p.end()};
+        }
+    }
+    ADD_FAILURE() << "no chain " << id;
+    return {};
+}
+
+/// Intersections other than shared end points among all chains of the stores.
+size_t count_intersections(const std::vector<const ChainStore*>& stores)
+{
+    std::vector<Segment> segs;
+    for (const auto* s : stores) {
+        for (const auto& c : s->chains) {
+            const auto p = s->chain_points(c);
+            for (size_t i = 0; i + 1 < p.size(); ++i) {
+                segs.push_back({p[i], p[i + 1], uint32_t(segs.size())});
+            }
+        }
+    }
+    return find_intersections(segs, 1).size();
+}
+
+bool dp_within(const Pts& pts, size_t a, size_t b, double eps)
+{
+    for (size_t i = a + 1; i < b; ++i) {
+        if (!within(pts[i], pts[a], pts[b], Tolerance(eps, Metric::l2))) {
+            return false;
+        }
+    }
+    return true;
+}
+
+/// Plain per-chain Douglas-Peucker, for contrast.
+Pts douglas_peucker(const Pts& pts, double eps)
+{
+    std::vector<bool> keep(pts.size(), false);
+    keep.front() = keep.back() = true;
+    std::vector<std::pair<size_t, size_t>> stack{{0, pts.size() - 1}};
+    while (!stack.empty()) {
+        auto [a, b] = stack.back();
+        stack.pop_back();
+        if (b <= a + 1 || dp_within(pts, a, b, eps)) {
+            continue;
+        }
+        size_t far = a + 1;
+        double best = -1;
+        for (size_t i = a + 1; i < b; ++i) {
+            const double d = distance(pts[i], pts[a], pts[b], Metric::l2);
+            if (d > best) {
+                best = d;
+                far = i;
+            }
+        }
+        keep[far] = true;
+        stack.push_back({a, far});
+        stack.push_back({far, b});
+    }
+    Pts out;
+    for (size_t i = 0; i < pts.size(); ++i) {
+        if (keep[i]) {
+            out.push_back(pts[i]);
+        }
+    }
+    return out;
+}
+
+} // namespace
+
+TEST(Metric, WithinMatchesTheDistanceOnRandomPoints)
+{
+    std::mt19937 rng(7);
+    std::uniform_int_distribution<int> c(-300, 300);
+    for (Metric m : {Metric::l2, Metric::l1, Metric::linf}) {
+        const Tolerance tol(100, m);
+        for (int i = 0; i < 20000; ++i) {
+            const GridPoint p{c(rng), c(rng)}, a{c(rng), c(rng)}, b{c(rng), c(rng)};
+            const double d = distance(p, a, b, m);
+            if (std::abs(d - 100) < 1e-6) {
+                continue; // on the boundary: the double distance cannot decide
+            }
+            EXPECT_EQ(within(p, a, b, tol), d < 100) << metric_name(m) << " p " << p.x << "," << p.y;
+        }
+    }
+}
+
+TEST(Candidates, MatchBruteForceOnRandomChains)
+{
+    std::mt19937 rng(11);
+    for (Metric m : {Metric::l2, Metric::l1, Metric::linf}) {
+        for (int trial = 0; trial < 200; ++trial) {
+            Pts pts;
+            GridPoint p{0, 0};
+            std::uniform_int_distribution<int> step(-60, 100);
+            for (int i = 0; i < 40; ++i) {
+                pts.push_back(p);
+                p = {p.x + step(rng), p.y + step(rng) / 2};
+            }
+            const Tolerance tol(double(50 + trial % 7 * 20), m);
+            const uint32_t reach = trial % 3 == 0 ? 5 : 0;
+            std::vector<Shortcut> want;
+            for (uint32_t j = 0; j < pts.size(); ++j) {
+                for (uint32_t k = j + 2; k < pts.size() && (reach == 0 || k <= j + reach); ++k) {
+                    bool ok = pts[j] != pts[k];
+                    for (uint32_t i = j + 1; ok && i < k; ++i) {
+                        ok = within(pts[i], pts[j], pts[k], tol);
+                    }
+                    if (ok) {
+                        want.push_back({j, k});
+                    }
+                }
+            }
+            const auto got = proximate_shortcuts(pts, tol, reach);
+            ASSERT_EQ(got.size(), want.size()) << metric_name(m) << " trial " << trial;
+            for (size_t i = 0; i < got.size(); ++i) {
+                EXPECT_EQ(got[i].from, want[i].from);
+                EXPECT_EQ(got[i].to, want[i].to);
+            }
+        }
+    }
+}
+
+TEST(Candidates, Figure5NonProximateSegmentInsideTheBandIsNotACandidate)
+{
+    // v1 -> v6 runs along the x axis inside C + B_eps (the legs of the deep
+    // notch are 20 apart), but v3 and v4 are 180 from it.
+    const Pts pts{{0, 0}, {100, 0}, {100, 180}, {120, 180}, {120, 0}, {220, 0}};
+    const auto got = proximate_shortcuts(pts, Tolerance(50, Metric::l2), 0);
+    for (const auto& s : got) {
+        EXPECT_FALSE(s.from <= 1 && s.to >= 4) << s.from << "->" << s.to << " skips the notch";
+    }
+    // ...and the simplified chain keeps the notch.
+    MapBuilder m;
+    m.chain(1, pts);
+    const auto out = run(m.s, 0.5);
+    int max_y = 0;
+    for (const GridPoint q : points_of(out, 1)) {
+        max_y = std::max(max_y, q.y);
+    }
+    EXPECT_EQ(max_y, 180) << "the notch was cut off";
+}
+
+TEST(Simplify, TwoCloseChainsThatDouglasPeuckerMakesCrossDoNot)
+{
+    const Pts a{{0, 0}, {500, 90}, {1000, 0}};
+    const Pts b{{300, -50}, {500, 60}, {700, -50}};
+    MapBuilder m;
+    m.chain(1, a).chain(2, b);
+    ASSERT_EQ(count_intersections({&m.s}), 0U);
+    // Douglas-Peucker at 1 m (100 units) straightens a through b.
+    MapBuilder dp;
+    dp.chain(1, douglas_peucker(a, 100)).chain(2, douglas_peucker(b, 100));
+    EXPECT_EQ(points_of(dp.s, 1).size(), 2U);
+    EXPECT_GT(count_intersections({&dp.s}), 0U);
+
+    ToleranceStats st;
+    const auto out = run(m.s, 1.0, plain(), &st);
+    EXPECT_EQ(points_of(out, 1), a);
+    EXPECT_EQ(points_of(out, 2), b);
+    EXPECT_EQ(count_intersections({&out}), 0U);
+    EXPECT_EQ(st.banned_exact, 0U) << "the exact net must not be what saves it";
+    EXPECT_GE(st.banned_raster + st.banned_points, 1U);
+}
+
+TEST(Raster, ShortcutThroughANeighboursRegionFailsAndOriginalEdgesPass)
+{
+    const Pts a{{0, 0}, {500, 90}, {1000, 0}};
+    const Pts b{{300, -50}, {500, 60}, {700, -50}};
+    const TentChain tents[] = {{a, 100, 1}, {b, 100, 2}};
+    TileSpec tile;
+    tile.x0 = -200;
+    tile.y0 = -300;
+    tile.pixel = 25;
+    tile.width = tile.height = 64;
+    const TestSegment segs[] = {{a[0], a[2], 1, 0},  // a's shortcut across b
+                                {a[0], a[1], 1, 1},  // a's own edges
+                                {a[1], a[2], 1, 2},
+                                {b[1], b[2], 2, 3},  // b's own edge
+                                {a[0], a[2], 2, 4}}; // a's shortcut drawn as if it were b's: fails in a's region
+    for (Compliance mode : {Compliance::ssbo, Compliance::readback}) {
+        std::vector<uint8_t> fails(5, 0);
+        raster(mode).run_tile(tile, tents, segs, fails);
+        EXPECT_EQ(fails, (std::vector<uint8_t>{1, 0, 0, 0, 1})) << (mode == Compliance::ssbo ? "ssbo" : "readback");
+    }
+}
+
+TEST(Simplify, IslandInABayIsNotJumped)
+{
+    // A bay 200 wide and 150 deep; an island ring inside it.
+    const Pts coast{{0, 0}, {400, 0}, {400, -150}, {600, -150}, {600, 0}, {1000, 0}};
+    const Pts island{{480, -100}, {520, -100}, {520, -60}, {480, -60}, {480, -100}};
+    MapBuilder m;
+    m.chain(1, coast, "land", "sea").chain(2, island, "isle", "sea");
+    const auto out = run(m.s, 2.0); // 200 units: the bay mouth is proximate
+    const auto c = points_of(out, 1);
+    // The island's points stay on the sea side: inside the polygon the coast
+    // makes with its own mouth.
+    Pts ring = c;
+    ring.push_back(c.front());
+    for (const GridPoint p : island) {
+        PointInPolygon pip(p);
+        for (size_t i = 0; i + 1 < ring.size(); ++i) {
+            pip.add_segment(ring[i], ring[i + 1]);
+        }
+        PointInPolygon orig(p);
+        Pts o = coast;
+        o.push_back(coast.front());
+        for (size_t i = 0; i + 1 < o.size(); ++i) {
+            orig.add_segment(o[i], o[i + 1]);
+        }
+        EXPECT_EQ(pip.location(), orig.location()) << "island vertex " << p.x << "," << p.y;
+    }
+    EXPECT_EQ(count_intersections({&out}), 0U);
+}
+
+TEST(Simplify, PointConstraintKeepsItsSideAndIsLostWithoutConstraints)
+{
+    const Pts a{{0, 0}, {500, 80}, {1000, 0}};
+    MapBuilder m;
+    m.chain(1, a, "north", "south").point("south", {500, 40});
+    ToleranceStats st;
+    const auto kept = run(m.s, 1.0, plain(), &st);
+    EXPECT_EQ(points_of(kept, 1), a);
+    EXPECT_EQ(st.banned_points, 1U);
+    SimplifyOptions off = plain();
+    off.point_constraints = false;
+    const auto lost = run(m.s, 1.0, off);
+    EXPECT_EQ(points_of(lost, 1), (Pts{{0, 0}, {1000, 0}}));
+}
+
+TEST(Simplify, UserPointsConstrainLikeInternalPoints)
+{
+    const Pts a{{0, 0}, {500, 80}, {1000, 0}};
+    MapBuilder m;
+    m.chain(1, a);
+    // The store's projection is CONUS Albers; put a user point at grid (500, 40).
+    const Projection proj(m.s.projection);
+    LonLat ll;
+    proj.to_lonlat(500, 40, ll.lon, ll.lat);
+    SimplifyOptions o = plain();
+    o.user_points = {ll};
+    ASSERT_EQ(proj.to_grid(ll.lon, ll.lat), (GridPoint{500, 40}));
+    EXPECT_EQ(points_of(run(m.s, 1.0, o), 1), a);
+    EXPECT_EQ(points_of(run(m.s, 1.0), 1).size(), 2U);
+}
+
+TEST(Simplify, ShortestPathThatSelfIntersectsIsRepaired)
+{
+    // The only proximate shortcut at 2 m, 2 -> 4, crosses the chain's first edge.
+    const Pts c{{900, 400}, {200, 0}, {800, 0}, {900, 300}, {900, 700}, {200, 900}};
+    MapBuilder m;
+    m.chain(1, c);
+    const auto cand = proximate_shortcuts(c, Tolerance(200, Metric::l2), 0);
+    ASSERT_EQ(cand.size(), 1U);
+    EXPECT_EQ(cand[0].from, 2U);
+    EXPECT_EQ(cand[0].to, 4U);
+    ToleranceStats st;
+    const auto out = run(m.s, 2.0, plain(), &st);
+    EXPECT_EQ(points_of(out, 1), c);
+    EXPECT_EQ(st.self_intersection_repairs, 1U);
+    EXPECT_EQ(st.banned_exact, 1U);
+}
+
+TEST(Simplify, LensOfTwoChainsBetweenTheSameJunctionsDoesNotCollapse)
+{
+    const Pts a{{0, 0}, {500, 50}, {1000, 0}};
+    const Pts b{{0, 0}, {500, -50}, {1000, 0}};
+    MapBuilder m;
+    m.chain(1, a, "in", "out").chain(2, b, "out", "in");
+    const auto out = run(m.s, 1.0);
+    EXPECT_LE(points_of(out, 1).size() + points_of(out, 2).size(), 6U);
+    EXPECT_GE(points_of(out, 1).size() + points_of(out, 2).size(), 5U) << "both collapsed onto one line";
+    EXPECT_EQ(count_intersections({&out}), 0U);
+}
+
+TEST(Simplify, RingKeepsThreeVerticesAndItsOrientation)
+{
+    const Pts ring{{0, 0}, {100, 0}, {200, 5}, {300, 0}, {300, 100}, {0, 100}, {0, 0}};
+    MapBuilder m;
+    m.chain(1, ring);
+    const auto out = run(m.s, 64.0); // eps far larger than the ring
+    const auto p = points_of(out, 1);
+    ASSERT_GE(p.size(), 4U);
+    EXPECT_EQ(p.front(), p.back());
+    int128 area = 0;
+    for (size_t i = 0; i + 1 < p.size(); ++i) {
+        area += int128{p[i].x} * p[i + 1].y - int128{p[i + 1].x} * p[i].y;
+    }
+    EXPECT_GT(area, 0) << "counter-clockwise ring must stay counter-clockwise";
+}
+
+TEST(Simplify, PerChainEpsByFeatureClass)
+{
+    const Pts a{{0, 0}, {500, 60}, {1000, 0}};
+    const Pts b{{0, 5000}, {500, 5060}, {1000, 5000}};
+    MapBuilder m;
+    m.chain(1, a, "x", "y", "road").chain(2, b, "x", "y", "river");
+    SimplifyOptions o = plain();
+    o.class_scale["river"] = 0.5; // 50 units: the 60 bump stays
+    const auto out = run(m.s, 1.0, o);
+    EXPECT_EQ(points_of(out, 1).size(), 2U);
+    EXPECT_EQ(points_of(out, 2), b);
+}
+
+TEST(Simplify, MetricsDifferWhereTheyShould)
+{
+    // Vertex (500 + d, 500 - d) off the diagonal: L2 distance d*sqrt2, L1 2d, Linf d.
+    const Pts d60{{0, 0}, {560, 440}, {1000, 1000}};
+    const Pts d80{{0, 0}, {580, 420}, {1000, 1000}};
+    auto size_at = [](const Pts& p, Metric m) {
+        MapBuilder b;
+        b.chain(1, p);
+        return points_of(run(b.s, 1.0, plain(m)), 1).size();
+    };
+    EXPECT_EQ(size_at(d60, Metric::l2), 2U);
+    EXPECT_EQ(size_at(d60, Metric::l1), 3U);
+    EXPECT_EQ(size_at(d60, Metric::linf), 2U);
+    EXPECT_EQ(size_at(d80, Metric::l2), 3U);
+    EXPECT_EQ(size_at(d80, Metric::linf), 2U);
+}
+
+namespace {
+
+/// A small dense map: a grid of wiggly chains.
+ChainStore wiggly_map()
+{
+    MapBuilder m;
+    uint64_t id = 1;
+    for (int row = 0; row < 6; ++row) {
+        Pts p;
+        for (int i = 0; i <= 40; ++i) {
+            p.push_back({i * 50, row * 120 + ((i * 37 + row * 11) % 7) * 9 - (i % 3) * 7});
+        }
+        m.chain(id++, p);
+    }
+    return m.s;
+}
+
+} // namespace
+
+TEST(Simplify, ReadbackAndStorageBufferAgree)
+{
+    const auto map = wiggly_map();
+    for (double eps : {0.3, 0.6, 1.2}) {
+        ToleranceStats a, b;
+        const auto ssbo = run(map, eps, plain(), &a, Compliance::ssbo);
+        const auto readback = run(map, eps, plain(), &b, Compliance::readback);
+        EXPECT_EQ(chains::to_text(ssbo), chains::to_text(readback)) << "eps " << eps;
+        EXPECT_EQ(a.banned_raster, b.banned_raster) << "eps " << eps;
+        EXPECT_EQ(count_intersections({&ssbo}), 0U);
+    }
+}
+
+TEST(Simplify, LazyEqualsExhaustive)
+{
+    const auto map = wiggly_map();
+    for (double eps : {0.3, 0.6, 1.2}) {
+        SimplifyOptions lazy = plain();
+        lazy.lazy = true;
+        ToleranceStats a, b;
+        const auto all = run(map, eps, plain(), &a);
+        const auto some = run(map, eps, lazy, &b);
+        EXPECT_EQ(chains::to_text(all), chains::to_text(some)) << "eps " << eps;
+        EXPECT_EQ(a.output_vertices, b.output_vertices);
+        EXPECT_LE(b.drawn_segments, a.drawn_segments);
+    }
+}
+
+TEST(Color, DsaturColoursAnOddCycleWithThreeAndFailsWithTwo)
+{
+    const std::vector<std::vector<uint32_t>> c5{{1, 4}, {0, 2}, {1, 3}, {2, 4}, {0, 3}};
+    std::vector<uint8_t> colors;
+    ASSERT_TRUE(dsatur(c5, 3, colors));
+    for (uint32_t v = 0; v < 5; ++v) {
+        for (uint32_t u : c5[v]) {
+            EXPECT_NE(colors[v], colors[u]);
+        }
+        EXPECT_GE(colors[v], 1);
+        EXPECT_LE(colors[v], 3);
+    }
+    EXPECT_FALSE(dsatur(c5, 2, colors));
+}
+
+TEST(Color, ConflictingChainsGetDifferentClassesAndTilesSplitBeforeFailing)
+{
+    // Three chains meeting at one junction conflict pairwise.
+    const Pts a{{0, 0}, {1000, 0}}, b{{0, 0}, {0, 1000}}, c{{0, 0}, {-1000, -1000}};
+    const Pts far{{50000, 50000}, {51000, 50000}};
+    std::vector<ChainGeom> g{{a, 100, true}, {b, 100, true}, {c, 100, true}, {far, 100, true}};
+    ColorOptions o;
+    o.tile_pixels = 256;
+    const auto r = color_tiles(g, o, 1);
+    EXPECT_EQ(r.conflict_edges, 3U);
+    for (const auto& t : r.tiles) {
+        std::map<uint32_t, uint8_t> cls;
+        for (size_t i = 0; i < t.chains.size(); ++i) {
+            cls[t.chains[i]] = t.classes[i];
+        }
+        if (cls.count(0) && cls.count(1)) {
+            EXPECT_NE(cls[0], cls[1]);
+        }
+        if (cls.count(1) && cls.count(2)) {
+            EXPECT_NE(cls[1], cls[2]);
+        }
+    }
+    // Two classes cannot separate them near the junction: tiles split down to
+    // the smallest size, then a clear error naming the place.
+    o.max_classes = 2;
+    try {
+        color_tiles(g, o, 1);
+        ADD_FAILURE() << "expected input_error";
+    } catch (const input_error& e) {
+        EXPECT_NE(std::string(e.what()).find("needs more than 2 stencil classes"), std::string::npos) << e.what();
+    }
+}
