@@ -1,0 +1,167 @@
+// Floyd County (../shared/data, skipped with a reason when absent) simplified
+// at 1, 4, 16 and 64 m and checked exactly: no crossings or self-intersections
+// anywhere in each level (partitions together), every original vertex within
+// eps of the simplified chain, every internal point strictly inside its unit.
+#include "core/segment_grid.hpp"
+#include "gl/context.hpp"
+#include "stages/ingest/config.hpp"
+#include "stages/ingest/map_builder.hpp"
+#include "stages/ingest/sources.hpp"
+#include "stages/simplify/simplifier.hpp"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <map>
+#include <mutex>
+
+namespace fs = std::filesystem;
+using namespace tigerlod;
+using namespace tigerlod::simplify;
+using chains::ChainStore;
+
+namespace {
+
+const fs::path source_dir = TIGERLOD_SOURCE_DIR;
+const fs::path shared_data = source_dir.parent_path() / "shared" / "data";
+
+std::vector<ChainStore> ingest_floyd()
+{
+    const auto cfg = ingest::load_config(source_dir / "configs" / "floyd.yaml");
+    Log log;
+    auto raw = ingest::read_dataset(cfg, 2, log);
+    ingest::BuildOptions o;
+    o.halo_m = cfg.halo_m;
+    o.threads = 2;
+    std::vector<ChainStore> stores;
+    std::mutex m;
+    ingest::build_map(std::move(raw), Projection(cfg.projection), o, [&](const ChainStore& s) {
+        std::lock_guard lock(m);
+        stores.push_back(s);
+    });
+    std::sort(stores.begin(), stores.end(), [](const auto& a, const auto& b) {
+        return std::tie(a.level_index, a.partition) < std::tie(b.level_index, b.partition);
+    });
+    return stores;
+}
+
+/// Every simplified chain against its original: a subsequence with the same
+/// ends, each skipped vertex within eps of the segment that replaced it.
+size_t eps_violations(const ChainStore& orig, const ChainStore& simp, const SimplifyOptions& opt, double eps_m)
+{
+    const auto eps = chain_tolerances(orig, eps_m, opt);
+    std::map<uint64_t, size_t> index;
+    for (size_t i = 0; i < orig.chains.size(); ++i) {
+        index[orig.chains[i].id] = i;
+    }
+    size_t bad = 0;
+    for (const auto& c : simp.chains) {
+        const size_t oi = index.at(c.id);
+        const auto o = orig.chain_points(orig.chains[oi]);
+        const auto s = simp.chain_points(c);
+        const Tolerance tol(eps[oi], opt.metric);
+        size_t k = 0; // position in o of s[j]
+        if (s.front() != o.front() || s.back() != o.back()) {
+            ++bad;
+            continue;
+        }
+        for (size_t j = 1; j < s.size(); ++j) {
+            size_t next = k + 1;
+            while (next < o.size() && o[next] != s[j]) {
+                ++next;
+            }
+            if (next == o.size()) {
+                ++bad; // not a subsequence
+                break;
+            }
+            for (size_t i = k + 1; i < next; ++i) {
+                bad += !within(o[i], s[j - 1], s[j], tol);
+            }
+            k = next;
+        }
+    }
+    return bad;
+}
+
+} // namespace
+
+TEST(SimplifyReal, FloydAtFourTolerancesIsExactlyValid)
+{
+    if (!fs::exists(shared_data / "tiger" / "tl_2020_51063_edges.zip")) {
+        GTEST_SKIP() << "../shared/data/tiger is absent: Floyd County tests need it";
+    }
+    const auto stores = ingest_floyd();
+    auto ctx = gl::Context::create(gl::Backend::osmesa);
+    RasterOptions ro;
+    Raster raster(*ctx, ro);
+    SimplifyOptions opt;
+    opt.threads = 2;
+    for (const double eps_m : {1.0, 4.0, 16.0, 64.0}) {
+        std::map<uint32_t, ChainStore> level_maps; // all partitions of a level together
+        size_t in_vertices = 0, out_vertices = 0, violations = 0;
+        for (const auto& store : stores) {
+            ToleranceStats st;
+            const auto simp = simplify_store(store, eps_m, opt, raster, nullptr, st);
+            in_vertices += st.input_vertices;
+            out_vertices += st.output_vertices;
+            violations += eps_violations(store, simp, opt, eps_m);
+            EXPECT_EQ(st.input_conflicts, 0U) << store.level_name << "/" << store.partition;
+            auto& m = level_maps[store.level_index];
+            m.projection = store.projection;
+            for (const auto& c : simp.chains) {
+                chains::ChainInfo info = c;
+                info.left = m.intern(simp.strings[c.left]);
+                info.right = m.intern(simp.strings[c.right]);
+                info.feature_class = m.intern(simp.strings[c.feature_class]);
+                m.add_chain(info, simp.chain_points(c));
+            }
+            for (const auto& p : store.constraints) {
+                m.constraints.push_back({m.intern(store.strings[p.unit]), p.kind, p.p});
+            }
+        }
+        EXPECT_EQ(violations, 0U) << "eps " << eps_m;
+        EXPECT_LT(out_vertices, in_vertices);
+        for (const auto& [level, m] : level_maps) {
+            std::vector<Segment> segs;
+            for (const auto& c : m.chains) {
+                const auto p = m.chain_points(c);
+                for (size_t i = 0; i + 1 < p.size(); ++i) {
+                    segs.push_back({p[i], p[i + 1], uint32_t(segs.size())});
+                }
+            }
+            EXPECT_EQ(find_intersections(segs, 2).size(), 0U) << "level " << level << " eps " << eps_m;
+            size_t outside = 0;
+            for (const auto& p : m.constraints) {
+                outside += unit_location(m, p.unit, p.p) != PointLocation::inside;
+            }
+            EXPECT_EQ(outside, 0U) << "level " << level << " eps " << eps_m << ": internal points not inside";
+        }
+    }
+}
+
+TEST(SimplifyReal, FloydIsByteIdenticalAcrossThreadCountsAndModes)
+{
+    if (!fs::exists(shared_data / "tiger" / "tl_2020_51063_edges.zip")) {
+        GTEST_SKIP() << "../shared/data/tiger is absent: Floyd County tests need it";
+    }
+    const auto stores = ingest_floyd();
+    auto ctx = gl::Context::create(gl::Backend::osmesa);
+    Raster raster(*ctx, RasterOptions{});
+    auto all = [&](unsigned threads, bool lazy) {
+        SimplifyOptions opt;
+        opt.threads = threads;
+        opt.lazy = lazy;
+        std::string bytes;
+        for (const auto& s : stores) {
+            if (s.level_name != "tract" && s.level_name != "block_group") {
+                continue;
+            }
+            ToleranceStats st;
+            bytes += chains::encode(simplify_store(s, 16.0, opt, raster, nullptr, st));
+        }
+        return bytes;
+    };
+    const std::string one = all(1, false);
+    EXPECT_EQ(one, all(2, false));
+    EXPECT_EQ(one, all(2, true));
+}
