@@ -106,7 +106,13 @@ IngestConfig load_config(const fs::path& file)
         throw config_error(file.string() + ": cannot read: " + e.what());
     }
     Ctx ctx(file);
-    ctx.check_keys(root, "", {"name", "description", "dataset", "levels", "projection", "ingest"});
+    ctx.check_keys(root, "", {"name", "description", "dataset", "levels", "projection", "ingest", "simplify"});
+    if (const YAML::Node simp = root["simplify"]) { // read by the pipeline; the stages validate the values
+        ctx.check_keys(simp, "simplify",
+                       {"tolerances_m", "metric", "class_scale", "projection_scale", "max_reach", "point_constraints",
+                        "points", "lazy", "compliance", "gl", "pixel_fraction", "tile_pixels", "max_classes",
+                        "threads"});
+    }
     cfg.name = ctx.get<std::string>(root, "name", "");
     if (cfg.name.empty() || cfg.name.find_first_not_of("abcdefghijklmnopqrstuvwxyz0123456789_-") != std::string::npos) {
         ctx.fail(root["name"], "'name' is required: lowercase letters, digits, '_' and '-'");

@@ -203,8 +203,21 @@ int SimplifyStage::run(const StageContext& ctx)
 
     const auto t_start = std::chrono::steady_clock::now();
     std::vector<ToleranceStats> totals(m_common.tolerances.size());
+    double max_scale = 1.0;
+    for (const auto& [cls, f] : o.class_scale) {
+        max_scale = std::max(max_scale, f);
+    }
     for (const auto& sf : stores) {
         const auto store = chains::read(sf.path);
+        // Partitions are simplified independently only if each sees every
+        // chain within eps_i + eps_j of its own: its halo must be that wide.
+        const double need = 2 * m_common.tolerances.back() * max_scale * l2_reach(o.metric);
+        if (store.partition != "all" && store.halo_m < need) {
+            throw usage_error(sf.path.string() + ": cut with a halo of " + std::to_string(store.halo_m) +
+                              " m, but tolerance " + std::to_string(m_common.tolerances.back()) + " m needs at least " +
+                              std::to_string(need) + " m so that partitions cannot cross; re-run tigerlod-ingest " +
+                              "with a larger ingest.halo_m (or --halo-m), or lower the tolerances");
+        }
         for (size_t ti = 0; ti < m_common.tolerances.size(); ++ti) {
             const double eps_m = m_common.tolerances[ti];
             ColorResult given;
