@@ -181,7 +181,7 @@ class Cli : public ::testing::Test {
 
 TEST_F(Cli, HelpAndVersion)
 {
-    for (const char* tool : {"ingest", "dump"}) {
+    for (const char* tool : {"ingest", "dump", "color", "simplify"}) {
         const Result h = run(tool, "--help");
         EXPECT_EQ(h.code, 0);
         EXPECT_NE(h.out.find("Usage: tigerlod-"), std::string::npos);
@@ -226,7 +226,7 @@ TEST_F(Cli, IngestSucceedsQuietlyAndDeterministically)
     // dump prints a store as sorted text.
     const Result d = run("dump", (m_dir / "out" / "tract" / "51063.tlc").string());
     EXPECT_EQ(d.code, 0);
-    EXPECT_EQ(d.out.rfind("chain-store 1.0\nlevel 2/5 tract\npartition 51063\n", 0), 0U) << d.out;
+    EXPECT_EQ(d.out.rfind("chain-store 1.1\nlevel 2/5 tract\npartition 51063\n", 0), 0U) << d.out;
 }
 
 TEST_F(Cli, MissingInputFile)
@@ -442,4 +442,87 @@ TEST_F(Cli, LineAndPolygonLayersWithMissingFields)
                                          .string() +
                                      " " + out()),
                    1, "geometry type is Line String, a polygons dataset needs polygons");
+}
+
+TEST_F(Cli, ColorAndSimplifyRunTheLadderDeterministically)
+{
+    make_tiger();
+    ASSERT_EQ(run("ingest", tiger_config().string() + " " + (m_dir / "in").string()).code, 0);
+    const std::string in = (m_dir / "in").string(), colors = (m_dir / "colors").string(), simp = (m_dir / "simp").string();
+    const Result c = run("color", in + " " + colors + " --tolerances 1,8");
+    ASSERT_EQ(c.code, 0) << c.err;
+    EXPECT_TRUE(c.err.empty()) << c.err;
+    EXPECT_TRUE(fs::exists(m_dir / "colors" / "color-report.json"));
+    EXPECT_TRUE(fs::exists(m_dir / "colors" / "eps-8m" / "tract" / "51063.colors.json"));
+    const Result s = run("simplify", in + " " + simp + " --tolerances 1,8 --colors " + colors + " --threads 1");
+    ASSERT_EQ(s.code, 0) << s.err;
+    EXPECT_TRUE(s.err.empty()) << s.err;
+    EXPECT_NE(s.out.find("eps 8 m:"), std::string::npos) << s.out;
+    const std::string report = slurp(m_dir / "simp" / "simplify-report.json");
+    for (const char* key : {"\"eps_m\"", "\"input_vertices\"", "\"output_vertices\"", "\"candidates\"",
+                            "\"drawn_segments\"", "\"banned\"", "\"self_intersection_repairs\"", "\"seconds\"",
+                            "\"tiles\""}) {
+        EXPECT_NE(report.find(key), std::string::npos) << key;
+    }
+    // Computing the colours itself, on two threads, gives the same stores.
+    const Result s2 = run("simplify", in + " " + (m_dir / "simp2").string() + " --tolerances 1,8 --threads 2");
+    ASSERT_EQ(s2.code, 0) << s2.err;
+    for (const auto& e : fs::recursive_directory_iterator(m_dir / "simp")) {
+        if (e.is_regular_file() && e.path().extension() == ".tlc") {
+            const auto rel = fs::relative(e.path(), m_dir / "simp");
+            EXPECT_EQ(slurp(e.path()), slurp(m_dir / "simp2" / rel)) << rel;
+        }
+    }
+    const Result d = run("dump", (m_dir / "simp" / "eps-8m" / "block" / "510639202001.tlc").string());
+    EXPECT_EQ(d.code, 0);
+    EXPECT_NE(d.out.find("simplified eps_m=8 metric=0"), std::string::npos) << d.out;
+    // Colours made at other options are refused.
+    expect_failure(run("simplify", in + " " + (m_dir / "simp3").string() + " --tolerances 2 --colors " + colors), 2,
+                   "run tigerlod-color with the same options");
+    EXPECT_FALSE(fs::exists(m_dir / "simp3"));
+}
+
+TEST_F(Cli, ColorAndSimplifyRejectBadInput)
+{
+    make_tiger();
+    ASSERT_EQ(run("ingest", tiger_config().string() + " " + (m_dir / "in").string()).code, 0);
+    const std::string in = (m_dir / "in").string() + " " + (m_dir / "res").string();
+    for (const char* tool : {"color", "simplify"}) {
+        expect_failure(run(tool, in + " --tolerances ''"), 2, "is empty: give at least one tolerance");
+        expect_failure(run(tool, in + " --tolerances 4,2"), 2, "must increase: 2 follows");
+        expect_failure(run(tool, in + " --tolerances 0,2"), 2, "every tolerance must be > 0");
+        expect_failure(run(tool, in + " --tolerances -1"), 2, "every tolerance must be > 0");
+        expect_failure(run(tool, in + " --tolerances 1,x"), 2, "has 'x', not a number");
+        expect_failure(run(tool, in + " --metric l3"), 2, "must be l2, l1 or linf");
+        expect_failure(run(tool, in + " --class-scale S1400"), 2, "expected CLASS=FACTOR");
+        expect_failure(run(tool, (m_dir / "nothing").string() + " " + (m_dir / "res").string()), 2, "not a folder");
+        // Three chains meet at every junction: two classes cannot separate them.
+        expect_failure(run(tool, in + " --max-classes 2"), 1, "needs more than 2 stencil classes");
+        EXPECT_FALSE(fs::exists(m_dir / "res"));
+    }
+    expect_failure(run("simplify", in + " --compliance occlusion"), 2, "must be ssbo or readback");
+    expect_failure(run("simplify", in + " --gl glx"), 2, "must be osmesa or egl");
+    expect_failure(run("simplify", in + " --tolerances 800"), 2, "needs at least 1600");
+    std::ofstream(m_dir / "points.csv") << "name,lon,lat\na,-95.99,40.001\nb,-95.99,north\n";
+    expect_failure(run("simplify", in + " --points " + (m_dir / "points.csv").string()), 1,
+                   "points.csv: line 3: lon/lat are not numbers");
+    std::ofstream(m_dir / "points.json") << R"({"type": "FeatureCollection", "features": [)"
+                                          << R"({"type": "Feature", "geometry": {"type": "LineString", "coordinates": []}}]})";
+    expect_failure(run("simplify", in + " --points " + (m_dir / "points.json").string()), 1,
+                   "points.json: feature 0: geometry type LineString, expected Point or MultiPoint");
+    EXPECT_FALSE(fs::exists(m_dir / "res"));
+
+    // A store of another major version, and a corrupt one.
+    const fs::path store = m_dir / "in" / "tract" / "51063.tlc";
+    std::string bytes = slurp(store);
+    std::string v2 = bytes;
+    v2[8] = 2;
+    std::ofstream(store, std::ios::binary) << v2;
+    expect_failure(run("simplify", in), 1, "51063.tlc: unsupported major version 2 (reads 1)");
+    std::string corrupt = bytes;
+    corrupt[corrupt.size() / 2] ^= 0x10;
+    std::ofstream(store, std::ios::binary) << corrupt;
+    expect_failure(run("color", in), 1, "51063.tlc: checksum mismatch (corrupt file)");
+    expect_failure(run("simplify", in), 1, "51063.tlc: checksum mismatch (corrupt file)");
+    EXPECT_FALSE(fs::exists(m_dir / "res"));
 }
