@@ -27,5 +27,6 @@ function(tigerlod_add_test name)
     ${name} PRIVATE TIGERLOD_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
                     TIGERLOD_BIN_DIR="${CMAKE_RUNTIME_OUTPUT_DIRECTORY}")
   tigerlod_warnings(${name})
-  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES TIMEOUT 900)
+  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES TIMEOUT 900 ENVIRONMENT
+                       "LSAN_OPTIONS=suppressions=${PROJECT_SOURCE_DIR}/tests/lsan.supp:print_suppressions=0")
 endfunction()
