@@ -77,12 +77,29 @@ std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> cha
     std::vector<std::pair<uint64_t, uint32_t>> entries;
     for (uint32_t i = 0; i < segs.size(); ++i) {
         const Seg& s = segs[i];
-        const auto x0 = static_cast<int64_t>(std::floor((std::min(s.ax, s.bx) - s.r) / cell));
-        const auto x1 = static_cast<int64_t>(std::floor((std::max(s.ax, s.bx) + s.r) / cell));
+        // The cells the segment's r-neighbourhood touches, row by row: the
+        // part of the segment within the row's band widened by r, widened by r.
         const auto y0 = static_cast<int64_t>(std::floor((std::min(s.ay, s.by) - s.r) / cell));
         const auto y1 = static_cast<int64_t>(std::floor((std::max(s.ay, s.by) + s.r) / cell));
-        for (int64_t x = x0; x <= x1; ++x) {
-            for (int64_t y = y0; y <= y1; ++y) {
+        for (int64_t y = y0; y <= y1; ++y) {
+            const double lo = double(y) * cell - s.r, hi = double(y + 1) * cell + s.r;
+            double t0 = 0, t1 = 1;
+            const double dy = s.by - s.ay;
+            if (dy != 0) {
+                double ta = (lo - s.ay) / dy, tb = (hi - s.ay) / dy;
+                if (ta > tb) {
+                    std::swap(ta, tb);
+                }
+                t0 = std::max(t0, ta);
+                t1 = std::min(t1, tb);
+            }
+            if (t0 > t1) {
+                t0 = t1 = std::clamp(t0, 0.0, 1.0); // rounding at a band's edge: keep one point
+            }
+            const double xa = s.ax + t0 * (s.bx - s.ax), xb = s.ax + t1 * (s.bx - s.ax);
+            const auto x0 = static_cast<int64_t>(std::floor((std::min(xa, xb) - s.r) / cell));
+            const auto x1 = static_cast<int64_t>(std::floor((std::max(xa, xb) + s.r) / cell));
+            for (int64_t x = x0; x <= x1; ++x) {
                 const uint64_t key =
                     (static_cast<uint64_t>(x + (1LL << 31)) << 32) | static_cast<uint32_t>(y + (1LL << 31));
                 entries.emplace_back(key, i);

@@ -25,7 +25,7 @@ struct RasterOptions {
     Metric metric = Metric::l2;
     Compliance compliance = Compliance::ssbo;
     uint32_t max_tile_pixels = 4096; ///< framebuffer size
-    double margin_px = 1.0;          ///< tents' quads reach this far beyond eps (pixels); the reset pass covers the same quads
+    double margin_px = 1.0; ///< tents' quads reach this far beyond eps (pixels); the reset pass covers the same quads
     double endpoint_margin_px = 1.5; ///< fragments this close to a shortcut's ends are not tested
 };
 

@@ -82,8 +82,7 @@ struct Work {
     std::vector<uint8_t> state;
     std::vector<uint32_t> path;      ///< vertex indices
     std::vector<uint32_t> path_cand; ///< candidate index of each path edge, UINT32_MAX for an original edge
-    bool dirty = true;          ///< path must be recomputed
-    bool failed_before = false; ///< a shortcut on its path failed the raster test
+    bool dirty = true;               ///< path must be recomputed
 };
 
 int128 signed_area2(std::span<const GridPoint> pts, const std::vector<uint32_t>& idx)
@@ -434,28 +433,25 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
                 }
             });
             st.seconds_shortest_path += since(t0);
-            // A chain whose path failed before has all its untested shortcuts
-            // tested at once: the result is the same (the path is the
-            // smallest shortest path over the shortcuts that pass, whatever
-            // was tested), and the number of rounds, each a redraw of the
-            // Voronoi diagram of the tiles involved, stays small.
+            // Lazy: test every untested shortcut that starts at a vertex of
+            // the current path (the path's own among them). A path of P
+            // vertices over shortcuts reaching w ahead costs about P * w = n
+            // segments, not the n * w of testing every candidate, and the
+            // alternatives a failure needs are mostly tested already, so the
+            // rounds (each a redraw of the tiles involved) stay few. The
+            // result is the same as testing all: the path is the smallest
+            // shortest path over the shortcuts that pass, whatever was tested.
             std::vector<std::pair<uint32_t, uint32_t>> tests;
             for (uint32_t wi = 0; wi < work.size(); ++wi) {
                 Work& w = work[wi];
                 if (!w.dirty) {
                     continue;
                 }
-                if (w.failed_before) {
-                    for (uint32_t c = 0; c < w.cand.size(); ++c) {
+                for (const uint32_t v : w.path) {
+                    for (uint32_t c = w.first[v]; c < w.first[v + 1]; ++c) {
                         if (w.state[c] == unknown) {
                             tests.emplace_back(wi, c);
                         }
-                    }
-                    continue;
-                }
-                for (const uint32_t c : w.path_cand) {
-                    if (c != UINT32_MAX && w.state[c] == unknown) {
-                        tests.emplace_back(wi, c);
                     }
                 }
             }
@@ -473,7 +469,6 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             }
             for (uint32_t wi = 0; wi < work.size(); ++wi) {
                 work[wi].dirty = failed[wi] != 0;
-                work[wi].failed_before |= work[wi].dirty;
             }
         }
 

@@ -28,10 +28,9 @@ void SimplifyStage::add_args(ArgSet& args)
     args.add("no-point-constraints", &m_no_point_constraints,
              "do not keep the units' internal points and user points on their side");
     args.add("points", &m_points, "user point constraints: GeoJSON points or CSV with lon,lat columns", "FILE");
-    args.add("lazy", &m_lazy,
-             "draw only the shortcuts on shortest paths, then all shortcuts of the chains whose path\n"
-             "      failed (same result as the default of testing every proximate shortcut, fewer segments\n"
-             "      drawn, but the Voronoi diagram is drawn once per round: slower on llvmpipe)");
+    args.add("exhaustive", &m_exhaustive,
+             "draw every proximate shortcut on the raster; by default only those starting at a vertex\n"
+             "      of the current shortest path are drawn, round after round (same result, fewer segments)");
     args.add("compliance", &m_compliance,
              "ssbo: one pass setting a flag per shortcut in a storage buffer; readback: the paper's\n"
              "      unique-colour read-back loop (Algorithm 5.1)",
@@ -56,7 +55,7 @@ void SimplifyStage::initialize()
     auto& o = m_common.options;
     o.max_reach = static_cast<uint32_t>(m_max_reach);
     o.point_constraints = !m_no_point_constraints;
-    o.lazy = m_lazy;
+    o.lazy = !m_exhaustive;
 }
 
 std::string SimplifyStage::help_notes() const

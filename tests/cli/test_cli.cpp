@@ -448,7 +448,8 @@ TEST_F(Cli, ColorAndSimplifyRunTheLadderDeterministically)
 {
     make_tiger();
     ASSERT_EQ(run("ingest", tiger_config().string() + " " + (m_dir / "in").string()).code, 0);
-    const std::string in = (m_dir / "in").string(), colors = (m_dir / "colors").string(), simp = (m_dir / "simp").string();
+    const std::string in = (m_dir / "in").string(), colors = (m_dir / "colors").string(),
+                      simp = (m_dir / "simp").string();
     const Result c = run("color", in + " " + colors + " --tolerances 1,8");
     ASSERT_EQ(c.code, 0) << c.err;
     EXPECT_TRUE(c.err.empty()) << c.err;
@@ -459,9 +460,9 @@ TEST_F(Cli, ColorAndSimplifyRunTheLadderDeterministically)
     EXPECT_TRUE(s.err.empty()) << s.err;
     EXPECT_NE(s.out.find("eps 8 m:"), std::string::npos) << s.out;
     const std::string report = slurp(m_dir / "simp" / "simplify-report.json");
-    for (const char* key : {"\"eps_m\"", "\"input_vertices\"", "\"output_vertices\"", "\"candidates\"",
-                            "\"drawn_segments\"", "\"banned\"", "\"self_intersection_repairs\"", "\"seconds\"",
-                            "\"tiles\""}) {
+    for (const char* key :
+         {"\"eps_m\"", "\"input_vertices\"", "\"output_vertices\"", "\"candidates\"", "\"drawn_segments\"",
+          "\"banned\"", "\"self_intersection_repairs\"", "\"seconds\"", "\"tiles\""}) {
         EXPECT_NE(report.find(key), std::string::npos) << key;
     }
     // Computing the colours itself, on two threads, gives the same stores.
@@ -506,8 +507,9 @@ TEST_F(Cli, ColorAndSimplifyRejectBadInput)
     std::ofstream(m_dir / "points.csv") << "name,lon,lat\na,-95.99,40.001\nb,-95.99,north\n";
     expect_failure(run("simplify", in + " --points " + (m_dir / "points.csv").string()), 1,
                    "points.csv: line 3: lon/lat are not numbers");
-    std::ofstream(m_dir / "points.json") << R"({"type": "FeatureCollection", "features": [)"
-                                          << R"({"type": "Feature", "geometry": {"type": "LineString", "coordinates": []}}]})";
+    std::ofstream(m_dir / "points.json")
+        << R"({"type": "FeatureCollection", "features": [)"
+        << R"({"type": "Feature", "geometry": {"type": "LineString", "coordinates": []}}]})";
     expect_failure(run("simplify", in + " --points " + (m_dir / "points.json").string()), 1,
                    "points.json: feature 0: geometry type LineString, expected Point or MultiPoint");
     EXPECT_FALSE(fs::exists(m_dir / "res"));

@@ -70,6 +70,7 @@ SimplifyOptions plain(Metric m = Metric::l2)
     o.projection_scale = false; // eps_m / 0.01 grid units exactly
     o.color.tile_pixels = 1024;
     o.color.metric = m;
+    o.lazy = false; // every candidate tested; LazyEqualsExhaustive compares
     return o;
 }
 
@@ -262,8 +263,8 @@ TEST(Raster, ShortcutThroughANeighboursRegionFailsAndOriginalEdgesPass)
     tile.y0 = -300;
     tile.pixel = 25;
     tile.width = tile.height = 64;
-    const TestSegment segs[] = {{a[0], a[2], 1, 0},  // a's shortcut across b
-                                {a[0], a[1], 1, 1},  // a's own edges
+    const TestSegment segs[] = {{a[0], a[2], 1, 0}, // a's shortcut across b
+                                {a[0], a[1], 1, 1}, // a's own edges
                                 {a[1], a[2], 1, 2},
                                 {b[1], b[2], 2, 3},  // b's own edge
                                 {a[0], a[2], 2, 4}}; // a's shortcut drawn as if it were b's: fails in a's region
