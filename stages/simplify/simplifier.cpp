@@ -69,6 +69,9 @@ template <class F> void parallel_for(size_t n, unsigned threads, F&& fn)
     }
 }
 
+/// Lazy rounds per chain before its remaining shortcuts are tested at once.
+constexpr uint32_t lazy_rounds = 3;
+
 enum State : uint8_t { unknown = 0, good = 1, bad_raster = 2, bad_exact = 3 };
 
 /// Per owned chain.
@@ -82,6 +85,7 @@ struct Work {
     std::vector<uint8_t> state;
     std::vector<uint32_t> path;      ///< vertex indices
     std::vector<uint32_t> path_cand; ///< candidate index of each path edge, UINT32_MAX for an original edge
+    uint32_t rounds = 0;             ///< lazy rounds that tested this chain
     bool dirty = true;               ///< path must be recomputed
 };
 
@@ -445,6 +449,16 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             for (uint32_t wi = 0; wi < work.size(); ++wi) {
                 Work& w = work[wi];
                 if (!w.dirty) {
+                    continue;
+                }
+                if (++w.rounds > lazy_rounds) {
+                    // Still failing after a few rounds: test the rest at once
+                    // rather than pay a redraw of its tiles per round.
+                    for (uint32_t c = 0; c < w.cand.size(); ++c) {
+                        if (w.state[c] == unknown) {
+                            tests.emplace_back(wi, c);
+                        }
+                    }
                     continue;
                 }
                 for (const uint32_t v : w.path) {
