@@ -421,7 +421,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
             for (size_t i = 0; i < pixels.size(); i += 4) {
                 const uint32_t c =
                     uint32_t(pixels[i]) | (uint32_t(pixels[i + 1]) << 8) | (uint32_t(pixels[i + 2]) << 16);
-                if (c != 0 && !removed[c - 1]) {
+                if (c != 0 && c <= removed.size() && !removed[c - 1]) {
                     removed[c - 1] = 1;
                     changed = true;
                 }

@@ -552,9 +552,6 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     out.eps_m = eps_m;
     out.metric = static_cast<uint8_t>(opt.metric);
     out.strings = store.strings;
-    for (const auto& s : store.strings) {
-        out.intern(s);
-    }
     out.junctions = store.junctions;
     out.constraints = store.constraints;
     std::vector<GridPoint> buf;
