@@ -224,6 +224,13 @@ struct Tiler {
 
 } // namespace
 
+double segment_distance(GridPoint a, GridPoint b, GridPoint c, GridPoint d) noexcept
+{
+    const Seg s{double(a.x), double(a.y), double(b.x), double(b.y), 0, 0};
+    const Seg t{double(c.x), double(c.y), double(d.x), double(d.y), 0, 0};
+    return seg_seg_distance(s, t);
+}
+
 bool dsatur(const std::vector<std::vector<uint32_t>>& adj, uint32_t max_colors, std::vector<uint8_t>& colors)
 {
     const auto n = static_cast<uint32_t>(adj.size());

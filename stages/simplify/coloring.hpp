@@ -61,6 +61,9 @@ double reach_radius(double eps, double pixel, const ColorOptions& opt) noexcept;
 /// a tile at min_tile_pixels still needs more classes.
 ColorResult color_tiles(std::span<const ChainGeom> chains, const ColorOptions& opt, unsigned threads);
 
+/// L2 distance between segments ab and cd (0 if they meet), in doubles.
+double segment_distance(GridPoint a, GridPoint b, GridPoint c, GridPoint d) noexcept;
+
 /// DSatur colouring of a graph given as sorted adjacency lists; colours from
 /// 1. Returns false if more than max_colors would be needed.
 bool dsatur(const std::vector<std::vector<uint32_t>>& adj, uint32_t max_colors, std::vector<uint8_t>& colors);

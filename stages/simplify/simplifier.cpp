@@ -21,6 +21,7 @@ void ToleranceStats::add(const ToleranceStats& o)
     output_vertices += o.output_vertices;
     candidates += o.candidates;
     drawn_segments += o.drawn_segments;
+    proved_far += o.proved_far;
     banned_raster += o.banned_raster;
     banned_exact += o.banned_exact;
     banned_points += o.banned_points;
@@ -342,9 +343,98 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         }
     }
 
+    // A shortcut farther from every other chain than that chain's reach
+    // (eps_j in the metric plus the colouring margin) lies in its own
+    // chain's eps-Voronoi region: proximate shortcuts stay within eps_i of
+    // their chain, and no other region comes near. Those skip the raster.
+    const double margin = colors->pixel * opt.color.margin_px;
+    double reach_max = 0;
+    for (const double e : eps) {
+        reach_max = std::max(reach_max, e * l2_reach(opt.metric) + margin);
+    }
+    const double cell = std::max(2 * reach_max, 1.0);
+    struct GridSeg {
+        uint64_t key;
+        uint32_t chain, index;
+    };
+    std::vector<GridSeg> grid;
+    auto cell_of = [&](double v) { return static_cast<int64_t>(std::floor(v / cell)); };
+    auto key_of = [](int64_t x, int64_t y) {
+        return (static_cast<uint64_t>(x + (1LL << 31)) << 32) | static_cast<uint32_t>(y + (1LL << 31));
+    };
+    for (uint32_t c = 0; c < store.chains.size(); ++c) {
+        const auto pts = store.chain_points(store.chains[c]);
+        for (uint32_t i = 0; i + 1 < pts.size(); ++i) {
+            for (int64_t x = cell_of(std::min(pts[i].x, pts[i + 1].x)); x <= cell_of(std::max(pts[i].x, pts[i + 1].x));
+                 ++x) {
+                for (int64_t y = cell_of(std::min(pts[i].y, pts[i + 1].y));
+                     y <= cell_of(std::max(pts[i].y, pts[i + 1].y)); ++y) {
+                    grid.push_back({key_of(x, y), c, i});
+                }
+            }
+        }
+    }
+    std::sort(grid.begin(), grid.end(), [](const GridSeg& a, const GridSeg& b) {
+        return std::tie(a.key, a.chain, a.index) < std::tie(b.key, b.chain, b.index);
+    });
+    // Whether a segment of another chain comes within `r` of segment ab.
+    auto near_other = [&](uint32_t chain, GridPoint a, GridPoint b, double r) {
+        for (int64_t x = cell_of(std::min(a.x, b.x) - r); x <= cell_of(std::max(a.x, b.x) + r); ++x) {
+            for (int64_t y = cell_of(std::min(a.y, b.y) - r); y <= cell_of(std::max(a.y, b.y) + r); ++y) {
+                const uint64_t key = key_of(x, y);
+                auto it = std::lower_bound(grid.begin(), grid.end(), key,
+                                           [](const GridSeg& g, uint64_t k) { return g.key < k; });
+                for (; it != grid.end() && it->key == key; ++it) {
+                    if (it->chain == chain) {
+                        continue;
+                    }
+                    const auto p = store.chain_points(store.chains[it->chain]);
+                    if (segment_distance(a, b, p[it->index], p[it->index + 1]) <= r * (1 + 1e-9) + 1) {
+                        return true;
+                    }
+                }
+            }
+        }
+        return false;
+    };
+    // Per owned chain, prefix counts of its segments that have another chain
+    // within eps_i + the largest reach: a shortcut spanning only clear
+    // segments lies within eps_i of them (L2), so farther than any other
+    // chain's reach from that chain.
+    std::vector<std::vector<uint32_t>> blocked(work.size());
+    if (opt.metric == Metric::l2) {
+        parallel_for(work.size(), opt.threads, [&](size_t wi) {
+            const Work& w = work[wi];
+            if (w.cand.empty()) {
+                return;
+            }
+            const auto pts = points_of(w);
+            auto& b = blocked[wi];
+            b.assign(pts.size(), 0);
+            for (size_t k = 0; k + 1 < pts.size(); ++k) {
+                b[k + 1] = b[k] + (near_other(w.chain, pts[k], pts[k + 1], w.tol.eps + reach_max) ? 1 : 0);
+            }
+        });
+    }
+
     // Raster test of (work, candidate) pairs, tile by tile.
-    auto raster_test = [&](const std::vector<std::pair<uint32_t, uint32_t>>& tests) {
+    auto raster_test = [&](const std::vector<std::pair<uint32_t, uint32_t>>& all_tests) {
         const auto before = raster.stats();
+        std::vector<uint8_t> far(all_tests.size(), 0);
+        for (size_t t = 0; t < all_tests.size(); ++t) {
+            const auto [wi, ci] = all_tests[t];
+            const auto& b = blocked[wi];
+            far[t] = !b.empty() && b[work[wi].cand[ci].to] == b[work[wi].cand[ci].from];
+        }
+        std::vector<std::pair<uint32_t, uint32_t>> tests;
+        for (size_t t = 0; t < all_tests.size(); ++t) {
+            if (far[t]) {
+                work[all_tests[t].first].state[all_tests[t].second] = good;
+                ++st.proved_far;
+            } else {
+                tests.push_back(all_tests[t]);
+            }
+        }
         std::vector<std::vector<TestSegment>> per_tile(colors->tiles.size());
         for (uint32_t id = 0; id < tests.size(); ++id) {
             const auto [wi, ci] = tests[id];
@@ -479,7 +569,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             // Chains whose tested shortcuts all passed keep their paths.
             std::vector<uint8_t> failed(work.size(), 0);
             for (const auto& [wi, ci] : tests) {
-                failed[wi] |= work[wi].state[ci] != good;
+                failed[wi] |= work[wi].state[ci] != good; // the far ones were marked good
             }
             for (uint32_t wi = 0; wi < work.size(); ++wi) {
                 work[wi].dirty = failed[wi] != 0;

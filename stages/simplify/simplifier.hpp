@@ -39,6 +39,7 @@ struct ToleranceStats {
     size_t output_vertices = 0;
     size_t candidates = 0;
     size_t drawn_segments = 0;
+    size_t proved_far = 0; ///< shortcuts accepted without drawing: farther from every other chain than its reach
     size_t banned_raster = 0;
     size_t banned_exact = 0;
     size_t banned_points = 0;

@@ -28,9 +28,9 @@ void SimplifyStage::add_args(ArgSet& args)
     args.add("no-point-constraints", &m_no_point_constraints,
              "do not keep the units' internal points and user points on their side");
     args.add("points", &m_points, "user point constraints: GeoJSON points or CSV with lon,lat columns", "FILE");
-    args.add("exhaustive", &m_exhaustive,
-             "draw every proximate shortcut on the raster; by default only those starting at a vertex\n"
-             "      of the current shortest path are drawn, round after round (same result, fewer segments)");
+    args.add("lazy", &m_lazy,
+             "draw only the shortcuts starting at a vertex of the current shortest paths, round after\n"
+             "      round (same result, fewer segments drawn; each round redraws the tiles involved)");
     args.add("compliance", &m_compliance,
              "ssbo: one pass setting a flag per shortcut in a storage buffer; readback: the paper's\n"
              "      unique-colour read-back loop (Algorithm 5.1)",
@@ -55,7 +55,7 @@ void SimplifyStage::initialize()
     auto& o = m_common.options;
     o.max_reach = static_cast<uint32_t>(m_max_reach);
     o.point_constraints = !m_no_point_constraints;
-    o.lazy = !m_exhaustive;
+    o.lazy = m_lazy;
 }
 
 std::string SimplifyStage::help_notes() const
@@ -275,6 +275,7 @@ int SimplifyStage::run(const StageContext& ctx)
         j["output_vertices"] = t.output_vertices;
         j["candidates"] = t.candidates;
         j["drawn_segments"] = t.drawn_segments;
+        j["proved_far"] = t.proved_far;
         j["banned"] = {{"raster", t.banned_raster}, {"exact", t.banned_exact}, {"point_constraints", t.banned_points}};
         j["self_intersection_repairs"] = t.self_intersection_repairs;
         j["orientation_repairs"] = t.orientation_repairs;

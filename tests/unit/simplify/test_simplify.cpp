@@ -70,7 +70,6 @@ SimplifyOptions plain(Metric m = Metric::l2)
     o.projection_scale = false; // eps_m / 0.01 grid units exactly
     o.color.tile_pixels = 1024;
     o.color.metric = m;
-    o.lazy = false; // every candidate tested; LazyEqualsExhaustive compares
     return o;
 }
 
