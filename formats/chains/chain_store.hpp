@@ -65,8 +65,8 @@ struct ChainStore {
     std::string partition;
     ProjectionParams projection;
     double halo_m = 0.0;
-    double eps_m = 0.0;  ///< tolerance this store was simplified at; 0 for original chains
-    uint8_t metric = 0;  ///< metric of eps_m: 0 L2, 1 L1, 2 Linf
+    double eps_m = 0.0;                   ///< tolerance this store was simplified at; 0 for original chains
+    uint8_t metric = 0;                   ///< metric of eps_m: 0 L2, 1 L1, 2 Linf
     std::vector<std::string> strings{""}; ///< entry 0 is "" (no unit)
     std::vector<ChainInfo> chains;
     std::vector<GridPoint> points;
