@@ -1,6 +1,7 @@
 #include "stages/ingest/map_builder.hpp"
 
 #include "core/errors.hpp"
+#include "core/parallel.hpp"
 #include "core/radix_sort.hpp"
 #include "core/segment_grid.hpp"
 
@@ -85,22 +86,10 @@ class Problems {
     size_t m_max;
 };
 
+/// Contiguous ranges of at least 4096 items per thread.
 template <class F> void parallel_for(size_t n, unsigned threads, F&& f)
 {
-    threads = std::max(1U, std::min<unsigned>(threads, static_cast<unsigned>(std::max<size_t>(1, n / 4096))));
-    if (threads == 1) {
-        f(size_t{0}, n);
-        return;
-    }
-    std::vector<std::thread> pool;
-    const size_t chunk = (n + threads - 1) / threads;
-    for (unsigned t = 0; t < threads; ++t) {
-        const size_t b = std::min(n, t * chunk), e = std::min(n, b + chunk);
-        pool.emplace_back([&f, b, e] { f(b, e); });
-    }
-    for (auto& th : pool) {
-        th.join();
-    }
+    parallel_ranges(n, threads, 4096, std::forward<F>(f));
 }
 
 /// Intern and project the vertices, then clean every polyline.

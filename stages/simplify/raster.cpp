@@ -151,6 +151,16 @@ struct Raster::Impl {
     GLuint fbo = 0, rb_depth = 0, rb_color = 0;
     explicit Impl(const gl::Api& api) : gl(api) {}
 
+    /// The info log of a shader or program (glGetShaderInfoLog / glGetProgramInfoLog).
+    template <class Get> static std::string info_log(Get get, GLuint object)
+    {
+        std::string log(4096, '\0');
+        GLsizei n = 0;
+        get(object, GLsizei(log.size()), &n, log.data());
+        log.resize(size_t(n));
+        return log;
+    }
+
     GLuint compile(GLenum type, const std::string& src)
     {
         GLuint s = gl.CreateShader(type);
@@ -160,10 +170,7 @@ struct Raster::Impl {
         GLint ok = 0;
         gl.GetShaderiv(s, GL_COMPILE_STATUS, &ok);
         if (!ok) {
-            std::string log(4096, '\0');
-            GLsizei n = 0;
-            gl.GetShaderInfoLog(s, GLsizei(log.size()), &n, log.data());
-            log.resize(size_t(n));
+            const std::string log = info_log(gl.GetShaderInfoLog, s);
             gl.DeleteShader(s);
             throw environment_error("OpenGL shader does not compile on this driver: " + log);
         }
@@ -181,11 +188,8 @@ struct Raster::Impl {
         GLint ok = 0;
         gl.GetProgramiv(p, GL_LINK_STATUS, &ok);
         if (!ok) {
-            std::string log(4096, '\0');
-            GLsizei n = 0;
-            gl.GetProgramInfoLog(p, GLsizei(log.size()), &n, log.data());
-            log.resize(size_t(n));
-            throw environment_error("OpenGL program does not link on this driver: " + log);
+            throw environment_error("OpenGL program does not link on this driver: " +
+                                    info_log(gl.GetProgramInfoLog, p));
         }
         return p;
     }

@@ -1,14 +1,13 @@
 #include "stages/simplify/simplifier.hpp"
 
+#include "core/parallel.hpp"
 #include "core/projection.hpp"
 #include "core/segment_grid.hpp"
 #include "stages/simplify/candidates.hpp"
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <cmath>
-#include <thread>
 
 namespace tigerlod::simplify {
 
@@ -49,27 +48,6 @@ double since(Clock::time_point t0)
     return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-/// Run fn(i) for i in [0, n) on `threads` threads; each i is independent.
-template <class F> void parallel_for(size_t n, unsigned threads, F&& fn)
-{
-    threads = std::max(1U, std::min<unsigned>(threads, static_cast<unsigned>(std::max<size_t>(n, 1))));
-    if (threads == 1) {
-        for (size_t i = 0; i < n; ++i) {
-            fn(i);
-        }
-        return;
-    }
-    std::atomic<size_t> next{0};
-    std::vector<std::jthread> pool;
-    for (unsigned t = 0; t < threads; ++t) {
-        pool.emplace_back([&] {
-            for (size_t i; (i = next.fetch_add(1)) < n;) {
-                fn(i);
-            }
-        });
-    }
-}
-
 /// Lazy rounds per chain before its remaining shortcuts are tested at once.
 constexpr uint32_t lazy_rounds = 3;
 
@@ -90,11 +68,12 @@ struct Work {
     bool dirty = true;               ///< path must be recomputed
 };
 
-int128 signed_area2(std::span<const GridPoint> pts, const std::vector<uint32_t>& idx)
+/// Twice the signed area of the ring through pts[at(0)], pts[at(1)], ..., pts[at(n-1)].
+template <class At> int128 signed_area2(std::span<const GridPoint> pts, size_t n, At at)
 {
     int128 a = 0;
-    for (size_t i = 0; i + 1 < idx.size(); ++i) {
-        const GridPoint p = pts[idx[i]], q = pts[idx[i + 1]];
+    for (size_t i = 0; i + 1 < n; ++i) {
+        const GridPoint p = pts[at(i)], q = pts[at(i + 1)];
         a += int128{p.x} * q.y - int128{q.x} * p.y;
     }
     return a;
@@ -261,7 +240,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
 
     // Candidates (exact proximity).
     t0 = Clock::now();
-    parallel_for(work.size(), opt.threads, [&](size_t i) {
+    parallel_each(work.size(), opt.threads, [&](size_t i) {
         Work& w = work[i];
         if (!w.fixed) {
             w.cand = proximate_shortcuts(points_of(w), w.tol, opt.max_reach);
@@ -294,7 +273,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     }
     index.finish();
     std::vector<size_t> culled(work.size(), 0);
-    parallel_for(work.size(), opt.threads, [&](size_t i) {
+    parallel_each(work.size(), opt.threads, [&](size_t i) {
         Work& w = work[i];
         if (w.cand.empty()) {
             return;
@@ -362,7 +341,8 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     auto key_of = [](int64_t x, int64_t y) {
         return (static_cast<uint64_t>(x + (1LL << 31)) << 32) | static_cast<uint32_t>(y + (1LL << 31));
     };
-    for (uint32_t c = 0; c < store.chains.size(); ++c) {
+    // Only the L2 far-shortcut rule below reads the grid.
+    for (uint32_t c = 0; opt.metric == Metric::l2 && c < store.chains.size(); ++c) {
         const auto pts = store.chain_points(store.chains[c]);
         for (uint32_t i = 0; i + 1 < pts.size(); ++i) {
             for (int64_t x = cell_of(std::min(pts[i].x, pts[i + 1].x)); x <= cell_of(std::max(pts[i].x, pts[i + 1].x));
@@ -403,7 +383,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     // chain's reach from that chain.
     std::vector<std::vector<uint32_t>> blocked(work.size());
     if (opt.metric == Metric::l2) {
-        parallel_for(work.size(), opt.threads, [&](size_t wi) {
+        parallel_each(work.size(), opt.threads, [&](size_t wi) {
             const Work& w = work[wi];
             if (w.cand.empty()) {
                 return;
@@ -489,7 +469,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         for (;;) {
             ++st.rounds;
             t0 = Clock::now();
-            parallel_for(work.size(), opt.threads, [&](size_t i) {
+            parallel_each(work.size(), opt.threads, [&](size_t i) {
                 Work& w = work[i];
                 if (!w.dirty) {
                     return;
@@ -498,15 +478,9 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
                 shortest_path(w, pts.size());
                 if (w.ring) {
                     // Keep the ring's orientation: ban the longest shortcut until it holds.
-                    const int128 orig = signed_area2(pts, [&] {
-                        std::vector<uint32_t> all(pts.size());
-                        for (uint32_t k = 0; k < all.size(); ++k) {
-                            all[k] = k;
-                        }
-                        return all;
-                    }());
+                    const int128 orig = signed_area2(pts, pts.size(), [](size_t k) { return k; });
                     for (;;) {
-                        const int128 now = signed_area2(pts, w.path);
+                        const int128 now = signed_area2(pts, w.path.size(), [&](size_t k) { return w.path[k]; });
                         if ((now > 0) == (orig > 0) && now != 0) {
                             break;
                         }
