@@ -390,6 +390,7 @@ TEST_F(Cli, EveryValidatedConfigKeyRejectsBadValues)
         {"ingest: {threads: -1}\n", "'ingest.threads' must be in 0..256"},
         {"ingest: {halo_m: -5}\n", "'ingest.halo_m' must be >= 0"},
         {"projection: {nope: 1}\n", "unknown key 'projection.nope'"},
+        {"simplify: {tolerance: [1]}\n", "unknown key 'simplify.tolerance'"},
     };
     for (const auto& [extra, fragment] : cases) {
         SCOPED_TRACE(extra);
@@ -501,6 +502,25 @@ TEST_F(Cli, ColorAndSimplifyRejectBadInput)
         expect_failure(run(tool, in + " --max-classes 2"), 1, "needs more than 2 stencil classes");
         EXPECT_FALSE(fs::exists(m_dir / "res"));
     }
+    for (const char* tool : {"color", "simplify"}) {
+        expect_failure(run(tool, in + " --pixel-fraction 0.9"), 2, "option '--pixel-fraction' must be in (0, 0.5]");
+        expect_failure(run(tool, in + " --tile-pixels 10"), 2, "option '--tile-pixels' must be in 64..16384");
+        expect_failure(run(tool, in + " --max-classes 300"), 2, "option '--max-classes' must be in 2..255");
+        expect_failure(run(tool, in + " --threads 999"), 2, "option '--threads' must be in 0..256");
+    }
+    expect_failure(run("simplify", in + " --max-reach -1"), 2, "option '--max-reach' must be >= 0");
+    // Colours: a folder without the store's file, and a corrupt file.
+    const std::string colors = (m_dir / "colors").string();
+    ASSERT_EQ(run("color", (m_dir / "in").string() + " " + colors + " --tolerances 8").code, 0);
+    expect_failure(run("simplify", in + " --tolerances 8 --colors " + (m_dir / "nocolors").string()), 2,
+                   "cannot open the colours file");
+    std::ofstream(m_dir / "colors" / "eps-8m" / "tract" / "51063.colors.json")
+        << "{\"schema\": \"tigerlod.colors/1\", ";
+    expect_failure(run("simplify", in + " --tolerances 8 --colors " + colors), 1,
+                   "51063.colors.json: not a colours file");
+    std::ofstream(m_dir / "colors" / "eps-8m" / "tract" / "51063.colors.json")
+        << R"({"schema": "tigerlod.colors/1", "eps_m": 8, "metric": "l2", "pixel": 1, "tiles": []})";
+    expect_failure(run("simplify", in + " --tolerances 8 --colors " + colors), 2, "made at eps");
     expect_failure(run("simplify", in + " --compliance occlusion"), 2, "must be ssbo or readback");
     expect_failure(run("simplify", in + " --gl glx"), 2, "must be osmesa or egl");
     expect_failure(run("simplify", in + " --tolerances 800"), 2, "needs at least 1600");
