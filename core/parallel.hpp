@@ -6,6 +6,9 @@
 #include <algorithm>
 #include <atomic>
 #include <cstddef>
+#include <cstdint>
+#include <exception>
+#include <mutex>
 #include <thread>
 #include <vector>
 
@@ -42,14 +45,32 @@ template <class F> void parallel_each(size_t n, unsigned threads, F&& f)
         }
         return;
     }
+    // Every item runs; of the exceptions thrown, the one of the lowest index
+    // is rethrown here, so which error a run reports does not depend on the threads.
     std::atomic<size_t> next{0};
-    std::vector<std::jthread> pool;
-    for (unsigned t = 0; t < threads; ++t) {
-        pool.emplace_back([&] {
-            for (size_t i; (i = next.fetch_add(1)) < n;) {
-                f(i);
-            }
-        });
+    std::mutex m;
+    std::exception_ptr error;
+    size_t error_index = SIZE_MAX;
+    {
+        std::vector<std::jthread> pool;
+        for (unsigned t = 0; t < threads; ++t) {
+            pool.emplace_back([&] {
+                for (size_t i; (i = next.fetch_add(1)) < n;) {
+                    try {
+                        f(i);
+                    } catch (...) {
+                        std::lock_guard lock(m);
+                        if (i < error_index) {
+                            error_index = i;
+                            error = std::current_exception();
+                        }
+                    }
+                }
+            });
+        }
+    }
+    if (error) {
+        std::rethrow_exception(error);
     }
 }
 

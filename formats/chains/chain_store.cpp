@@ -1,5 +1,6 @@
 #include "formats/chains/chain_store.hpp"
 
+#include "core/bytes.hpp"
 #include "core/digest.hpp"
 #include "core/errors.hpp"
 #include "core/fs.hpp"
@@ -19,88 +20,8 @@ constexpr char magic[8] = {'T', 'L', 'D', 'C', 'H', 'A', 'I', 'N'};
 constexpr size_t header_size = 24;
 constexpr size_t chain_record_size = 8 + 5 * 4;
 
-class Writer {
-  public:
-    template <class T> void put(T v)
-    {
-        static_assert(std::is_trivially_copyable_v<T>);
-        char b[sizeof(T)];
-        std::memcpy(b, &v, sizeof(T)); // the format is little-endian, as every target of ours
-        m_out.append(b, sizeof(T));
-    }
-    /// Points as consecutive little-endian (i32 x, i32 y): GridPoint's own layout.
-    void put_points(std::span<const GridPoint> pts)
-    {
-        static_assert(sizeof(GridPoint) == 8 && std::endian::native == std::endian::little);
-        m_out.append(reinterpret_cast<const char*>(pts.data()), pts.size_bytes());
-    }
-    void reserve(size_t n) { m_out.reserve(n); }
-    void put_str(std::string_view s)
-    {
-        put(static_cast<uint32_t>(s.size()));
-        m_out.append(s);
-    }
-    std::string& bytes() noexcept { return m_out; }
-
-  private:
-    std::string m_out;
-};
-
-class Reader {
-  public:
-    Reader(std::span<const std::byte> bytes, const std::string& name) : m_bytes(bytes), m_name(name) {}
-    [[noreturn]] void fail(const std::string& what) const
-    {
-        throw format_error(m_name + ": " + what + " (at byte " + std::to_string(m_pos) + ")");
-    }
-    size_t left() const noexcept { return m_bytes.size() - m_pos; }
-    void need(size_t n, const char* what) const
-    {
-        if (left() < n) {
-            fail(std::string("truncated in ") + what);
-        }
-    }
-    template <class T> T get(const char* what)
-    {
-        need(sizeof(T), what);
-        T v;
-        std::memcpy(&v, m_bytes.data() + m_pos, sizeof(T));
-        m_pos += sizeof(T);
-        return v;
-    }
-    std::string get_str(const char* what)
-    {
-        const auto n = get<uint32_t>(what);
-        need(n, what);
-        std::string s(reinterpret_cast<const char*>(m_bytes.data() + m_pos), n);
-        m_pos += n;
-        return s;
-    }
-    /// A count of records of at least `record_size` bytes each, checked against the bytes left.
-    uint32_t get_count(size_t record_size, const char* what)
-    {
-        const auto n = get<uint32_t>(what);
-        if (static_cast<uint64_t>(n) * record_size > left()) {
-            fail(std::string("count ") + std::to_string(n) + " of " + what + " exceeds the file");
-        }
-        return n;
-    }
-    /// Append `n` points (little-endian i32 pairs, GridPoint's layout).
-    void get_points(uint32_t n, std::vector<GridPoint>& out)
-    {
-        need(static_cast<size_t>(n) * sizeof(GridPoint), "chain points");
-        const size_t old = out.size();
-        out.resize(old + n);
-        std::memcpy(out.data() + old, m_bytes.data() + m_pos, static_cast<size_t>(n) * sizeof(GridPoint));
-        m_pos += static_cast<size_t>(n) * sizeof(GridPoint);
-    }
-    size_t pos() const noexcept { return m_pos; }
-
-  private:
-    std::span<const std::byte> m_bytes;
-    const std::string& m_name;
-    size_t m_pos = 0;
-};
+using Writer = ByteWriter;
+using Reader = ByteReader;
 
 } // namespace
 

@@ -1,0 +1,187 @@
+#pragma once
+/// @file reader.hpp
+/// The reader runtime: opens a Data Tree, selects the front for a 2D view
+/// (the paper's Algorithm 6.1), and streams payloads through a cache with a
+/// hard byte budget, an I/O thread and prefetching. No GL, no GDAL: a
+/// renderer links this (CMake: `find_package(tigerlod-reader)`, target
+/// `tigerlod::reader`) and draws what `Streamer::resident_front()` returns.
+///
+/// Bad data never throws out of this API and never crashes: calls return a
+/// Status whose message names the file and the node, and the streamer records
+/// the error and goes on with what it has.
+
+#include "formats/datatree/datatree.hpp"
+
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace tigerlod::reader {
+
+/// Empty when the operation succeeded, else what went wrong (file, node, fault).
+struct Status {
+    std::string error;
+    bool ok() const noexcept { return error.empty(); }
+};
+
+/// An open Data Tree: the skeleton in memory, payloads read on demand. Thread-safe.
+class Tree {
+  public:
+    /// Opens `dir` (its skeleton.tls). Returns null and sets `error` on failure.
+    static std::shared_ptr<Tree> open(const std::filesystem::path& dir, std::string& error);
+
+    const datatree::Skeleton& skeleton() const noexcept { return m_skeleton; }
+    const std::filesystem::path& dir() const noexcept { return m_dir; }
+    /// Size of the skeleton file, and of skeleton plus tile files.
+    uint64_t skeleton_bytes() const noexcept { return m_skeleton_bytes; }
+    uint64_t tree_bytes() const noexcept;
+    /// The origin payload coordinates are relative to: the node box's minimum corner.
+    GridPoint origin(uint32_t node) const noexcept;
+
+    /// Read a payload's bytes, checking the tile header and the payload's CRC.
+    /// `lod` -1 is the node's chain table.
+    Status read_payload(uint32_t node, int lod, std::string& bytes) const;
+    Status read_geometry(uint32_t node, uint32_t lod, datatree::Geometry& out) const;
+    Status read_table(uint32_t node, datatree::ChainTable& out) const;
+
+  private:
+    Tree() = default;
+    std::filesystem::path m_dir;
+    datatree::Skeleton m_skeleton;
+    uint64_t m_skeleton_bytes = 0;
+}; // class Tree
+
+/// A 2D camera over the projected grid.
+struct View {
+    double center_x = 0.0; ///< grid units
+    double center_y = 0.0;
+    double units_per_pixel = 1.0; ///< grid units per screen pixel
+    uint32_t width = 1024;        ///< viewport in pixels
+    uint32_t height = 768;
+};
+
+struct FrontOptions {
+    /// A LOD may be drawn when its error, projected, is below this many pixels.
+    double pixel_error = 1.0;
+    /// A node is drawn itself, not its children, when its box covers less than
+    /// this fraction of the viewport's area.
+    double node_fraction = 0.25;
+};
+
+struct FrontItem {
+    uint32_t node = 0;
+    uint32_t lod = 0;
+    friend bool operator==(const FrontItem&, const FrontItem&) = default;
+    friend auto operator<=>(const FrontItem&, const FrontItem&) = default;
+};
+
+/// Algorithm 6.1: cull by the view, take a node when its projected box is
+/// small enough (or it is a leaf), then its coarsest LOD whose projected error
+/// is below the threshold (LOD 0, the original, when none is). Depth-first order.
+std::vector<FrontItem> select_front(const datatree::Skeleton& s, const View& view, const FrontOptions& options = {});
+
+/// The LOD Algorithm 6.1 picks for `node` in `view`.
+uint32_t select_lod(const datatree::Skeleton& s, uint32_t node, const View& view, const FrontOptions& options = {});
+
+struct StreamOptions {
+    /// Hard limit on the bytes of decoded payloads held, plus the I/O thread's
+    /// buffers while it decodes. Never exceeded.
+    uint64_t budget_bytes = 64ULL << 20;
+    bool prefetch = true;
+    /// The prefetch view extends the view by this fraction of its size on each side.
+    double prefetch_margin = 0.5;
+    FrontOptions front;
+};
+
+struct Stats {
+    uint64_t hits = 0;       ///< front items resident when asked for
+    uint64_t misses = 0;     ///< front items not resident when asked for
+    uint64_t loads = 0;      ///< payloads read and decoded
+    uint64_t prefetches = 0; ///< of those, loaded for the prefetch list
+    uint64_t bytes_read = 0;
+    uint64_t evictions = 0;
+    uint64_t skipped = 0; ///< wanted payloads that did not fit in the budget
+    uint64_t errors = 0;  ///< payloads that failed to read or decode
+    uint64_t resident_bytes = 0;
+    uint64_t peak_bytes = 0;      ///< largest resident + in-flight bytes seen
+    double seconds_waiting = 0.0; ///< time callers spent in wait_front()
+};
+
+/// A decoded payload the caller may draw; it stays valid while held.
+struct Drawable {
+    FrontItem wanted;
+    uint32_t lod = 0; ///< the LOD drawn: `wanted.lod` on a hit, else the nearest resident one
+    std::shared_ptr<const datatree::Geometry> geometry;
+};
+
+/// The out-of-core streamer: a payload cache with a byte budget and an I/O
+/// thread that loads the front's missing payloads first, then prefetches.
+class Streamer {
+  public:
+    Streamer(std::shared_ptr<const Tree> tree, StreamOptions options);
+    ~Streamer();
+    Streamer(const Streamer&) = delete;
+    Streamer& operator=(const Streamer&) = delete;
+
+    /// Set the view: computes the front and the prefetch list and hands them
+    /// to the I/O thread. Never waits for the disk.
+    std::vector<FrontItem> set_view(const View& view);
+    /// For each front item, what is resident now: its own LOD, else the
+    /// nearest resident LOD of the node, else no geometry. Never waits for the disk.
+    std::vector<Drawable> resident_front();
+    /// Wait until the front is resident (or cannot be: budget, errors), at most `timeout`.
+    /// Returns true when it all is. The time is counted in Stats::seconds_waiting.
+    bool wait_front(std::chrono::milliseconds timeout);
+    /// Wait until the I/O thread has nothing left to do.
+    void wait_idle();
+
+    Stats stats() const;
+    /// Each distinct error so far, naming file and node.
+    std::vector<std::string> errors() const;
+    /// Resident payloads and the bytes charged for each.
+    struct Resident {
+        FrontItem item;
+        size_t bytes = 0;
+        std::shared_ptr<const datatree::Geometry> geometry;
+    };
+    std::vector<Resident> resident() const;
+
+  private:
+    struct Entry {
+        std::shared_ptr<const datatree::Geometry> geometry;
+        size_t bytes = 0;
+        uint64_t last_used = 0;
+    };
+    void run();
+    bool front_done_locked() const;
+    size_t charge(FrontItem item) const;
+    size_t in_flight_cost(FrontItem item) const;
+
+    std::shared_ptr<const Tree> m_tree;
+    StreamOptions m_options;
+    mutable std::mutex m_mutex;
+    std::condition_variable m_work;    ///< the I/O thread waits here
+    std::condition_variable m_changed; ///< callers wait here
+    bool m_stop = false;
+    bool m_busy = false;
+    uint64_t m_generation = 0;
+    uint64_t m_tick = 0;
+    std::vector<FrontItem> m_front;
+    std::vector<FrontItem> m_wanted; ///< front, then prefetch list, by priority
+    std::map<FrontItem, size_t> m_rank;
+    std::map<FrontItem, Entry> m_cache;
+    std::map<FrontItem, std::string> m_failed;
+    std::map<FrontItem, uint64_t> m_skipped; ///< item -> generation it was skipped in
+    uint64_t m_in_flight = 0;
+    Stats m_stats;
+    std::thread m_thread;
+}; // class Streamer
+
+} // namespace tigerlod::reader

@@ -1,0 +1,130 @@
+#include "stages/pack/pack_stage.hpp"
+
+#include "core/fs.hpp"
+#include "stages/pack/packer.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <thread>
+
+namespace fs = std::filesystem;
+using json = nlohmann::ordered_json;
+
+namespace tigerlod::pack {
+
+void PackStage::add_args(ArgSet& args)
+{
+    args.positional("ORIGINAL", &m_original, "a tigerlod-ingest output folder: LOD 0, the original chains");
+    args.positional("SIMPLIFIED", &m_simplified, "a tigerlod-simplify output folder: one LOD per eps-<E>m folder");
+    args.positional("OUTPUT", &m_output, "the Data Tree folder, created or updated in place");
+    args.group("Packing");
+    args.add("tile-mb", &m_tile_mb, "target tile file size in MiB: a subtree up to it is one tile", "MB");
+    args.add("draco-speed", &m_draco_speed, "Draco encoder speed, 0 (smallest) .. 10 (fastest)", "N");
+    args.add("threads", &m_threads, "worker threads, 0 for all cores", "N");
+}
+
+void PackStage::initialize()
+{
+    if (!(m_tile_mb > 0) || !std::isfinite(m_tile_mb) || m_tile_mb > 4096) {
+        throw usage_error("pack: option '--tile-mb' must be in (0, 4096]");
+    }
+    if (m_draco_speed < 0 || m_draco_speed > 10) {
+        throw usage_error("pack: option '--draco-speed' must be in 0..10");
+    }
+    if (m_threads < 0 || m_threads > 1024) {
+        throw usage_error("pack: option '--threads' must be in 0..1024");
+    }
+    const fs::path out(m_output);
+    std::error_code ec;
+    if (fs::exists(out, ec) &&
+        !(fs::is_directory(out, ec) && (fs::is_empty(out, ec) || fs::exists(out / "skeleton.tls", ec)))) {
+        throw usage_error("pack: " + m_output +
+                          " exists and is not a Data Tree (no skeleton.tls); pick another OUTPUT");
+    }
+}
+
+std::string PackStage::help_notes() const
+{
+    return "Outputs:\n"
+           "  OUTPUT/skeleton.tls        the skeleton (formats/datatree/SPEC.md)\n"
+           "  OUTPUT/tiles/*.tlt         tile files, named by their content\n"
+           "  OUTPUT/pack-report.json    nodes, tiles, bytes and vertices per LOD, skeleton fraction\n"
+           "Exit codes: 0 done; 1 bad input data (corrupt or inconsistent stores); 2 usage error;\n"
+           "  3 environment (cannot read or write).\n";
+}
+
+std::vector<std::string> PackStage::versions() const
+{
+    return {"draco (system package)"};
+}
+
+int PackStage::run(const StageContext& ctx)
+{
+    const auto t0 = std::chrono::steady_clock::now();
+    PackOptions options;
+    options.tile_bytes = static_cast<uint64_t>(m_tile_mb * 1024 * 1024);
+    options.draco_speed = m_draco_speed;
+    options.threads =
+        m_threads > 0 ? static_cast<unsigned>(m_threads) : std::max(1U, std::thread::hardware_concurrency());
+    const PackedTree tree = build_tree(m_original, m_simplified, options);
+    ctx.log.info("pack: built " + std::to_string(tree.skeleton.nodes.size()) + " nodes in " +
+                 std::to_string(tree.skeleton.tiles.size()) + " tiles");
+    const WriteStats ws = write_tree(m_output, tree);
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+
+    json report;
+    report["schema"] = "tigerlod.pack-report/1";
+    report["original"] = m_original;
+    report["simplified"] = m_simplified;
+    report["nodes"] = tree.skeleton.nodes.size();
+    json levels = json::array();
+    for (uint32_t l = 0; l < tree.skeleton.level_names.size(); ++l) {
+        size_t n = 0;
+        for (const auto& node : tree.skeleton.nodes) {
+            n += node.level == l;
+        }
+        levels.push_back({{"map_level", tree.skeleton.level_names[l]}, {"nodes", n}});
+    }
+    report["levels"] = std::move(levels);
+    report["tiles"] = {{"count", tree.skeleton.tiles.size()},
+                       {"written", ws.tiles_written},
+                       {"kept", ws.tiles_kept},
+                       {"removed", ws.tiles_removed}};
+    json lods = json::array();
+    uint64_t vertices = 0, bytes = 0;
+    for (const auto& l : tree.lods) {
+        lods.push_back({{"eps_m", l.eps_m},
+                        {"vertices", l.vertices},
+                        {"payload_bytes", l.payload_bytes},
+                        {"bytes_per_vertex", l.vertices ? double(l.payload_bytes) / double(l.vertices) : 0.0},
+                        {"raw_int32_bytes", l.raw_bytes}});
+        vertices += l.vertices;
+        bytes += l.payload_bytes;
+    }
+    report["lods"] = std::move(lods);
+    report["geometry_bytes_per_vertex"] = vertices ? double(bytes) / double(vertices) : 0.0;
+    report["chain_table_bytes"] = tree.table_bytes;
+    report["skeleton_bytes"] = ws.skeleton_bytes;
+    report["tree_bytes"] = ws.tree_bytes;
+    report["skeleton_fraction"] = ws.tree_bytes ? double(ws.skeleton_bytes) / double(ws.tree_bytes) : 0.0;
+    report["seconds"] = seconds;
+    write_file_atomic(fs::path(m_output) / "pack-report.json", report.dump(2) + "\n");
+
+    std::printf("pack: %zu nodes, %zu tiles (%zu written, %zu kept, %zu removed), %llu bytes\n",
+                tree.skeleton.nodes.size(), tree.skeleton.tiles.size(), ws.tiles_written, ws.tiles_kept,
+                ws.tiles_removed, static_cast<unsigned long long>(ws.tree_bytes));
+    for (const auto& l : tree.lods) {
+        std::printf("  LOD eps %g m: %llu vertices, %.2f bytes/vertex\n", l.eps_m,
+                    static_cast<unsigned long long>(l.vertices),
+                    l.vertices ? double(l.payload_bytes) / double(l.vertices) : 0.0);
+    }
+    std::printf("  skeleton %llu bytes (%.3f%% of the tree)\noutputs in %s\n",
+                static_cast<unsigned long long>(ws.skeleton_bytes),
+                ws.tree_bytes ? 100.0 * double(ws.skeleton_bytes) / double(ws.tree_bytes) : 0.0, m_output.c_str());
+    return exit_ok;
+}
+
+} // namespace tigerlod::pack

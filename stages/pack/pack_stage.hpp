@@ -1,0 +1,32 @@
+#pragma once
+/// @file pack_stage.hpp
+/// tigerlod-pack: build or update the Data Tree from the original and
+/// simplified chain stores.
+
+#include "core/stage.hpp"
+
+#include <string>
+
+namespace tigerlod::pack {
+
+class PackStage final : public Stage {
+  public:
+    static constexpr const char* name = "pack";
+    static constexpr const char* description =
+        "Pack the original and simplified chain stores into a Data Tree: a skeleton and tile files of\n"
+        "Draco-compressed payloads, one node per unit with the map of its child units at every LOD.\n"
+        "An existing tree in OUTPUT is updated: unchanged tiles are kept, the skeleton is swapped atomically.";
+    void add_args(ArgSet& args) override;
+    void initialize() override;
+    int run(const StageContext& ctx) override;
+    std::string help_notes() const override;
+    std::vector<std::string> versions() const override;
+
+  private:
+    std::string m_original, m_simplified, m_output;
+    double m_tile_mb = 32;
+    int m_draco_speed = 0;
+    int m_threads = 0;
+}; // class PackStage
+
+} // namespace tigerlod::pack

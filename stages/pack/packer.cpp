@@ -1,0 +1,527 @@
+#include "stages/pack/packer.hpp"
+
+#include "core/digest.hpp"
+#include "core/errors.hpp"
+#include "core/fs.hpp"
+#include "core/parallel.hpp"
+#include "formats/chains/chain_store.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <set>
+#include <unordered_map>
+
+namespace fs = std::filesystem;
+
+namespace tigerlod::pack {
+
+namespace {
+
+/// The chain store files of one folder (ORIGINAL or one eps-<E>m), by level folder and file name.
+std::vector<fs::path> store_files(const fs::path& dir)
+{
+    std::vector<fs::path> out;
+    if (!fs::is_directory(dir)) {
+        throw input_error(dir.string() + ": not a folder of chain stores");
+    }
+    for (const auto& level : fs::directory_iterator(dir)) {
+        if (!level.is_directory() || level.path().filename().string().starts_with("eps-")) {
+            continue;
+        }
+        for (const auto& f : fs::directory_iterator(level.path())) {
+            if (f.path().extension() == ".tlc") {
+                out.push_back(fs::relative(f.path(), dir));
+            }
+        }
+    }
+    std::sort(out.begin(), out.end());
+    return out;
+}
+
+/// Distance from p to segment ab, in grid units.
+double segment_distance(GridPoint p, GridPoint a, GridPoint b)
+{
+    const double abx = double(b.x) - a.x, aby = double(b.y) - a.y;
+    const double apx = double(p.x) - a.x, apy = double(p.y) - a.y;
+    const double len2 = abx * abx + aby * aby;
+    double t = len2 > 0 ? (apx * abx + apy * aby) / len2 : 0.0;
+    t = std::clamp(t, 0.0, 1.0);
+    const double dx = apx - t * abx, dy = apy - t * aby;
+    return std::sqrt(dx * dx + dy * dy);
+}
+
+/// Largest distance of an original vertex from the simplified chain, which must be a
+/// subsequence with the same endpoints; -1 if it is not.
+double deviation(std::span<const GridPoint> orig, std::span<const GridPoint> simp)
+{
+    if (simp.size() < 2 || simp.front() != orig.front() || simp.back() != orig.back()) {
+        return -1.0;
+    }
+    double worst = 0.0;
+    size_t j = 0;
+    for (size_t i = 0; i + 1 < simp.size(); ++i) {
+        const size_t from = j;
+        // The next occurrence of simp[i + 1]; the last simplified point is the last original one.
+        size_t k = from + 1;
+        if (i + 2 == simp.size()) {
+            k = orig.size() - 1;
+        } else {
+            while (k < orig.size() && orig[k] != simp[i + 1]) {
+                ++k;
+            }
+        }
+        if (k >= orig.size() || k <= from) {
+            return -1.0;
+        }
+        for (size_t m = from + 1; m < k; ++m) {
+            worst = std::max(worst, segment_distance(orig[m], simp[i], simp[i + 1]));
+        }
+        j = k;
+    }
+    return worst;
+}
+
+struct NodeBuild {
+    uint32_t level = 0;
+    std::string partition;
+    std::vector<std::string> units; ///< the partition's units at this level (sorted)
+    std::vector<uint64_t> ids;      ///< its chains, sorted
+    datatree::Geometry original;
+    std::string table;
+    std::vector<std::string> lod_payloads;
+    double last_error = 0.0;
+};
+
+/// Where each owned chain of a level lies, by id.
+using ChainIndex = std::unordered_map<uint64_t, std::pair<const chains::ChainStore*, const chains::ChainInfo*>>;
+
+ChainIndex index_owned(const std::vector<chains::ChainStore>& stores, const std::vector<fs::path>& paths)
+{
+    ChainIndex index;
+    for (size_t s = 0; s < stores.size(); ++s) {
+        for (const auto& c : stores[s].chains) {
+            if ((c.flags & chains::chain_halo) == 0 && !index.try_emplace(c.id, &stores[s], &c).second) {
+                throw input_error(paths[s].string() + ": chain " + std::to_string(c.id) +
+                                  " is owned by two partitions of its level");
+            }
+        }
+    }
+    return index;
+}
+
+std::vector<chains::ChainStore> read_all(const std::vector<fs::path>& paths, unsigned threads)
+{
+    std::vector<chains::ChainStore> out(paths.size());
+    parallel_each(paths.size(), threads, [&](size_t i) { out[i] = chains::read(paths[i]); });
+    return out;
+}
+
+} // namespace
+
+PackedTree build_tree(const fs::path& original, const fs::path& simplified, const PackOptions& options)
+{
+    // The stores: LOD 0 from ORIGINAL, LOD k from the k-th smallest eps folder.
+    const auto rel = store_files(original);
+    if (rel.empty()) {
+        throw input_error(original.string() + ": no chain stores (<level>/<partition>.tlc)");
+    }
+    std::vector<fs::path> lod_dirs{original};
+    std::vector<double> lod_eps{0.0};
+    {
+        std::vector<std::pair<double, fs::path>> eps_dirs;
+        if (fs::is_directory(simplified)) {
+            for (const auto& d : fs::directory_iterator(simplified)) {
+                if (d.is_directory() && d.path().filename().string().starts_with("eps-")) {
+                    const auto files = store_files(d.path());
+                    if (files != rel) {
+                        throw input_error(d.path().string() + ": its chain stores are not those of " +
+                                          original.string() + " (" + std::to_string(files.size()) + " against " +
+                                          std::to_string(rel.size()) + ")");
+                    }
+                    const auto first = chains::read(d.path() / rel.front());
+                    eps_dirs.emplace_back(first.eps_m, d.path());
+                }
+            }
+        } else {
+            throw input_error(simplified.string() + ": not a tigerlod-simplify output folder");
+        }
+        std::sort(eps_dirs.begin(), eps_dirs.end());
+        for (const auto& [eps, dir] : eps_dirs) {
+            if (!(eps > lod_eps.back())) {
+                throw input_error(dir.string() + ": tolerance " + std::to_string(eps) +
+                                  " m is not above the previous one");
+            }
+            lod_eps.push_back(eps);
+            lod_dirs.push_back(dir);
+        }
+    }
+    const size_t nlods = lod_eps.size();
+
+    // Levels, from each level folder's stores.
+    std::map<uint32_t, std::vector<fs::path>> level_files;
+    std::vector<std::string> level_names;
+    PackedTree tree;
+    auto& sk = tree.skeleton;
+    {
+        std::vector<chains::ChainStore> firsts;
+        std::map<std::string, uint32_t> index_of_dir;
+        for (const auto& r : rel) {
+            const std::string dir = r.parent_path().string();
+            if (!index_of_dir.contains(dir)) {
+                const auto s = chains::read(original / r);
+                index_of_dir[dir] = s.level_index;
+                if (level_names.empty()) {
+                    level_names.resize(s.level_count);
+                    const auto& p = s.projection;
+                    sk.projection_kind = static_cast<uint8_t>(p.kind);
+                    sk.utm_north = p.utm_north ? 1 : 0;
+                    sk.utm_zone = p.utm_zone;
+                    const double v[10] = {p.lon0_deg,        p.lat0_deg,         p.stdlat1_deg, p.stdlat2_deg, p.k0,
+                                          p.false_easting_m, p.false_northing_m, p.grid_m,      p.a_m,         p.f};
+                    std::copy(std::begin(v), std::end(v), std::begin(sk.projection));
+                }
+                if (s.level_index >= level_names.size() || s.level_count != level_names.size()) {
+                    throw input_error((original / r).string() + ": level " + std::to_string(s.level_index) + " of " +
+                                      std::to_string(s.level_count) + " does not fit the other stores");
+                }
+                level_names[s.level_index] = s.level_name;
+            }
+            level_files[index_of_dir[dir]].push_back(r);
+        }
+    }
+    const auto nlevels = static_cast<uint32_t>(level_names.size());
+    sk.level_names = level_names;
+    sk.lod_eps_m = lod_eps;
+
+    // Pass 1: partitions and their units, level by level; the hierarchy from them.
+    std::vector<std::map<std::string, std::vector<std::string>>> units(nlevels); // partition -> units
+    std::vector<std::map<std::string, fs::path>> file_of(nlevels);
+    for (uint32_t l = 0; l < nlevels; ++l) {
+        std::vector<fs::path> paths;
+        for (const auto& r : level_files[l]) {
+            paths.push_back(original / r);
+        }
+        const auto stores = read_all(paths, options.threads);
+        for (size_t i = 0; i < stores.size(); ++i) {
+            const auto& s = stores[i];
+            if (s.level_index != l || s.projection != stores.front().projection) {
+                throw input_error(paths[i].string() + ": level or projection differs from the other stores");
+            }
+            std::set<std::string> u;
+            for (const auto& c : s.constraints) {
+                if (c.kind == chains::constraint_internal) {
+                    u.insert(s.strings[c.unit]);
+                }
+            }
+            units[l][s.partition] = {u.begin(), u.end()};
+            file_of[l][s.partition] = level_files[l][i];
+        }
+    }
+    if (units[0].size() != 1) {
+        throw input_error(original.string() + ": the top level must have one partition, it has " +
+                          std::to_string(units[0].size()));
+    }
+    std::vector<NodeBuild> nodes;
+    nodes.push_back({0, units[0].begin()->first, units[0].begin()->second, {}, {}, {}, {}, 0.0});
+    sk.nodes.push_back({});
+    for (size_t i = 0; i < nodes.size(); ++i) {
+        const uint32_t l = nodes[i].level;
+        auto& n = sk.nodes[i];
+        n.level = l;
+        n.first_child = static_cast<uint32_t>(nodes.size());
+        if (l + 1 < nlevels) {
+            for (const auto& u : nodes[i].units) {
+                if (auto it = units[l + 1].find(u); it != units[l + 1].end()) {
+                    nodes.push_back({l + 1, u, it->second, {}, {}, {}, {}, 0.0});
+                    datatree::Node child;
+                    child.parent = static_cast<uint32_t>(i);
+                    sk.nodes.push_back(child);
+                    ++sk.nodes[i].child_count;
+                }
+            }
+        }
+        if (sk.nodes[i].child_count == 0) {
+            sk.nodes[i].first_child = 0;
+        }
+    }
+    {
+        std::vector<size_t> per_level(nlevels);
+        for (const auto& n : nodes) {
+            ++per_level[n.level];
+        }
+        for (uint32_t l = 0; l < nlevels; ++l) {
+            if (per_level[l] != units[l].size()) {
+                throw input_error(original.string() + "/" + level_names[l] + ": " +
+                                  std::to_string(units[l].size() - per_level[l]) +
+                                  " partitions are not units of the level above");
+            }
+        }
+    }
+    std::unordered_map<std::string, uint32_t> string_index;
+    for (size_t i = 0; i < nodes.size(); ++i) {
+        const std::string code = i == 0 ? std::string() : nodes[i].partition;
+        auto [it, fresh] = string_index.try_emplace(code, 0);
+        if (fresh) {
+            if (!code.empty()) {
+                it->second = static_cast<uint32_t>(sk.strings.size());
+                sk.strings.push_back(code);
+            }
+        }
+        sk.nodes[i].code = it->second;
+    }
+
+    // Pass 2: each level at each LOD: node geometry, errors, payloads.
+    tree.lods.resize(nlods);
+    for (size_t k = 0; k < nlods; ++k) {
+        tree.lods[k].eps_m = lod_eps[k];
+    }
+    for (uint32_t l = 0; l < nlevels; ++l) {
+        std::vector<size_t> at_level;
+        for (size_t i = 0; i < nodes.size(); ++i) {
+            if (nodes[i].level == l) {
+                at_level.push_back(i);
+            }
+        }
+        for (size_t k = 0; k < nlods; ++k) {
+            std::vector<fs::path> paths;
+            for (const auto& r : level_files[l]) {
+                paths.push_back(lod_dirs[k] / r);
+            }
+            const auto stores = read_all(paths, options.threads);
+            std::map<std::string, size_t> store_of;
+            for (size_t s = 0; s < stores.size(); ++s) {
+                store_of[stores[s].partition] = s;
+                if (k > 0 && (stores[s].eps_m != lod_eps[k] || stores[s].metric != stores.front().metric)) {
+                    throw input_error(paths[s].string() + ": tolerance or metric differs from its folder's");
+                }
+            }
+            if (k == 1) {
+                sk.metric = stores.front().metric;
+            }
+            const ChainIndex owned = index_owned(stores, paths);
+            parallel_each(at_level.size(), options.threads, [&](size_t a) {
+                NodeBuild& nb = nodes[at_level[a]];
+                datatree::Node& node = sk.nodes[at_level[a]];
+                const auto sit = store_of.find(nb.partition);
+                if (sit == store_of.end()) {
+                    throw input_error(paths.front().parent_path().string() + ": no store for partition " +
+                                      nb.partition);
+                }
+                const auto& store = stores[sit->second];
+                if (k == 0) {
+                    // The node's map: the chains it owns, and the borders of its units owned by neighbours.
+                    const std::set<std::string> mine(nb.units.begin(), nb.units.end());
+                    for (const auto& c : store.chains) {
+                        if ((c.flags & chains::chain_halo) == 0 || mine.contains(store.strings[c.left]) ||
+                            mine.contains(store.strings[c.right])) {
+                            nb.ids.push_back(c.id);
+                        }
+                    }
+                    std::sort(nb.ids.begin(), nb.ids.end());
+                    node.chains = static_cast<uint32_t>(nb.ids.size());
+                }
+                datatree::Geometry g;
+                g.offsets.reserve(nb.ids.size() + 1);
+                datatree::ChainTable table;
+                std::map<std::string, uint32_t> table_strings{{"", 0}};
+                auto table_string = [&](const std::string& s) {
+                    auto [it, fresh] = table_strings.try_emplace(s, static_cast<uint32_t>(table.strings.size()));
+                    if (fresh) {
+                        table.strings.push_back(s);
+                    }
+                    return it->second;
+                };
+                double error = 0.0;
+                for (size_t ci = 0; ci < nb.ids.size(); ++ci) {
+                    const auto it = owned.find(nb.ids[ci]);
+                    if (it == owned.end()) {
+                        throw input_error(paths[sit->second].string() + ": chain " + std::to_string(nb.ids[ci]) +
+                                          " is in no store of its level at this tolerance");
+                    }
+                    const auto& [os, oc] = it->second;
+                    const auto pts = os->chain_points(*oc);
+                    if (k == 0) {
+                        table.chains.push_back(
+                            {oc->id, table_string(os->strings[oc->left]), table_string(os->strings[oc->right]),
+                             table_string(os->strings[oc->feature_class]), oc->flags & ~uint32_t{chains::chain_halo}});
+                    } else {
+                        const double d = deviation(nb.original.chain(ci), pts);
+                        if (d < 0) {
+                            throw input_error(paths[size_t(os - stores.data())].string() + ": chain " +
+                                              std::to_string(oc->id) +
+                                              " is not a subsequence of its original with the same endpoints");
+                        }
+                        error = std::max(error, d);
+                    }
+                    g.add_chain(pts);
+                }
+                if (k == 0) {
+                    datatree::Box box{INT32_MAX, INT32_MAX, INT32_MIN, INT32_MIN};
+                    for (const auto& p : g.points) {
+                        box = {std::min(box.min_x, p.x), std::min(box.min_y, p.y), std::max(box.max_x, p.x),
+                               std::max(box.max_y, p.y)};
+                    }
+                    if (g.points.empty()) {
+                        box = {};
+                    }
+                    node.box = box;
+                    nb.table = datatree::encode_table(table);
+                    node.lods.resize(nlods);
+                }
+                const double error_m = std::max(nb.last_error, error * sk.grid_m());
+                nb.last_error = error_m;
+                node.lods[k].error_m = error_m;
+                node.lods[k].vertices = g.points.size();
+                nb.lod_payloads.push_back(
+                    datatree::encode_geometry(g, {node.box.min_x, node.box.min_y}, {options.draco_speed}));
+                if (k == 0) {
+                    nb.original = std::move(g);
+                }
+            });
+            for (size_t i : at_level) {
+                tree.lods[k].vertices += sk.nodes[i].lods[k].vertices;
+                tree.lods[k].payload_bytes += nodes[i].lod_payloads[k].size();
+                tree.lods[k].raw_bytes += sk.nodes[i].lods[k].vertices * sizeof(GridPoint);
+            }
+        }
+        for (size_t i : at_level) {
+            nodes[i].original = {};
+            tree.table_bytes += nodes[i].table.size();
+        }
+    }
+
+    // Tiles: a subtree that fits in tile_bytes is one tile; siblings that are
+    // small are grouped; a node too big for one keeps its own payloads in a
+    // tile of its own and its children are tiled the same way.
+    std::vector<uint64_t> subtree(nodes.size());
+    for (size_t i = nodes.size(); i-- > 0;) {
+        subtree[i] += nodes[i].table.size();
+        for (const auto& p : nodes[i].lod_payloads) {
+            subtree[i] += p.size();
+        }
+        if (i > 0) {
+            subtree[sk.nodes[i].parent] += subtree[i];
+        }
+    }
+    std::vector<std::vector<uint32_t>> groups; // each: the subtree roots (or a lone node) of one tile
+    std::vector<bool> lone;                    // the group is one node's own payloads only
+    std::vector<uint32_t> stack{0};
+    while (!stack.empty()) {
+        const uint32_t n = stack.back();
+        stack.pop_back();
+        if (subtree[n] <= options.tile_bytes || sk.nodes[n].child_count == 0) {
+            groups.push_back({n});
+            lone.push_back(false);
+            continue;
+        }
+        groups.push_back({n});
+        lone.push_back(true);
+        const auto& node = sk.nodes[n];
+        std::vector<uint32_t> group;
+        uint64_t group_bytes = 0;
+        std::vector<uint32_t> big;
+        for (uint32_t c = node.first_child; c < node.first_child + node.child_count; ++c) {
+            if (subtree[c] > options.tile_bytes) {
+                big.push_back(c);
+                continue;
+            }
+            if (!group.empty() && group_bytes + subtree[c] > options.tile_bytes) {
+                groups.push_back(std::move(group));
+                lone.push_back(false);
+                group.clear();
+                group_bytes = 0;
+            }
+            group.push_back(c);
+            group_bytes += subtree[c];
+        }
+        if (!group.empty()) {
+            groups.push_back(std::move(group));
+            lone.push_back(false);
+        }
+        for (auto it = big.rbegin(); it != big.rend(); ++it) {
+            stack.push_back(*it);
+        }
+    }
+    for (size_t t = 0; t < groups.size(); ++t) {
+        // The nodes of this tile in breadth-first (index) order.
+        std::vector<uint32_t> members;
+        if (lone[t]) {
+            members = groups[t];
+        } else {
+            std::vector<uint32_t> todo = groups[t];
+            while (!todo.empty()) {
+                const uint32_t n = todo.back();
+                todo.pop_back();
+                members.push_back(n);
+                for (uint32_t c = sk.nodes[n].first_child; c < sk.nodes[n].first_child + sk.nodes[n].child_count; ++c) {
+                    todo.push_back(c);
+                }
+            }
+            std::sort(members.begin(), members.end());
+        }
+        std::string bytes = datatree::tile_header(0);
+        const auto tile_index = static_cast<uint32_t>(sk.tiles.size());
+        auto place = [&](const std::string& payload) {
+            datatree::PayloadRef ref{tile_index, bytes.size(), static_cast<uint32_t>(payload.size()),
+                                     crc32(std::as_bytes(std::span(payload.data(), payload.size())))};
+            bytes += payload;
+            return ref;
+        };
+        for (uint32_t n : members) {
+            sk.nodes[n].table = place(nodes[n].table);
+            for (size_t k = 0; k < nlods; ++k) {
+                sk.nodes[n].lods[k].payload = place(nodes[n].lod_payloads[k]);
+            }
+        }
+        const std::string head = datatree::tile_header(bytes.size());
+        std::copy(head.begin(), head.end(), bytes.begin());
+        Sha256 sha;
+        sha.update(std::as_bytes(std::span(bytes.data(), bytes.size())));
+        const std::string code = groups[t].front() == 0 ? std::string("root") : nodes[groups[t].front()].partition;
+        std::string safe;
+        for (char ch : code) {
+            safe += std::isalnum(static_cast<unsigned char>(ch)) || ch == '-' || ch == '_' ? ch : '_';
+        }
+        sk.tiles.push_back({"tiles/" + safe + "-" + sha.hex_digest().substr(0, 16) + ".tlt", bytes.size()});
+        tree.tile_bytes.push_back(std::move(bytes));
+    }
+    return tree;
+}
+
+WriteStats write_tree(const fs::path& dir, const PackedTree& tree)
+{
+    WriteStats st;
+    std::error_code ec;
+    fs::create_directories(dir / "tiles", ec);
+    if (ec) {
+        throw environment_error(dir.string() + ": cannot create: " + ec.message());
+    }
+    std::set<std::string> names;
+    for (size_t t = 0; t < tree.skeleton.tiles.size(); ++t) {
+        const auto& tile = tree.skeleton.tiles[t];
+        names.insert(fs::path(tile.file).filename().string());
+        const fs::path path = dir / tile.file;
+        // Named by content: a file of that name and size is this tile.
+        if (fs::is_regular_file(path, ec) && fs::file_size(path, ec) == tile.size) {
+            ++st.tiles_kept;
+        } else {
+            write_file_atomic(path, tree.tile_bytes[t]);
+            ++st.tiles_written;
+        }
+        st.tree_bytes += tile.size;
+    }
+    const std::string skeleton = datatree::encode_skeleton(tree.skeleton);
+    write_file_atomic(dir / "skeleton.tls", skeleton);
+    st.skeleton_bytes = skeleton.size();
+    st.tree_bytes += skeleton.size();
+    for (const auto& f : fs::directory_iterator(dir / "tiles")) {
+        if (f.path().extension() == ".tlt" && !names.contains(f.path().filename().string())) {
+            fs::remove(f.path(), ec);
+            ++st.tiles_removed;
+        }
+    }
+    return st;
+}
+
+} // namespace tigerlod::pack

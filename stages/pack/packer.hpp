@@ -1,0 +1,57 @@
+#pragma once
+/// @file packer.hpp
+/// Building a Data Tree from chain stores: the node hierarchy, each node's
+/// chain table and geometry at every LOD (LOD 0 the original chains, then
+/// the simplified ladder), and tiles that group subtrees.
+
+#include "formats/datatree/datatree.hpp"
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace tigerlod::pack {
+
+struct PackOptions {
+    /// A subtree whose payloads fit in this many bytes goes into one tile;
+    /// small sibling subtrees are grouped up to it.
+    uint64_t tile_bytes = 32ULL << 20;
+    int draco_speed = 0;
+    unsigned threads = 1;
+};
+
+/// Per-LOD totals, for the report and the benchmarks.
+struct LodTotals {
+    double eps_m = 0.0;
+    uint64_t vertices = 0;      ///< points of all nodes' chains
+    uint64_t payload_bytes = 0; ///< geometry payloads
+    uint64_t raw_bytes = 0;     ///< the same points as int32 pairs
+};
+
+/// The tree in memory: skeleton plus each tile's bytes.
+struct PackedTree {
+    datatree::Skeleton skeleton;
+    std::vector<std::string> tile_bytes; ///< parallel to skeleton.tiles
+    std::vector<LodTotals> lods;
+    uint64_t table_bytes = 0;
+};
+
+/// Build from an ingest output folder (LOD 0) and a simplify output folder
+/// (its eps-<E>m subfolders). Throws input_error naming the store at fault.
+PackedTree build_tree(const std::filesystem::path& original, const std::filesystem::path& simplified,
+                      const PackOptions& options);
+
+/// What writing a tree did.
+struct WriteStats {
+    size_t tiles_written = 0, tiles_kept = 0, tiles_removed = 0;
+    uint64_t skeleton_bytes = 0, tree_bytes = 0;
+};
+
+/// Write into `dir`, updating a tree already there: tile files are named by
+/// their content, so unchanged ones are kept; new ones are written under a
+/// temporary name and renamed; then the skeleton is replaced atomically;
+/// then tile files it no longer names are removed.
+WriteStats write_tree(const std::filesystem::path& dir, const PackedTree& tree);
+
+} // namespace tigerlod::pack

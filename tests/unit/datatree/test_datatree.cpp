@@ -1,0 +1,210 @@
+// The Data Tree format: skeleton, chain table and geometry payloads round-trip
+// exactly, and every kind of damage is refused with a message, never a crash.
+#include "formats/datatree/datatree.hpp"
+
+#include "core/errors.hpp"
+#include "../../support/synthetic_tree.hpp"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+using namespace tigerlod;
+using namespace tigerlod::datatree;
+
+namespace {
+
+std::span<const std::byte> as_span(const std::string& s)
+{
+    return std::as_bytes(std::span(s.data(), s.size()));
+}
+
+std::string error_of(auto&& f)
+{
+    try {
+        f();
+    } catch (const format_error& e) {
+        return e.what();
+    }
+    return "";
+}
+
+} // namespace
+
+TEST(Geometry, SharedEndpointsAndRingsRoundTripExactly)
+{
+    Geometry g;
+    // A star of three chains meeting at (100, 100), a ring, and a chain whose
+    // interior point equals another chain's endpoint.
+    g.add_chain(std::vector<GridPoint>{{100, 100}, {150, 120}, {200, 100}});
+    g.add_chain(std::vector<GridPoint>{{100, 100}, {100, 300}});
+    g.add_chain(std::vector<GridPoint>{{0, 0}, {50, 80}, {100, 100}});
+    g.add_chain(std::vector<GridPoint>{{300, 300}, {400, 300}, {400, 400}, {300, 300}});
+    g.add_chain(std::vector<GridPoint>{{200, 100}, {100, 300}, {0, 0}});
+    const GridPoint origin{0, 0};
+    const std::string bytes = encode_geometry(g, origin);
+    const Geometry back = decode_geometry(as_span(bytes), origin, 5, g.points.size(), "test");
+    EXPECT_EQ(back, g);
+    EXPECT_EQ(back.memory_bytes(), geometry_bytes(5, g.points.size()));
+}
+
+TEST(Geometry, RandomChainsRoundTripExactly)
+{
+    std::mt19937 rng(7);
+    for (int round = 0; round < 200; ++round) {
+        Geometry g;
+        const GridPoint origin{static_cast<int32_t>(rng() % 1000) - 500, -2000000000};
+        std::uniform_int_distribution<int32_t> coord(0, 1 << (1 + round % 30));
+        const size_t nchains = rng() % 8;
+        std::vector<GridPoint> ends;
+        for (size_t c = 0; c < nchains; ++c) {
+            std::vector<GridPoint> pts;
+            const size_t n = 2 + rng() % 20;
+            for (size_t k = 0; k < n; ++k) {
+                pts.push_back({origin.x + coord(rng), origin.y + coord(rng)});
+            }
+            if (!ends.empty() && rng() % 2) {
+                pts.front() = ends[rng() % ends.size()];
+            }
+            if (!ends.empty() && rng() % 2) {
+                pts.back() = ends[rng() % ends.size()];
+            }
+            ends.push_back(pts.front());
+            ends.push_back(pts.back());
+            g.add_chain(pts);
+        }
+        const std::string bytes = encode_geometry(g, origin);
+        ASSERT_EQ(decode_geometry(as_span(bytes), origin, nchains, g.points.size(), "test"), g) << "round " << round;
+    }
+}
+
+TEST(Geometry, PointBelowTheOriginIsRefused)
+{
+    Geometry g;
+    g.add_chain(std::vector<GridPoint>{{10, 10}, {5, 20}});
+    EXPECT_THROW(encode_geometry(g, {6, 0}), input_error);
+}
+
+TEST(Geometry, CountsThatDisagreeWithTheSkeletonAreRefused)
+{
+    Geometry g;
+    g.add_chain(std::vector<GridPoint>{{10, 10}, {20, 20}, {30, 10}});
+    const std::string bytes = encode_geometry(g, {0, 0});
+    EXPECT_NE(error_of([&] {
+                  decode_geometry(as_span(bytes), {0, 0}, 2, 3, "n7");
+              }).find("n7: has 1 chains, the skeleton says 2"),
+              std::string::npos);
+    EXPECT_NE(error_of([&] {
+                  decode_geometry(as_span(bytes), {0, 0}, 1, 4, "n7");
+              }).find("has 3 points, the skeleton says 4"),
+              std::string::npos);
+}
+
+TEST(Geometry, EveryDamagedByteIsRefusedOrDecodedWithoutCrashing)
+{
+    const auto t = tigerlod::testing::make_synthetic_tree(1);
+    const std::string good = t.payloads[1][1];
+    const auto& node = t.skeleton.nodes[1];
+    size_t refused = 0;
+    for (size_t i = 0; i < good.size(); ++i) {
+        for (uint8_t flip : {uint8_t{0x01}, uint8_t{0x80}, uint8_t{0xFF}}) {
+            std::string bad = good;
+            bad[i] = static_cast<char>(bad[i] ^ flip);
+            try {
+                decode_geometry(as_span(bad), {node.box.min_x, node.box.min_y}, node.chains, node.lods[0].vertices,
+                                "x");
+            } catch (const format_error&) {
+                ++refused;
+            }
+        }
+    }
+    // Truncations are always refused.
+    for (size_t n = 0; n < good.size(); ++n) {
+        EXPECT_THROW(decode_geometry(as_span(good.substr(0, n)), {node.box.min_x, node.box.min_y}, node.chains,
+                                     node.lods[0].vertices, "x"),
+                     format_error)
+            << n;
+    }
+    EXPECT_GT(refused, 0U);
+}
+
+TEST(ChainTable, RoundTripAndDamage)
+{
+    ChainTable t;
+    t.strings = {"", "51063", "510630201001", "S1400"};
+    t.chains = {{5, 1, 2, 3, 0}, {3, 0, 1, 0, 1}, {~0ULL, 2, 2, 0, 4}};
+    const std::string bytes = encode_table(t);
+    EXPECT_EQ(decode_table(as_span(bytes), "t"), t);
+    for (size_t n = 0; n < bytes.size(); ++n) {
+        EXPECT_THROW(decode_table(as_span(bytes.substr(0, n)), "t"), format_error);
+    }
+    std::string bad = bytes;
+    bad[0] = 2; // a geometry payload's kind
+    EXPECT_NE(error_of([&] { decode_table(as_span(bad), "t"); }).find("not a chain table"), std::string::npos);
+}
+
+TEST(Skeleton, RoundTrip)
+{
+    const auto t = tigerlod::testing::make_synthetic_tree(2);
+    const std::string bytes = encode_skeleton(t.skeleton);
+    EXPECT_EQ(decode_skeleton(as_span(bytes), "s"), t.skeleton);
+    EXPECT_EQ(t.skeleton.nodes.size(), 21U);
+}
+
+TEST(Skeleton, DamageIsNamed)
+{
+    const auto t = tigerlod::testing::make_synthetic_tree(1);
+    const std::string good = encode_skeleton(t.skeleton);
+    auto fault = [&](const std::string& bytes) { return error_of([&] { decode_skeleton(as_span(bytes), "sk.tls"); }); };
+    std::string bad = good;
+    bad[0] = 'X';
+    EXPECT_NE(fault(bad).find("sk.tls: not a Data Tree skeleton (wrong magic)"), std::string::npos);
+    bad = good;
+    bad[8] = 9;
+    EXPECT_NE(fault(bad).find("unsupported major version 9"), std::string::npos);
+    EXPECT_NE(fault(good.substr(0, good.size() - 10)).find("truncated"), std::string::npos);
+    EXPECT_NE(fault(good + "xx").find("trailing bytes"), std::string::npos);
+    bad = good;
+    bad[200] = static_cast<char>(bad[200] ^ 1);
+    EXPECT_NE(fault(bad).find("checksum mismatch"), std::string::npos);
+    // Every single-byte change and every truncation is refused.
+    for (size_t i = 0; i < good.size(); ++i) {
+        bad = good;
+        bad[i] = static_cast<char>(bad[i] ^ 0x40);
+        EXPECT_FALSE(fault(bad).empty()) << i;
+        EXPECT_FALSE(fault(good.substr(0, i)).empty()) << i;
+    }
+}
+
+TEST(Skeleton, ShapeErrorsAreCaughtEvenWithAValidChecksum)
+{
+    auto t = tigerlod::testing::make_synthetic_tree(1);
+    auto fault = [&](const Skeleton& s) {
+        return error_of([&] { decode_skeleton(as_span(encode_skeleton(s)), "sk"); });
+    };
+    Skeleton s = t.skeleton;
+    s.nodes[2].parent = 3;
+    EXPECT_NE(fault(s).find("node 2: parent 3 is not an earlier node"), std::string::npos);
+    s = t.skeleton;
+    s.nodes[1].lods[2].error_m = 0.0;
+    EXPECT_NE(fault(s).find("node 1: LOD errors must be finite and grow"), std::string::npos);
+    s = t.skeleton;
+    s.nodes[3].lods[1].payload.offset = s.tiles[s.nodes[3].lods[1].payload.tile].size;
+    EXPECT_NE(fault(s).find("node 3: payload outside its tile"), std::string::npos);
+    s = t.skeleton;
+    s.tiles[0].file = "../../etc/passwd";
+    EXPECT_NE(fault(s).find("must be relative and stay inside the tree"), std::string::npos);
+    s = t.skeleton;
+    s.nodes[0].child_count = 3;
+    EXPECT_NE(fault(s).find("not reachable from the root"), std::string::npos);
+}
+
+TEST(Tile, HeaderChecked)
+{
+    const std::string h = tile_header(100);
+    EXPECT_NO_THROW(check_tile_header(as_span(h), 100, "t"));
+    EXPECT_NE(error_of([&] { check_tile_header(as_span(h), 90, "t.tlt"); }).find("t.tlt: truncated"),
+              std::string::npos);
+    EXPECT_NE(error_of([&] { check_tile_header(as_span(h.substr(0, 10)), 100, "t.tlt"); }).find("truncated in header"),
+              std::string::npos);
+}

@@ -1,0 +1,273 @@
+// The reader runtime on a synthetic quadtree: exact payloads, the front of
+// Algorithm 6.1, the byte budget under a long random camera walk,
+// prefetching, and damaged trees that are reported, never crashed on.
+// Also built under ThreadSanitizer (scripts/test).
+#include "reader/reader.hpp"
+
+#include "../../support/synthetic_tree.hpp"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <random>
+
+namespace fs = std::filesystem;
+using namespace tigerlod;
+using namespace tigerlod::reader;
+
+namespace {
+
+constexpr int32_t side = 1 << 20;
+
+struct TreeDir {
+    fs::path dir;
+    tigerlod::testing::SyntheticTree tree;
+    explicit TreeDir(const std::string& name, uint32_t depth = 3)
+        : dir(fs::temp_directory_path() / ("tigerlod_reader_" + name + "_" + std::to_string(::getpid()))),
+          tree(tigerlod::testing::make_synthetic_tree(depth, side))
+    {
+        fs::remove_all(dir);
+        tree.write(dir);
+    }
+    ~TreeDir() { fs::remove_all(dir); }
+    std::shared_ptr<Tree> open() const
+    {
+        std::string error;
+        auto t = Tree::open(dir, error);
+        EXPECT_TRUE(t) << error;
+        return t;
+    }
+};
+
+/// A view of the whole root box at `px` pixels a side.
+View whole(uint32_t px = 512)
+{
+    return {side / 2.0, side / 2.0, double(side) / px, px, px};
+}
+
+} // namespace
+
+TEST(Tree, EveryPayloadDecodesExactly)
+{
+    TreeDir d("exact");
+    const auto t = d.open();
+    ASSERT_TRUE(t);
+    EXPECT_EQ(t->skeleton(), d.tree.skeleton);
+    for (uint32_t n = 0; n < t->skeleton().nodes.size(); ++n) {
+        for (uint32_t k = 0; k < t->skeleton().lod_eps_m.size(); ++k) {
+            datatree::Geometry g;
+            ASSERT_TRUE(t->read_geometry(n, k, g).ok());
+            EXPECT_EQ(g, d.tree.geometry[n][k]) << n << " " << k;
+        }
+        datatree::ChainTable table;
+        ASSERT_TRUE(t->read_table(n, table).ok());
+        EXPECT_EQ(table, d.tree.tables[n]);
+    }
+    EXPECT_LT(t->skeleton_bytes(), t->tree_bytes());
+}
+
+TEST(Front, Algorithm61)
+{
+    TreeDir d("front", 2);
+    const auto tree = d.open();
+    const auto& s = tree->skeleton();
+    // The LOD errors of every node are 0, 20 and 80 m (grid 1 cm).
+    // Whole tree in 512 px: 2048 grid units (20.48 m) a pixel. The root covers
+    // the whole viewport and each child a quarter, not less than the default
+    // fraction: the 16 grandchildren (leaves) are drawn, each at the coarsest
+    // LOD under one pixel of error (LOD 1: 20 m < 20.48 m).
+    const auto front = select_front(s, whole());
+    ASSERT_EQ(front.size(), 16U);
+    for (uint32_t i = 0; i < 16; ++i) {
+        EXPECT_EQ(front[i].lod, 1U);
+        EXPECT_EQ(s.nodes[front[i].node].child_count, 0U);
+        EXPECT_EQ(s.nodes[s.nodes[front[i].node].parent].parent, 0U);
+    }
+    // A larger fraction draws the four children.
+    FrontOptions quarter;
+    quarter.node_fraction = 0.3;
+    EXPECT_EQ(select_front(s, whole(), quarter), (std::vector<FrontItem>{{1, 1}, {2, 1}, {3, 1}, {4, 1}}));
+    // With a threshold of 4 px, LOD 2 (80 m < 81.9 m) qualifies.
+    FrontOptions coarse;
+    coarse.pixel_error = 4.0;
+    EXPECT_EQ(select_front(s, whole(), coarse)[0].lod, 2U);
+    // Above 1, even the root is small enough.
+    FrontOptions big;
+    big.node_fraction = 1.5;
+    EXPECT_EQ(select_front(s, whole(), big), (std::vector<FrontItem>{{0, 1}}));
+    // Zoomed into the lower-left quadrant: only its subtree survives culling,
+    // and at this scale its children (leaves) are drawn at LOD 0.
+    View v{side / 4.0 - 100, side / 4.0 - 100, double(side) / 2 / 512 / 8, 512, 512};
+    const auto zoomed = select_front(s, v);
+    ASSERT_FALSE(zoomed.empty());
+    for (const auto& f : zoomed) {
+        EXPECT_EQ(s.nodes[f.node].parent, 1U);
+        EXPECT_EQ(f.lod, 0U);
+    }
+    // Outside the tree: nothing.
+    View away = whole();
+    away.center_x = -10.0 * side;
+    EXPECT_TRUE(select_front(s, away).empty());
+}
+
+TEST(Streamer, BudgetNeverExceededOnARandomWalk)
+{
+    TreeDir d("walk", 3);
+    const auto t = d.open();
+    uint64_t all = 0;
+    for (const auto& n : t->skeleton().nodes) {
+        for (const auto& l : n.lods) {
+            all += datatree::geometry_bytes(n.chains, l.vertices);
+        }
+    }
+    StreamOptions o;
+    o.budget_bytes = all / 6;
+    Streamer st(t, o);
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<double> pos(0, side), zoom(-6, 1);
+    size_t drawn = 0;
+    for (int step = 0; step < 600; ++step) {
+        View v = whole();
+        v.center_x = pos(rng);
+        v.center_y = pos(rng);
+        v.units_per_pixel *= std::exp2(zoom(rng));
+        st.set_view(v);
+        if (step % 3 == 0) {
+            st.wait_front(std::chrono::milliseconds(200));
+        }
+        for (const auto& dr : st.resident_front()) {
+            if (dr.geometry) {
+                ++drawn;
+                ASSERT_EQ(*dr.geometry, d.tree.geometry[dr.wanted.node][dr.lod]);
+            }
+        }
+        size_t held = 0;
+        for (const auto& r : st.resident()) {
+            EXPECT_EQ(r.bytes, r.geometry->memory_bytes());
+            held += r.geometry->memory_bytes();
+        }
+        ASSERT_LE(held, o.budget_bytes) << "step " << step;
+    }
+    st.wait_idle();
+    const Stats s = st.stats();
+    EXPECT_LE(s.peak_bytes, o.budget_bytes);
+    EXPECT_GT(s.evictions, 0U);
+    EXPECT_GT(s.hits, 0U);
+    EXPECT_GT(drawn, 0U);
+    EXPECT_EQ(s.errors, 0U);
+    EXPECT_GT(s.seconds_waiting, 0.0);
+}
+
+TEST(Streamer, PrefetchTurnsAPanIntoHits)
+{
+    TreeDir d("prefetch", 3);
+    const auto t = d.open();
+    View v = whole();
+    v.units_per_pixel /= 4; // a quarter of the tree in view
+    v.center_x = v.center_y = side * 0.3;
+    View panned = v;
+    panned.center_x += 0.3 * v.width * v.units_per_pixel;
+    auto misses_after_pan = [&](bool prefetch) {
+        StreamOptions o;
+        o.prefetch = prefetch;
+        o.budget_bytes = 1ULL << 30;
+        Streamer st(t, o);
+        st.set_view(v);
+        st.wait_idle();
+        const auto before = st.stats().misses;
+        st.set_view(panned);
+        st.resident_front();
+        return st.stats().misses - before;
+    };
+    EXPECT_EQ(misses_after_pan(true), 0U);
+    EXPECT_GT(misses_after_pan(false), 0U);
+}
+
+TEST(Streamer, FallsBackToAResidentLodOfTheSameNode)
+{
+    TreeDir d("fallback", 1);
+    // Every LOD 0 payload is damaged, so a view that wants LOD 0 can only be
+    // drawn from the coarser LODs already resident.
+    for (const auto& n : d.tree.skeleton.nodes) {
+        const auto& ref = n.lods[0].payload;
+        std::fstream f(d.dir / d.tree.skeleton.tiles[ref.tile].file, std::ios::in | std::ios::out | std::ios::binary);
+        f.seekp(static_cast<std::streamoff>(ref.offset + 1));
+        f.put('\x33');
+    }
+    const auto t = d.open();
+    StreamOptions o;
+    o.prefetch = false;
+    Streamer st(t, o);
+    View v = whole();
+    v.units_per_pixel *= 8; // coarse: LOD 2 for every node
+    const auto coarse = st.set_view(v);
+    ASSERT_TRUE(st.wait_front(std::chrono::seconds(10)));
+    View fine = v;
+    fine.units_per_pixel /= 1024; // LOD 0 wanted, the same nodes in view
+    fine.width = fine.height = 512 * 1024;
+    const auto front = st.set_view(fine);
+    ASSERT_EQ(front.size(), coarse.size());
+    st.wait_idle();
+    for (const auto& dr : st.resident_front()) {
+        EXPECT_EQ(dr.wanted.lod, 0U);
+        ASSERT_TRUE(dr.geometry);
+        EXPECT_EQ(dr.lod, 2U);
+        EXPECT_EQ(*dr.geometry, d.tree.geometry[dr.wanted.node][2]);
+    }
+    EXPECT_EQ(st.stats().errors, front.size());
+}
+
+TEST(Damage, CorruptTruncatedAndMissingTilesAreReportedAndTheRestStillDraws)
+{
+    TreeDir d("damage", 1);
+    const auto& sk = d.tree.skeleton;
+    // Corrupt a payload byte of node 1 (tile 1); truncate tile 2; remove tile 3.
+    {
+        const auto& ref = sk.nodes[1].lods[0].payload;
+        std::fstream f(d.dir / sk.tiles[ref.tile].file, std::ios::in | std::ios::out | std::ios::binary);
+        f.seekp(static_cast<std::streamoff>(ref.offset + ref.size / 2));
+        f.put('\x5A');
+    }
+    fs::resize_file(d.dir / sk.tiles[2].file, sk.tiles[2].size - 10);
+    fs::remove(d.dir / sk.tiles[3].file);
+    const auto t = d.open();
+    datatree::Geometry g;
+    Status s1 = t->read_geometry(1, 0, g);
+    EXPECT_NE(s1.error.find("t1.tlt: node 1 (a) LOD 0: checksum mismatch"), std::string::npos) << s1.error;
+    Status s2 = t->read_geometry(2, 0, g);
+    EXPECT_NE(s2.error.find("t2.tlt: truncated"), std::string::npos) << s2.error;
+    EXPECT_NE(s2.error.find("node 2 (b)"), std::string::npos) << s2.error;
+    Status s3 = t->read_geometry(3, 0, g);
+    EXPECT_NE(s3.error.find("t3.tlt: node 3 (c) LOD 0: cannot open"), std::string::npos) << s3.error;
+    EXPECT_TRUE(t->read_geometry(4, 0, g).ok());
+
+    StreamOptions o;
+    Streamer st(t, o);
+    View v = whole();
+    v.units_per_pixel /= 64; // LOD 0 everywhere
+    st.set_view(v);
+    EXPECT_FALSE(st.wait_front(std::chrono::seconds(10)));
+    st.wait_idle();
+    size_t drawn = 0;
+    for (const auto& dr : st.resident_front()) {
+        drawn += dr.geometry != nullptr;
+    }
+    EXPECT_GE(drawn, 1U); // node 4 at least
+    EXPECT_GE(st.stats().errors, 3U);
+    EXPECT_EQ(st.errors().size(), st.stats().errors);
+}
+
+TEST(Damage, BadSkeletonIsAnErrorNotACrash)
+{
+    TreeDir d("badskel", 1);
+    {
+        std::fstream f(d.dir / "skeleton.tls", std::ios::in | std::ios::out | std::ios::binary);
+        f.seekp(0);
+        f.put('Q');
+    }
+    std::string error;
+    EXPECT_FALSE(Tree::open(d.dir, error));
+    EXPECT_NE(error.find("skeleton.tls: not a Data Tree skeleton"), std::string::npos) << error;
+    EXPECT_FALSE(Tree::open(d.dir / "nowhere", error));
+    EXPECT_NE(error.find("cannot open"), std::string::npos);
+}
