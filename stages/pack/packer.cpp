@@ -391,9 +391,11 @@ PackedTree build_tree(const fs::path& original, const fs::path& simplified, cons
         }
     }
 
-    // Tiles: a subtree that fits in tile_bytes is one tile; siblings that are
-    // small are grouped; a node too big for one keeps its own payloads in a
-    // tile of its own and its children are tiled the same way.
+    // Tiles: a subtree that fits in tile_bytes is one tile; a node whose
+    // subtree does not keeps its own payloads in a tile of its own and its
+    // children are tiled the same way. Each decision depends on the node's own
+    // subtree only, so a change in one region rewrites that region's tile and,
+    // only if its size crosses the target, the tiling just above it.
     std::vector<uint64_t> subtree(nodes.size());
     for (size_t i = nodes.size(); i-- > 0;) {
         subtree[i] += nodes[i].table.size();
@@ -404,52 +406,29 @@ PackedTree build_tree(const fs::path& original, const fs::path& simplified, cons
             subtree[sk.nodes[i].parent] += subtree[i];
         }
     }
-    std::vector<std::vector<uint32_t>> groups; // each: the subtree roots (or a lone node) of one tile
-    std::vector<bool> lone;                    // the group is one node's own payloads only
+    std::vector<uint32_t> groups; // the root of each tile's subtree
+    std::vector<bool> lone;       // the tile holds that node's own payloads only
     std::vector<uint32_t> stack{0};
     while (!stack.empty()) {
         const uint32_t n = stack.back();
         stack.pop_back();
-        if (subtree[n] <= options.tile_bytes || sk.nodes[n].child_count == 0) {
-            groups.push_back({n});
-            lone.push_back(false);
-            continue;
-        }
-        groups.push_back({n});
-        lone.push_back(true);
         const auto& node = sk.nodes[n];
-        std::vector<uint32_t> group;
-        uint64_t group_bytes = 0;
-        std::vector<uint32_t> big;
-        for (uint32_t c = node.first_child; c < node.first_child + node.child_count; ++c) {
-            if (subtree[c] > options.tile_bytes) {
-                big.push_back(c);
-                continue;
+        const bool whole = subtree[n] <= options.tile_bytes || node.child_count == 0;
+        groups.push_back(n);
+        lone.push_back(!whole);
+        if (!whole) {
+            for (uint32_t c = node.first_child + node.child_count; c-- > node.first_child;) {
+                stack.push_back(c);
             }
-            if (!group.empty() && group_bytes + subtree[c] > options.tile_bytes) {
-                groups.push_back(std::move(group));
-                lone.push_back(false);
-                group.clear();
-                group_bytes = 0;
-            }
-            group.push_back(c);
-            group_bytes += subtree[c];
-        }
-        if (!group.empty()) {
-            groups.push_back(std::move(group));
-            lone.push_back(false);
-        }
-        for (auto it = big.rbegin(); it != big.rend(); ++it) {
-            stack.push_back(*it);
         }
     }
     for (size_t t = 0; t < groups.size(); ++t) {
         // The nodes of this tile in breadth-first (index) order.
         std::vector<uint32_t> members;
         if (lone[t]) {
-            members = groups[t];
+            members = {groups[t]};
         } else {
-            std::vector<uint32_t> todo = groups[t];
+            std::vector<uint32_t> todo{groups[t]};
             while (!todo.empty()) {
                 const uint32_t n = todo.back();
                 todo.pop_back();
@@ -478,7 +457,7 @@ PackedTree build_tree(const fs::path& original, const fs::path& simplified, cons
         std::copy(head.begin(), head.end(), bytes.begin());
         Sha256 sha;
         sha.update(std::as_bytes(std::span(bytes.data(), bytes.size())));
-        const std::string code = groups[t].front() == 0 ? std::string("root") : nodes[groups[t].front()].partition;
+        const std::string code = groups[t] == 0 ? std::string("root") : nodes[groups[t]].partition;
         std::string safe;
         for (char ch : code) {
             safe += std::isalnum(static_cast<unsigned char>(ch)) || ch == '-' || ch == '_' ? ch : '_';

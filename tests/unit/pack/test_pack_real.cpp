@@ -1,0 +1,294 @@
+// Floyd County (../shared/data, skipped with a reason when absent) through
+// ingest, simplify at 4 and 64 m, and pack, then read back with the reader
+// runtime: every LOD of every node decodes to exactly the chains of the stores
+// (borders from the store that owns them), packing is deterministic, and
+// repacking after one partition changed rewrites only its tile.
+#include "formats/chains/chain_store.hpp"
+#include "reader/reader.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <fstream>
+#include <map>
+#include <set>
+
+namespace fs = std::filesystem;
+using namespace tigerlod;
+
+namespace {
+
+const fs::path source_dir = TIGERLOD_SOURCE_DIR;
+const fs::path bin_dir = TIGERLOD_BIN_DIR;
+const fs::path floyd_edges = source_dir.parent_path() / "shared" / "data" / "tiger" / "tl_2020_51063_edges.zip";
+
+std::string slurp(const fs::path& p)
+{
+    std::ifstream in(p, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+int run(const std::string& tool, const std::string& args, const fs::path& log)
+{
+    const std::string cmd = (bin_dir / ("tigerlod-" + tool)).string() + " " + args + " >" + log.string() + " 2>&1";
+    const int status = std::system(cmd.c_str());
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+class PackReal : public ::testing::Test {
+  protected:
+    static inline fs::path dir;
+    static inline bool ready = false;
+
+    static void SetUpTestSuite()
+    {
+        if (!fs::exists(floyd_edges)) {
+            return;
+        }
+        dir = fs::temp_directory_path() / ("tigerlod-pack-real-" + std::to_string(::getpid()));
+        fs::remove_all(dir);
+        fs::create_directories(dir);
+        const std::string d = dir.string();
+        ASSERT_EQ(run("ingest", (source_dir / "configs" / "floyd.yaml").string() + " " + d + "/ingest", dir / "log"), 0)
+            << slurp(dir / "log");
+        ASSERT_EQ(run("simplify", "--tolerances 4,64 --threads 2 " + d + "/ingest " + d + "/simp", dir / "log"), 0)
+            << slurp(dir / "log");
+        // Small tiles, so the tree has several.
+        ASSERT_EQ(run("pack", "--tile-mb 0.05 --threads 2 " + d + "/ingest " + d + "/simp " + d + "/tree", dir / "log"),
+                  0)
+            << slurp(dir / "log");
+        ready = true;
+    }
+    static void TearDownTestSuite()
+    {
+        if (!dir.empty()) {
+            fs::remove_all(dir);
+        }
+    }
+    void SetUp() override
+    {
+        if (!fs::exists(floyd_edges)) {
+            GTEST_SKIP() << "needs ../shared/data/tiger (Floyd County TIGER/Line 2020): " << floyd_edges;
+        }
+        ASSERT_TRUE(ready);
+    }
+    static std::shared_ptr<reader::Tree> open(const fs::path& p)
+    {
+        std::string error;
+        auto t = reader::Tree::open(p, error);
+        EXPECT_TRUE(t) << error;
+        return t;
+    }
+};
+
+/// The stores of one level at one LOD folder, by partition.
+std::map<std::string, chains::ChainStore> level_stores(const fs::path& lod_dir, const std::string& level)
+{
+    std::map<std::string, chains::ChainStore> out;
+    for (const auto& f : fs::directory_iterator(lod_dir / level)) {
+        auto s = chains::read(f.path());
+        out.emplace(s.partition, std::move(s));
+    }
+    return out;
+}
+
+} // namespace
+
+TEST_F(PackReal, EveryLodOfEveryNodeDecodesToItsStoresExactly)
+{
+    const auto tree = open(dir / "tree");
+    ASSERT_TRUE(tree);
+    const auto& sk = tree->skeleton();
+    ASSERT_EQ(sk.lod_eps_m, (std::vector<double>{0.0, 4.0, 64.0}));
+    ASSERT_EQ(sk.level_names.size(), 5U);
+    // One node per unit with units below it: the root, 1 state, 1 county, 5 tracts, 12 block groups.
+    EXPECT_EQ(sk.nodes.size(), 20U);
+    EXPECT_GT(sk.tiles.size(), 2U);
+    const std::vector<fs::path> lod_dirs{dir / "ingest", dir / "simp" / "eps-4m", dir / "simp" / "eps-64m"};
+    size_t checked_chains = 0, borders = 0;
+    for (uint32_t l = 0; l < sk.level_names.size(); ++l) {
+        // The node's chains come from the original stores (simplified stores hold no halo).
+        const auto originals = level_stores(lod_dirs[0], sk.level_names[l]);
+        for (size_t k = 0; k < lod_dirs.size(); ++k) {
+            const auto stores = level_stores(lod_dirs[k], sk.level_names[l]);
+            // Owned chains of the level, by id.
+            std::map<uint64_t, std::pair<const chains::ChainStore*, const chains::ChainInfo*>> owned;
+            for (const auto& [p, s] : stores) {
+                for (const auto& c : s.chains) {
+                    if (!(c.flags & chains::chain_halo)) {
+                        ASSERT_TRUE(owned.emplace(c.id, std::make_pair(&s, &c)).second);
+                    }
+                }
+            }
+            for (uint32_t n = 0; n < sk.nodes.size(); ++n) {
+                const auto& node = sk.nodes[n];
+                if (node.level != l) {
+                    continue;
+                }
+                const std::string partition = n == 0 ? "all" : sk.strings[node.code];
+                const auto& store = originals.at(partition);
+                std::set<std::string> units;
+                for (const auto& cp : store.constraints) {
+                    units.insert(store.strings[cp.unit]);
+                }
+                std::set<uint64_t> expect_ids;
+                for (const auto& c : store.chains) {
+                    const bool border = units.contains(store.strings[c.left]) || units.contains(store.strings[c.right]);
+                    if (!(c.flags & chains::chain_halo) || border) {
+                        expect_ids.insert(c.id);
+                        borders += (c.flags & chains::chain_halo) != 0;
+                    }
+                }
+                datatree::ChainTable table;
+                ASSERT_TRUE(tree->read_table(n, table).ok());
+                datatree::Geometry g;
+                const auto st = tree->read_geometry(n, static_cast<uint32_t>(k), g);
+                ASSERT_TRUE(st.ok()) << st.error;
+                ASSERT_EQ(table.chains.size(), expect_ids.size()) << "node " << n;
+                ASSERT_EQ(g.chain_count(), expect_ids.size());
+                auto id = expect_ids.begin();
+                for (size_t i = 0; i < table.chains.size(); ++i, ++id) {
+                    const auto& e = table.chains[i];
+                    ASSERT_EQ(e.id, *id);
+                    const auto& [os, oc] = owned.at(e.id);
+                    const auto pts = os->chain_points(*oc);
+                    ASSERT_TRUE(std::equal(pts.begin(), pts.end(), g.chain(i).begin(), g.chain(i).end()))
+                        << "node " << n << " LOD " << k << " chain " << e.id;
+                    EXPECT_EQ(table.strings[e.left], os->strings[oc->left]);
+                    EXPECT_EQ(table.strings[e.right], os->strings[oc->right]);
+                    EXPECT_EQ(e.flags & chains::chain_closed, oc->flags & chains::chain_closed);
+                    ++checked_chains;
+                }
+                EXPECT_EQ(node.lods[k].vertices, g.points.size());
+                if (k > 0) {
+                    EXPECT_GE(node.lods[k].error_m, node.lods[k - 1].error_m);
+                    EXPECT_LE(node.lods[k].error_m, sk.lod_eps_m[k] * 1.01); // eps is ground metres; Albers scale ~1
+                }
+            }
+        }
+    }
+    EXPECT_GT(checked_chains, 1000U);
+    EXPECT_GT(borders, 0U); // borders owned by a neighbour do appear
+    EXPECT_LT(double(tree->skeleton_bytes()), 0.01 * double(tree->tree_bytes()));
+}
+
+TEST_F(PackReal, DeterministicAcrossThreads)
+{
+    const std::string d = dir.string();
+    ASSERT_EQ(run("pack", "--tile-mb 0.05 --threads 1 " + d + "/ingest " + d + "/simp " + d + "/tree1", dir / "log"), 0)
+        << slurp(dir / "log");
+    EXPECT_EQ(slurp(dir / "tree1" / "skeleton.tls"), slurp(dir / "tree" / "skeleton.tls"));
+    for (const auto& f : fs::directory_iterator(dir / "tree" / "tiles")) {
+        EXPECT_EQ(slurp(f.path()), slurp(dir / "tree1" / "tiles" / f.path().filename()));
+    }
+    fs::remove_all(dir / "tree1");
+}
+
+TEST_F(PackReal, RepackingAfterOnePartitionChangedRewritesOnlyTheTilesShowingIt)
+{
+    const std::string d = dir.string();
+    fs::copy(dir / "simp", dir / "simp2", fs::copy_options::recursive);
+    fs::copy(dir / "tree", dir / "tree2", fs::copy_options::recursive);
+    // The region is re-simplified: one block group's blocks at 64 m get the
+    // (also valid) 4 m chains.
+    const auto before = open(dir / "tree2");
+    const auto& sk = before->skeleton();
+    uint32_t node = 0;
+    for (uint32_t n = 0; n < sk.nodes.size(); ++n) {
+        if (sk.nodes[n].child_count == 0 && sk.nodes[n].level == 4) {
+            node = n;
+            break;
+        }
+    }
+    ASSERT_NE(node, 0U);
+    const std::string code = sk.strings[sk.nodes[node].code];
+    auto store = chains::read(dir / "simp2" / "eps-4m" / "block" / (code + ".tlc"));
+    store.eps_m = 64.0;
+    chains::write(dir / "simp2" / "eps-64m" / "block" / (code + ".tlc"), store);
+    // The nodes that show a chain of that partition: its own node and the
+    // neighbours across its borders. Their tiles, and only theirs, must change.
+    std::set<uint64_t> changed_ids;
+    for (const auto& c : store.chains) {
+        if (!(c.flags & chains::chain_halo)) {
+            changed_ids.insert(c.id);
+        }
+    }
+    std::set<std::string> affected_tiles;
+    size_t affected_nodes = 0;
+    for (uint32_t n = 0; n < sk.nodes.size(); ++n) {
+        if (sk.nodes[n].level != sk.nodes[node].level) {
+            continue;
+        }
+        datatree::ChainTable t;
+        ASSERT_TRUE(before->read_table(n, t).ok());
+        if (std::any_of(t.chains.begin(), t.chains.end(), [&](const auto& e) { return changed_ids.contains(e.id); })) {
+            affected_tiles.insert(fs::path(sk.tiles[sk.nodes[n].lods[2].payload.tile].file).filename().string());
+            ++affected_nodes;
+        }
+    }
+    EXPECT_GE(affected_nodes, 2U); // the block group and at least one neighbour
+    std::map<std::string, fs::file_time_type> times;
+    for (const auto& f : fs::directory_iterator(dir / "tree2" / "tiles")) {
+        times[f.path().filename().string()] = fs::last_write_time(f.path());
+    }
+    ASSERT_EQ(run("pack", "--tile-mb 0.05 " + d + "/ingest " + d + "/simp2 " + d + "/tree2", dir / "log"), 0)
+        << slurp(dir / "log");
+    const size_t n_aff = affected_tiles.size();
+    EXPECT_NE(slurp(dir / "log")
+                  .find("(" + std::to_string(n_aff) + " written, " + std::to_string(sk.tiles.size() - n_aff) +
+                        " kept, " + std::to_string(n_aff) + " removed)"),
+              std::string::npos)
+        << slurp(dir / "log");
+    // The tiles that were not affected are the very same files, untouched.
+    size_t untouched = 0;
+    for (const auto& f : fs::directory_iterator(dir / "tree2" / "tiles")) {
+        const auto name = f.path().filename().string();
+        auto it = times.find(name);
+        if (it != times.end()) {
+            EXPECT_FALSE(affected_tiles.contains(name)) << name;
+            untouched += it->second == fs::last_write_time(f.path());
+        }
+    }
+    EXPECT_EQ(untouched, sk.tiles.size() - n_aff);
+    const auto after = open(dir / "tree2");
+    datatree::Geometry g2, g1;
+    ASSERT_TRUE(after->read_geometry(node, 2, g2).ok());
+    ASSERT_TRUE(after->read_geometry(node, 1, g1).ok());
+    EXPECT_EQ(g2, g1); // the node now shows the 4 m chains at LOD 2
+    EXPECT_EQ(after->skeleton().nodes[node].lods[2].vertices, after->skeleton().nodes[node].lods[1].vertices);
+    fs::remove_all(dir / "tree2");
+    fs::remove_all(dir / "simp2");
+}
+
+TEST_F(PackReal, BadInputIsNamed)
+{
+    const std::string d = dir.string();
+    // A simplified folder missing a store.
+    fs::copy(dir / "simp", dir / "simp3", fs::copy_options::recursive);
+    fs::remove(dir / "simp3" / "eps-4m" / "county" / "51.tlc");
+    EXPECT_EQ(run("pack", d + "/ingest " + d + "/simp3 " + d + "/tree3", dir / "log"), 1);
+    EXPECT_NE(slurp(dir / "log").find("simp3/eps-4m: its chain stores are not those of"), std::string::npos)
+        << slurp(dir / "log");
+    EXPECT_FALSE(fs::exists(dir / "tree3" / "skeleton.tls"));
+    // A store that is not a subsequence of its original.
+    fs::copy(dir / "simp" / "eps-4m" / "county" / "51.tlc", dir / "simp3" / "eps-4m" / "county" / "51.tlc");
+    auto s = chains::read(dir / "simp3" / "eps-64m" / "county" / "51.tlc");
+    for (const auto& c : s.chains) {
+        if (!(c.flags & chains::chain_halo) && c.count > 2) {
+            s.points[c.first + 1].x += 1;
+            break;
+        }
+    }
+    chains::write(dir / "simp3" / "eps-64m" / "county" / "51.tlc", s);
+    EXPECT_EQ(run("pack", d + "/ingest " + d + "/simp3 " + d + "/tree3", dir / "log"), 1);
+    EXPECT_NE(slurp(dir / "log").find("eps-64m/county/51.tlc: chain"), std::string::npos) << slurp(dir / "log");
+    EXPECT_NE(slurp(dir / "log").find("is not a subsequence of its original"), std::string::npos);
+    // OUTPUT that is something else.
+    fs::create_directories(dir / "other");
+    std::ofstream(dir / "other" / "x") << "x";
+    EXPECT_EQ(run("pack", d + "/ingest " + d + "/simp " + d + "/other", dir / "log"), 2);
+    EXPECT_NE(slurp(dir / "log").find("exists and is not a Data Tree"), std::string::npos);
+    fs::remove_all(dir / "simp3");
+    fs::remove_all(dir / "tree3");
+    fs::remove_all(dir / "other");
+}
