@@ -38,6 +38,45 @@ int64_t unzigzag(uint64_t u) noexcept
     return static_cast<int64_t>((u >> 1) ^ (~(u & 1) + 1));
 }
 
+/// Draco with the settings of the format, over `npoints` points of `values` (x y interleaved).
+std::string draco_encode(const int32_t* values, uint32_t npoints, int speed)
+{
+    draco::PointCloudBuilder builder;
+    builder.Start(npoints);
+    const int att = builder.AddAttribute(draco::GeometryAttribute::POSITION, 2, draco::DT_INT32);
+    builder.SetAttributeValuesForAllPoints(att, values, 2 * sizeof(int32_t));
+    const auto pc = builder.Finalize(false); // never deduplicate: order and count are the format
+    draco::Encoder encoder;
+    encoder.SetEncodingMethod(draco::POINT_CLOUD_SEQUENTIAL_ENCODING);
+    encoder.SetSpeedOptions(speed, speed);
+    // The values are already differences along the chains: no second prediction.
+    encoder.SetAttributePredictionScheme(draco::GeometryAttribute::POSITION, draco::PREDICTION_NONE);
+    draco::EncoderBuffer buffer;
+    const draco::Status st = encoder.EncodePointCloudToBuffer(*pc, &buffer);
+    if (!st.ok()) {
+        throw input_error(std::string("geometry payload: Draco encoding failed: ") + st.error_msg());
+    }
+    return {buffer.data(), buffer.size()};
+}
+
+/// The first bytes of every Draco buffer of ours: header (magic, version,
+/// point cloud, sequential, no flags), the point count (bytes 11-14, which
+/// differ), one attributes decoder with one 2 x INT32 position attribute,
+/// integer coding, no prediction. Decoding checks them before Draco sees the
+/// buffer: Draco allocates what a damaged count asks for (the fuzzer made it
+/// take 2 GiB), so the count must be the one the side table gives.
+constexpr size_t draco_prefix_size = 24;
+constexpr size_t draco_count_at = 11;
+
+const std::string& draco_prefix()
+{
+    static const std::string prefix = [] {
+        const int32_t one[2] = {0, 0};
+        return draco_encode(one, 1, 0).substr(0, draco_prefix_size);
+    }();
+    return prefix;
+}
+
 struct PointHash {
     size_t operator()(GridPoint p) const noexcept
     {
@@ -103,22 +142,7 @@ std::string encode_geometry(const Geometry& g, GridPoint origin, const GeometryO
     const auto npoints = static_cast<uint32_t>(fresh.size() / 2);
     std::string draco_bytes;
     if (npoints > 0) {
-        draco::PointCloudBuilder builder;
-        builder.Start(npoints);
-        const int att = builder.AddAttribute(draco::GeometryAttribute::POSITION, 2, draco::DT_INT32);
-        builder.SetAttributeValuesForAllPoints(att, fresh.data(), 2 * sizeof(int32_t));
-        const auto pc = builder.Finalize(false); // never deduplicate: order and count are the format
-        draco::Encoder encoder;
-        encoder.SetEncodingMethod(draco::POINT_CLOUD_SEQUENTIAL_ENCODING);
-        encoder.SetSpeedOptions(options.draco_speed, options.draco_speed);
-        // The values are already differences along the chains: no second prediction.
-        encoder.SetAttributePredictionScheme(draco::GeometryAttribute::POSITION, draco::PREDICTION_NONE);
-        draco::EncoderBuffer buffer;
-        const draco::Status st = encoder.EncodePointCloudToBuffer(*pc, &buffer);
-        if (!st.ok()) {
-            throw input_error(std::string("geometry payload: Draco encoding failed: ") + st.error_msg());
-        }
-        draco_bytes.assign(buffer.data(), buffer.size());
+        draco_bytes = draco_encode(fresh.data(), npoints, options.draco_speed);
     }
     ByteWriter w;
     w.put(kind_geometry);
@@ -183,6 +207,20 @@ Geometry decode_geometry(std::span<const std::byte> bytes, GridPoint origin, uin
     }
     std::vector<int32_t> fresh;
     if (nfresh > 0) {
+        const std::string& prefix = draco_prefix();
+        const auto* db = reinterpret_cast<const char*>(draco_bytes.data());
+        uint32_t count = 0;
+        if (draco_bytes.size() > draco_prefix_size) {
+            std::memcpy(&count, db + draco_count_at, sizeof count);
+        }
+        if (draco_bytes.size() <= draco_prefix_size || std::memcmp(db, prefix.data(), draco_count_at) != 0 ||
+            std::memcmp(db + draco_count_at + 4, prefix.data() + draco_count_at + 4,
+                        draco_prefix_size - draco_count_at - 4) != 0) {
+            r.fail("Draco data does not start as this format's does");
+        }
+        if (count != nfresh) {
+            r.fail("Draco data has " + std::to_string(count) + " points, the side table " + std::to_string(nfresh));
+        }
         draco::DecoderBuffer buffer;
         buffer.Init(reinterpret_cast<const char*>(draco_bytes.data()), draco_bytes.size());
         draco::Decoder decoder;

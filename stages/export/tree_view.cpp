@@ -1,0 +1,270 @@
+#include "stages/export/tree_view.hpp"
+
+#include "core/errors.hpp"
+
+#include <charconv>
+#include <cstdio>
+#include <map>
+#include <sstream>
+
+namespace tigerlod::view {
+
+ProjectionParams projection_of(const datatree::Skeleton& s)
+{
+    ProjectionParams p;
+    p.kind = static_cast<ProjectionParams::Kind>(s.projection_kind);
+    p.utm_north = s.utm_north != 0;
+    p.utm_zone = s.utm_zone;
+    p.lon0_deg = s.projection[0];
+    p.lat0_deg = s.projection[1];
+    p.stdlat1_deg = s.projection[2];
+    p.stdlat2_deg = s.projection[3];
+    p.k0 = s.projection[4];
+    p.false_easting_m = s.projection[5];
+    p.false_northing_m = s.projection[6];
+    p.grid_m = s.projection[7];
+    p.a_m = s.projection[8];
+    p.f = s.projection[9];
+    return p;
+}
+
+uint32_t find_node(const datatree::Skeleton& s, const std::string& spec)
+{
+    if (spec.empty() || spec == "root") {
+        return 0;
+    }
+    uint32_t index = 0;
+    const auto [p, ec] = std::from_chars(spec.data(), spec.data() + spec.size(), index);
+    for (uint32_t n = 0; n < s.nodes.size(); ++n) {
+        if (s.strings[s.nodes[n].code] == spec) {
+            return n;
+        }
+    }
+    if (ec == std::errc() && p == spec.data() + spec.size() && index < s.nodes.size()) {
+        return index;
+    }
+    throw usage_error("no node '" + spec + "' in the tree (a node index below " + std::to_string(s.nodes.size()) +
+                      " or a unit code)");
+}
+
+namespace {
+
+const char* metric_name(uint8_t m)
+{
+    return m == 1 ? "l1" : m == 2 ? "linf" : "l2";
+}
+
+std::string ref_text(const datatree::PayloadRef& r)
+{
+    return "tile=" + std::to_string(r.tile) + " offset=" + std::to_string(r.offset) +
+           " size=" + std::to_string(r.size) + " crc=" + std::to_string(r.crc);
+}
+
+std::string flags_text(uint32_t f)
+{
+    std::string s = "---";
+    if (f & 1U) {
+        s[0] = 'c';
+    }
+    if (f & 4U) {
+        s[2] = 'p';
+    }
+    return s;
+}
+
+} // namespace
+
+std::string skeleton_text(const reader::Tree& tree)
+{
+    const auto& s = tree.skeleton();
+    std::ostringstream out;
+    out << "data-tree 1.0\n";
+    out << "projection " << Projection(projection_of(s)).describe() << "\n";
+    out << "metric " << metric_name(s.metric) << "\n";
+    out << "levels";
+    for (const auto& l : s.level_names) {
+        out << " " << l;
+    }
+    out << "\nlods";
+    for (double e : s.lod_eps_m) {
+        out << " " << e;
+    }
+    out << "\nskeleton_bytes " << tree.skeleton_bytes() << " tree_bytes " << tree.tree_bytes() << "\n";
+    for (size_t t = 0; t < s.tiles.size(); ++t) {
+        out << "tile " << t << " " << s.tiles[t].file << " size=" << s.tiles[t].size << "\n";
+    }
+    for (size_t i = 0; i < s.nodes.size(); ++i) {
+        const auto& n = s.nodes[i];
+        out << "node " << i << " code=" << s.strings[n.code] << " name=" << s.strings[n.name]
+            << " map=" << s.level_names[n.level]
+            << " parent=" << (n.parent == datatree::no_node ? std::string("-") : std::to_string(n.parent))
+            << " children=";
+        if (n.child_count == 0) {
+            out << "-";
+        } else {
+            out << n.first_child << ".." << (n.first_child + n.child_count - 1);
+        }
+        out << " chains=" << n.chains << " box=" << n.box.min_x << "," << n.box.min_y << "," << n.box.max_x << ","
+            << n.box.max_y << " table " << ref_text(n.table) << "\n";
+        for (size_t k = 0; k < n.lods.size(); ++k) {
+            char err[32];
+            std::snprintf(err, sizeof err, "%.3f", n.lods[k].error_m);
+            out << "  lod " << k << " eps=" << s.lod_eps_m[k] << " error_m=" << err
+                << " vertices=" << n.lods[k].vertices << " " << ref_text(n.lods[k].payload) << "\n";
+        }
+    }
+    return out.str();
+}
+
+NodeMap read_node(const reader::Tree& tree, uint32_t node, uint32_t lod)
+{
+    NodeMap m;
+    m.node = node;
+    m.lod = lod;
+    if (lod >= tree.skeleton().lod_eps_m.size()) {
+        throw usage_error("no LOD " + std::to_string(lod) + " (the tree has " +
+                          std::to_string(tree.skeleton().lod_eps_m.size()) + ")");
+    }
+    if (auto st = tree.read_table(node, m.table); !st.ok()) {
+        throw input_error(st.error);
+    }
+    if (auto st = tree.read_geometry(node, lod, m.geometry); !st.ok()) {
+        throw input_error(st.error);
+    }
+    return m;
+}
+
+std::string node_text(const reader::Tree& tree, const NodeMap& m)
+{
+    const auto& s = tree.skeleton();
+    std::ostringstream out;
+    out << "node " << m.node << " code=" << s.strings[s.nodes[m.node].code] << " lod " << m.lod
+        << " eps=" << s.lod_eps_m[m.lod] << " chains=" << m.table.chains.size()
+        << " vertices=" << m.geometry.points.size() << "\n";
+    for (size_t i = 0; i < m.table.chains.size(); ++i) {
+        const auto& c = m.table.chains[i];
+        const auto pts = m.geometry.chain(i);
+        out << "chain " << c.id << " left=" << m.table.strings[c.left] << " right=" << m.table.strings[c.right]
+            << " class=" << m.table.strings[c.feature_class] << " flags=" << flags_text(c.flags) << " n=" << pts.size()
+            << " :";
+        for (const auto& p : pts) {
+            out << " " << p.x << "," << p.y;
+        }
+        out << "\n";
+    }
+    return out.str();
+}
+
+namespace {
+
+std::string json_string(const std::string& s)
+{
+    std::string out = "\"";
+    for (char c : s) {
+        if (c == '"' || c == '\\') {
+            out += '\\';
+            out += c;
+        } else if (static_cast<unsigned char>(c) < 0x20) {
+            char b[8];
+            std::snprintf(b, sizeof b, "\\u%04x", c);
+            out += b;
+        } else {
+            out += c;
+        }
+    }
+    return out + "\"";
+}
+
+} // namespace
+
+std::string node_geojson(const reader::Tree& tree, const NodeMap& m)
+{
+    const Projection proj(projection_of(tree.skeleton()));
+    std::string out = "{\"type\":\"FeatureCollection\",\"features\":[\n";
+    for (size_t i = 0; i < m.table.chains.size(); ++i) {
+        const auto& c = m.table.chains[i];
+        out += i ? ",\n" : "";
+        out += "{\"type\":\"Feature\",\"properties\":{\"id\":" + std::to_string(c.id) +
+               ",\"left\":" + json_string(m.table.strings[c.left]) +
+               ",\"right\":" + json_string(m.table.strings[c.right]) +
+               ",\"class\":" + json_string(m.table.strings[c.feature_class]) +
+               ",\"closed\":" + ((c.flags & 1U) ? "true" : "false") +
+               "},\"geometry\":{\"type\":\"LineString\",\"coordinates\":[";
+        const auto pts = m.geometry.chain(i);
+        for (size_t k = 0; k < pts.size(); ++k) {
+            double lon = 0, lat = 0;
+            proj.to_lonlat(pts[k].x, pts[k].y, lon, lat);
+            char b[64];
+            std::snprintf(b, sizeof b, "%s[%.7f,%.7f]", k ? "," : "", lon, lat);
+            out += b;
+        }
+        out += "]}}";
+    }
+    out += "\n]}\n";
+    return out;
+}
+
+std::vector<Ring> unit_rings(const datatree::ChainTable& table, const datatree::Geometry& g, uint32_t unit)
+{
+    // The unit's boundary as directed chains with the unit on their left.
+    struct Directed {
+        size_t chain;
+        bool reversed;
+    };
+    std::vector<Directed> parts;
+    for (size_t i = 0; i < table.chains.size(); ++i) {
+        const auto& c = table.chains[i];
+        if (c.left == c.right) {
+            continue;
+        }
+        if (c.left == unit) {
+            parts.push_back({i, false});
+        } else if (c.right == unit) {
+            parts.push_back({i, true});
+        }
+    }
+    auto first = [&](const Directed& d) { return d.reversed ? g.chain(d.chain).back() : g.chain(d.chain).front(); };
+    auto last = [&](const Directed& d) { return d.reversed ? g.chain(d.chain).front() : g.chain(d.chain).back(); };
+    std::multimap<GridPoint, size_t> starts;
+    for (size_t i = 0; i < parts.size(); ++i) {
+        starts.emplace(first(parts[i]), i);
+    }
+    std::vector<bool> used(parts.size(), false);
+    std::vector<Ring> rings;
+    for (size_t s = 0; s < parts.size(); ++s) {
+        if (used[s]) {
+            continue;
+        }
+        Ring ring;
+        size_t cur = s;
+        const GridPoint origin = first(parts[s]);
+        while (true) {
+            used[cur] = true;
+            const auto pts = g.chain(parts[cur].chain);
+            const size_t from = ring.points.empty() ? 0 : 1;
+            for (size_t k = from; k < pts.size(); ++k) {
+                ring.points.push_back(parts[cur].reversed ? pts[pts.size() - 1 - k] : pts[k]);
+            }
+            const GridPoint end = last(parts[cur]);
+            if (end == origin) {
+                break;
+            }
+            size_t next = SIZE_MAX;
+            for (auto [it, stop] = starts.equal_range(end); it != stop; ++it) {
+                if (!used[it->second]) {
+                    next = it->second;
+                    break;
+                }
+            }
+            if (next == SIZE_MAX) {
+                ring.closed = false;
+                break;
+            }
+            cur = next;
+        }
+        rings.push_back(std::move(ring));
+    }
+    return rings;
+}
+
+} // namespace tigerlod::view
