@@ -106,12 +106,15 @@ IngestConfig load_config(const fs::path& file)
         throw config_error(file.string() + ": cannot read: " + e.what());
     }
     Ctx ctx(file);
-    ctx.check_keys(root, "", {"name", "description", "dataset", "levels", "projection", "ingest", "simplify"});
+    ctx.check_keys(root, "", {"name", "description", "dataset", "levels", "projection", "ingest", "simplify", "pack"});
     if (const YAML::Node simp = root["simplify"]) { // read by the pipeline; the stages validate the values
         ctx.check_keys(simp, "simplify",
                        {"tolerances_m", "metric", "class_scale", "projection_scale", "max_reach", "point_constraints",
                         "points", "lazy", "compliance", "gl", "pixel_fraction", "tile_pixels", "max_classes",
                         "threads"});
+    }
+    if (const YAML::Node pack = root["pack"]) { // read by the pipeline; tigerlod-pack validates the values
+        ctx.check_keys(pack, "pack", {"tile_mb", "draco_speed", "threads"});
     }
     cfg.name = ctx.get<std::string>(root, "name", "");
     if (cfg.name.empty() || cfg.name.find_first_not_of("abcdefghijklmnopqrstuvwxyz0123456789_-") != std::string::npos) {

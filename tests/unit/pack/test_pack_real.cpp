@@ -292,3 +292,43 @@ TEST_F(PackReal, BadInputIsNamed)
     fs::remove_all(dir / "tree3");
     fs::remove_all(dir / "other");
 }
+
+TEST_F(PackReal, DumpAndExport)
+{
+    const std::string d = dir.string();
+    ASSERT_EQ(run("dump", d + "/tree", dir / "out"), 0);
+    const std::string skel = slurp(dir / "out");
+    EXPECT_EQ(skel.rfind("data-tree 1.0\n", 0), 0U);
+    EXPECT_NE(skel.find("levels state county tract block_group block\nlods 0 4 64\n"), std::string::npos);
+    ASSERT_EQ(run("dump", "--node 51063 --lod 2 " + d + "/tree", dir / "out"), 0);
+    EXPECT_EQ(slurp(dir / "out").rfind("node 2 code=51063 lod 2 eps=64 chains=", 0), 0U) << slurp(dir / "out");
+    ASSERT_EQ(run("dump", "--node 51063 --geojson " + d + "/tree", dir / "out"), 0);
+    EXPECT_EQ(slurp(dir / "out").rfind("{\"type\":\"FeatureCollection\"", 0), 0U);
+    EXPECT_EQ(run("dump", "--node 99999 " + d + "/tree", dir / "out"), 2);
+    EXPECT_NE(slurp(dir / "out").find("no node '99999'"), std::string::npos);
+    // Every block of Floyd County comes back as a valid polygon at the 64 m LOD.
+    ASSERT_EQ(run("export", "--level block --lod 2 " + d + "/tree " + d + "/blocks.gpkg", dir / "out"), 0)
+        << slurp(dir / "out");
+    EXPECT_NE(slurp(dir / "out").find("709 unit polygons"), std::string::npos) << slurp(dir / "out");
+    ASSERT_EQ(std::system(("ogrinfo -q -sql \"SELECT COUNT(*) AS bad FROM units WHERE NOT ST_IsValid(geom)\" " + d +
+                           "/blocks.gpkg > " + d + "/ogr.txt 2>&1")
+                              .c_str()),
+              0);
+    EXPECT_NE(slurp(dir / "ogr.txt").find("bad (Integer) = 0"), std::string::npos) << slurp(dir / "ogr.txt");
+    EXPECT_EQ(run("export", "--level block " + d + "/tree " + d + "/blocks.gpkg", dir / "out"), 2); // exists
+    EXPECT_EQ(run("export", "--level nowhere " + d + "/tree " + d + "/x.gpkg", dir / "out"), 2);
+    // A damaged tree: the dump names the file, the node and the fault.
+    fs::copy(dir / "tree", dir / "bad", fs::copy_options::recursive);
+    const auto t = open(dir / "bad");
+    const auto& ref = t->skeleton().nodes[2].lods[1].payload;
+    {
+        std::fstream f(dir / "bad" / t->skeleton().tiles[ref.tile].file,
+                       std::ios::in | std::ios::out | std::ios::binary);
+        f.seekp(static_cast<std::streamoff>(ref.offset + 3));
+        f.put('\x7F');
+    }
+    EXPECT_EQ(run("dump", "--node 51063 --lod 1 " + d + "/bad", dir / "out"), 1);
+    EXPECT_NE(slurp(dir / "out").find("node 2 (51063) LOD 1: checksum mismatch"), std::string::npos)
+        << slurp(dir / "out");
+    fs::remove_all(dir / "bad");
+}
