@@ -11,6 +11,8 @@
 #include <draco/compression/encode.h>
 #include <draco/point_cloud/point_cloud_builder.h>
 
+#include <algorithm>
+#include <bit>
 #include <unordered_map>
 
 namespace tigerlod::datatree {
@@ -20,13 +22,26 @@ namespace {
 constexpr uint8_t kind_geometry = 2;
 
 /// Draco's integer encoder spends time and memory linear in the largest value
-/// it is given (a 2^28 value takes seconds), and codes small values well. So
-/// it gets the differences below `escape` in magnitude as they are, and for
-/// any other the marker `escape`; those go, as zigzag varints, to an escape
-/// stream beside it. They are rare: jumps between chains and the longest
-/// shortcuts of coarse LODs (2^18 grid units is 2.6 km at 1 cm). The bound
-/// keeps the worst encode near 1.5 ms a payload, measured here.
-constexpr int32_t escape = 1 << 18;
+/// it is given (a 2^28 value takes seconds, measured here), and codes small
+/// values well. So each payload picks an escape bound 2^b, b in
+/// [min_escape_bits, max_escape_bits]: the smallest power of two above 99% of
+/// its differences. Differences below it in magnitude go to Draco as they
+/// are; for any other Draco gets the marker 2^b and the difference goes, as a
+/// zigzag varint, to an escape stream beside it. The worst encode stays near
+/// 6 ms a payload (2^20), measured here.
+constexpr int min_escape_bits = 12;
+constexpr int max_escape_bits = 20;
+
+int escape_bits_for(std::vector<uint64_t> magnitudes)
+{
+    if (magnitudes.empty()) {
+        return min_escape_bits;
+    }
+    const size_t at = magnitudes.size() - 1 - magnitudes.size() / 100;
+    std::nth_element(magnitudes.begin(), magnitudes.begin() + static_cast<std::ptrdiff_t>(at), magnitudes.end());
+    const int bits = static_cast<int>(std::bit_width(magnitudes[at])); // 2^bits > the 99th percentile
+    return std::clamp(bits, min_escape_bits, max_escape_bits);
+}
 
 uint64_t zigzag(int64_t v) noexcept
 {
@@ -95,9 +110,8 @@ std::string encode_geometry(const Geometry& g, GridPoint origin, const GeometryO
     // New points, x y interleaved, each as its difference from the point
     // output before it (the origin for the first), so a chain whose start is
     // a reference still continues from that start.
-    std::vector<int32_t> fresh;
-    fresh.reserve(g.points.size() * 2);
-    ByteWriter escapes;
+    std::vector<int64_t> diffs;
+    diffs.reserve(g.points.size() * 2);
     std::unordered_map<GridPoint, uint32_t, PointHash> ends;
     GridPoint prev = origin;
     auto add = [&](GridPoint p) {
@@ -106,14 +120,8 @@ std::string encode_geometry(const Geometry& g, GridPoint origin, const GeometryO
             dy > INT32_MAX) {
             throw input_error("geometry payload: point outside the node box");
         }
-        for (const int64_t d : {dx, dy}) {
-            if (d > -escape && d < escape) {
-                fresh.push_back(static_cast<int32_t>(d));
-            } else {
-                fresh.push_back(escape);
-                escapes.put_varint(zigzag(d));
-            }
-        }
+        diffs.push_back(dx);
+        diffs.push_back(dy);
     };
     auto endpoint = [&](GridPoint p, uint32_t at) {
         const auto [it, inserted] = ends.try_emplace(p, at);
@@ -139,6 +147,23 @@ std::string encode_geometry(const Geometry& g, GridPoint origin, const GeometryO
         }
         endpoint(c.back(), static_cast<uint32_t>(first + c.size() - 1));
     }
+    std::vector<uint64_t> magnitudes(diffs.size());
+    for (size_t i = 0; i < diffs.size(); ++i) {
+        magnitudes[i] = static_cast<uint64_t>(diffs[i] < 0 ? -diffs[i] : diffs[i]);
+    }
+    const int escape_bits = escape_bits_for(std::move(magnitudes));
+    const int32_t escape = int32_t{1} << escape_bits;
+    std::vector<int32_t> fresh;
+    fresh.reserve(diffs.size());
+    ByteWriter escapes;
+    for (const int64_t d : diffs) {
+        if (d > -escape && d < escape) {
+            fresh.push_back(static_cast<int32_t>(d));
+        } else {
+            fresh.push_back(escape);
+            escapes.put_varint(zigzag(d));
+        }
+    }
     const auto npoints = static_cast<uint32_t>(fresh.size() / 2);
     std::string draco_bytes;
     if (npoints > 0) {
@@ -149,6 +174,7 @@ std::string encode_geometry(const Geometry& g, GridPoint origin, const GeometryO
     w.put_varint(g.chain_count());
     w.put_varint(npoints);
     w.put_bytes(side.bytes());
+    w.put_varint(static_cast<uint64_t>(escape_bits));
     w.put_varint(escapes.size());
     w.put_bytes(escapes.bytes());
     w.put_varint(draco_bytes.size());
@@ -196,6 +222,11 @@ Geometry decode_geometry(std::span<const std::byte> bytes, GridPoint origin, uin
     if (needed != nfresh) {
         r.fail("side table needs " + std::to_string(needed) + " new points, the payload has " + std::to_string(nfresh));
     }
+    const auto escape_bits = static_cast<int>(r.get_varint("escape bits", max_escape_bits));
+    if (escape_bits < min_escape_bits) {
+        r.fail("escape bits " + std::to_string(escape_bits) + " below " + std::to_string(min_escape_bits));
+    }
+    const int32_t escape = int32_t{1} << escape_bits;
     const uint64_t escape_size = r.get_varint("escape stream size");
     const auto escape_bytes =
         r.get_bytes(static_cast<size_t>(std::min<uint64_t>(escape_size, r.left() + 1)), "escape stream");
