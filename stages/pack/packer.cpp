@@ -391,16 +391,32 @@ PackedTree build_tree(const fs::path& original, const fs::path& simplified, cons
         }
     }
 
+    std::vector<std::vector<std::string>> payloads(nodes.size());
+    for (size_t i = 0; i < nodes.size(); ++i) {
+        payloads[i].push_back(std::move(nodes[i].table));
+        for (auto& p : nodes[i].lod_payloads) {
+            payloads[i].push_back(std::move(p));
+        }
+    }
+    layout_tiles(tree, payloads, options.tile_bytes);
+    return tree;
+}
+
+void layout_tiles(PackedTree& tree, const std::vector<std::vector<std::string>>& payloads, uint64_t tile_bytes)
+{
+    auto& sk = tree.skeleton;
+    sk.tiles.clear();
+    tree.tile_bytes.clear();
     // Tiles: a subtree that fits in tile_bytes is one tile; a node whose
     // subtree does not keeps its own payloads in a tile of its own and its
     // children are tiled the same way. Each decision depends on the node's own
     // subtree only, so a change in one region rewrites that region's tile and,
     // only if its size crosses the target, the tiling just above it.
-    std::vector<uint64_t> subtree(nodes.size());
-    for (size_t i = nodes.size(); i-- > 0;) {
-        subtree[i] += nodes[i].table.size();
-        for (const auto& p : nodes[i].lod_payloads) {
-            subtree[i] += p.size();
+    std::vector<uint64_t> subtree(sk.nodes.size());
+    for (size_t i = sk.nodes.size(); i-- > 0;) {
+        subtree[i] += payloads[i][0].size();
+        for (size_t k = 1; k < payloads[i].size(); ++k) {
+            subtree[i] += payloads[i][k].size();
         }
         if (i > 0) {
             subtree[sk.nodes[i].parent] += subtree[i];
@@ -413,7 +429,7 @@ PackedTree build_tree(const fs::path& original, const fs::path& simplified, cons
         const uint32_t n = stack.back();
         stack.pop_back();
         const auto& node = sk.nodes[n];
-        const bool whole = subtree[n] <= options.tile_bytes || node.child_count == 0;
+        const bool whole = subtree[n] <= tile_bytes || node.child_count == 0;
         groups.push_back(n);
         lone.push_back(!whole);
         if (!whole) {
@@ -448,16 +464,16 @@ PackedTree build_tree(const fs::path& original, const fs::path& simplified, cons
             return ref;
         };
         for (uint32_t n : members) {
-            sk.nodes[n].table = place(nodes[n].table);
-            for (size_t k = 0; k < nlods; ++k) {
-                sk.nodes[n].lods[k].payload = place(nodes[n].lod_payloads[k]);
+            sk.nodes[n].table = place(payloads[n][0]);
+            for (size_t k = 0; k < sk.nodes[n].lods.size(); ++k) {
+                sk.nodes[n].lods[k].payload = place(payloads[n][1 + k]);
             }
         }
         const std::string head = datatree::tile_header(bytes.size());
         std::copy(head.begin(), head.end(), bytes.begin());
         Sha256 sha;
         sha.update(std::as_bytes(std::span(bytes.data(), bytes.size())));
-        const std::string code = groups[t] == 0 ? std::string("root") : nodes[groups[t]].partition;
+        const std::string code = groups[t] == 0 ? std::string("root") : sk.strings[sk.nodes[groups[t]].code];
         std::string safe;
         for (char ch : code) {
             safe += std::isalnum(static_cast<unsigned char>(ch)) || ch == '-' || ch == '_' ? ch : '_';
@@ -465,7 +481,6 @@ PackedTree build_tree(const fs::path& original, const fs::path& simplified, cons
         sk.tiles.push_back({"tiles/" + safe + "-" + sha.hex_digest().substr(0, 16) + ".tlt", bytes.size()});
         tree.tile_bytes.push_back(std::move(bytes));
     }
-    return tree;
 }
 
 WriteStats write_tree(const fs::path& dir, const PackedTree& tree)

@@ -42,6 +42,11 @@ struct PackedTree {
 PackedTree build_tree(const std::filesystem::path& original, const std::filesystem::path& simplified,
                       const PackOptions& options);
 
+/// Place the payloads ([node][0] the chain table, [node][1 + k] LOD k) into
+/// tiles and set the skeleton's tiles and payload references. Tiles are
+/// named by their content.
+void layout_tiles(PackedTree& tree, const std::vector<std::vector<std::string>>& payloads, uint64_t tile_bytes);
+
 /// What writing a tree did.
 struct WriteStats {
     size_t tiles_written = 0, tiles_kept = 0, tiles_removed = 0;
