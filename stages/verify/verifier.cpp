@@ -1,0 +1,607 @@
+#include "stages/verify/verifier.hpp"
+
+#include "core/errors.hpp"
+#include "core/geometry.hpp"
+#include "core/parallel.hpp"
+#include "core/projection.hpp"
+#include "core/segment_grid.hpp"
+#include "formats/chains/chain_store.hpp"
+#include "stages/export/tree_view.hpp"
+#include "stages/simplify/metric.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <mutex>
+#include <set>
+#include <unordered_map>
+
+namespace fs = std::filesystem;
+
+namespace tigerlod::verify {
+
+namespace {
+
+/// Twice the signed area of a closed point sequence (first == last), exact.
+int128 twice_area(std::span<const GridPoint> pts)
+{
+    int128 a = 0;
+    for (size_t i = 0; i + 1 < pts.size(); ++i) {
+        a += int128{pts[i].x} * pts[i + 1].y - int128{pts[i + 1].x} * pts[i].y;
+    }
+    return a;
+}
+
+/// The shoelace terms of an open point sequence; summed over a closed boundary, twice its area.
+int128 twice_area_open(std::span<const GridPoint> pts)
+{
+    int128 a = 0;
+    for (size_t i = 0; i + 1 < pts.size(); ++i) {
+        a += int128{pts[i].x} * pts[i + 1].y - int128{pts[i + 1].x} * pts[i].y;
+    }
+    return a;
+}
+
+int sign(int128 v)
+{
+    return (v > 0) - (v < 0);
+}
+
+/// L2 distance from p to segment ab in grid units (double; for error_m and reports only).
+double l2_distance(GridPoint p, GridPoint a, GridPoint b)
+{
+    return std::sqrt(simplify::distance(p, a, b, simplify::Metric::l2));
+}
+
+/// An original chain of a level: its store, its record and its tolerance at the LOD.
+struct Original {
+    const chains::ChainStore* store = nullptr;
+    const chains::ChainInfo* info = nullptr;
+    size_t index = 0; ///< in its store
+};
+
+/// What one node contributes at one LOD.
+struct NodeResult {
+    std::vector<Violation> violations;
+    datatree::ChainTable table;
+    datatree::Geometry geometry;
+    bool ok = false;
+    uint64_t points = 0;
+};
+
+/// Which unit of a node's map contains each user point (found on the original map).
+struct UserPoint {
+    size_t index = 0; ///< in Options::user_points
+    GridPoint p;
+    std::string unit; ///< the unit that holds it in the original map
+};
+
+class Verifier {
+  public:
+    Verifier(const reader::Tree& tree, const fs::path& original, const Options& options)
+        : m_tree(tree), m_sk(tree.skeleton()), m_original(original), m_options(options),
+          m_proj(view::projection_of(m_sk)), m_metric(static_cast<simplify::Metric>(m_sk.metric))
+    {
+        m_opt = options.tolerance;
+        m_opt.metric = m_metric;
+    }
+
+    Report run()
+    {
+        const auto t0 = std::chrono::steady_clock::now();
+        for (const char* k : kinds) {
+            m_report.violations[k] = 0;
+        }
+        m_report.nodes = m_sk.nodes.size();
+        m_report.lods = m_sk.lod_eps_m.size();
+        for (uint32_t l = 0; l < m_sk.level_names.size(); ++l) {
+            verify_level(l);
+        }
+        m_report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        std::sort(m_report.items.begin(), m_report.items.end(), [](const Violation& a, const Violation& b) {
+            return std::tie(a.level, a.lod, a.kind, a.node, a.chains, a.x, a.y) <
+                   std::tie(b.level, b.lod, b.kind, b.node, b.chains, b.x, b.y);
+        });
+        return std::move(m_report);
+    }
+
+  private:
+    void add(LevelLod& ll, Violation v)
+    {
+        ++ll.violations[v.kind];
+        ++m_report.violations[v.kind];
+        if (m_report.items.size() >= m_options.max_items) {
+            ++m_report.items_dropped;
+            return;
+        }
+        m_proj.to_lonlat(v.x, v.y, v.lon, v.lat);
+        std::sort(v.chains.begin(), v.chains.end());
+        m_report.items.push_back(std::move(v));
+    }
+
+    std::string node_code(uint32_t n) const { return m_sk.strings[m_sk.nodes[n].code]; }
+    /// The chain store partition whose map node `n` shows.
+    std::string partition_of(uint32_t n) const { return n == 0 ? std::string("all") : node_code(n); }
+
+    void verify_level(uint32_t l)
+    {
+        const std::string& level = m_sk.level_names[l];
+        std::vector<uint32_t> nodes;
+        for (uint32_t n = 0; n < m_sk.nodes.size(); ++n) {
+            if (m_sk.nodes[n].level == l) {
+                nodes.push_back(n);
+            }
+        }
+        if (nodes.empty()) {
+            return;
+        }
+        // The original stores of the level.
+        const fs::path dir = m_original / level;
+        if (!fs::is_directory(dir)) {
+            throw input_error(dir.string() + ": no stores for level '" + level + "' of the tree");
+        }
+        std::vector<fs::path> paths;
+        for (const auto& f : fs::directory_iterator(dir)) {
+            if (f.path().extension() == ".tlc") {
+                paths.push_back(f.path());
+            }
+        }
+        std::sort(paths.begin(), paths.end());
+        std::vector<chains::ChainStore> stores(paths.size());
+        parallel_each(paths.size(), m_options.threads, [&](size_t i) { stores[i] = chains::read(paths[i]); });
+        std::unordered_map<uint64_t, Original> owned;
+        std::map<std::string, const chains::ChainStore*> by_partition;
+        for (const auto& s : stores) {
+            by_partition[s.partition] = &s;
+            for (size_t i = 0; i < s.chains.size(); ++i) {
+                if (!(s.chains[i].flags & chains::chain_halo)) {
+                    owned[s.chains[i].id] = {&s, &s.chains[i], i};
+                }
+            }
+        }
+        for (uint32_t n : nodes) {
+            const std::string partition = partition_of(n);
+            if (!by_partition.contains(partition)) {
+                throw input_error(dir.string() + ": no store for partition " + partition + " (node " +
+                                  std::to_string(n) + ")");
+            }
+        }
+        // The units whose boundary each node's original map holds, and their original area sign.
+        std::vector<std::vector<UserPoint>> user_points(nodes.size());
+        std::vector<std::map<std::string, int>> area_sign(nodes.size());
+        parallel_each(nodes.size(), m_options.threads, [&](size_t i) {
+            original_facts(*by_partition.at(partition_of(nodes[i])), area_sign[i], user_points[i]);
+        });
+
+        for (uint32_t k = 0; k < m_sk.lod_eps_m.size(); ++k) {
+            LevelLod ll;
+            ll.level = level;
+            ll.lod = k;
+            ll.eps_m = m_sk.lod_eps_m[k];
+            for (const char* kind : kinds) {
+                ll.violations[kind] = 0;
+            }
+            // Tolerances of the LOD, per original chain.
+            std::map<const chains::ChainStore*, std::vector<double>> eps;
+            if (k > 0) {
+                for (const auto& s : stores) {
+                    eps[&s] = simplify::chain_tolerances(s, ll.eps_m, m_opt);
+                }
+            }
+            std::vector<NodeResult> results(nodes.size());
+            parallel_each(nodes.size(), m_options.threads, [&](size_t i) {
+                results[i] = check_node(nodes[i], k, owned, *by_partition.at(partition_of(nodes[i])), eps, area_sign[i],
+                                        user_points[i]);
+            });
+            // Node by node, in order: their own findings, then the level as a whole.
+            std::unordered_map<uint64_t, std::pair<size_t, size_t>> first_seen; // id -> (node slot, chain)
+            std::vector<std::pair<size_t, size_t>> unique;                      // (node slot, chain)
+            for (size_t i = 0; i < nodes.size(); ++i) {
+                auto& r = results[i];
+                ++ll.nodes;
+                ll.points += r.points;
+                for (auto& v : r.violations) {
+                    v.level = level;
+                    v.lod = k;
+                    add(ll, std::move(v));
+                }
+                if (!r.ok) {
+                    continue;
+                }
+                for (size_t c = 0; c < r.table.chains.size(); ++c) {
+                    const uint64_t id = r.table.chains[c].id;
+                    const auto [it, fresh] = first_seen.try_emplace(id, i, c);
+                    if (fresh) {
+                        unique.emplace_back(i, c);
+                        continue;
+                    }
+                    const auto a = results[it->second.first].geometry.chain(it->second.second);
+                    const auto b = r.geometry.chain(c);
+                    if (!std::equal(a.begin(), a.end(), b.begin(), b.end())) {
+                        add(ll, {"border_mismatch",
+                                 level,
+                                 k,
+                                 node_code(nodes[i]),
+                                 {id},
+                                 double(b.front().x),
+                                 double(b.front().y),
+                                 0,
+                                 0,
+                                 "shown by nodes " + node_code(nodes[it->second.first]) + " and " +
+                                     node_code(nodes[i]) + " with different coordinates"});
+                    }
+                }
+            }
+            // Crossings, overlaps and self-intersections over the whole level.
+            std::vector<Segment> segs;
+            std::vector<std::pair<size_t, size_t>> seg_chain; // unique index of each segment's chain, segment index
+            for (size_t u = 0; u < unique.size(); ++u) {
+                const auto pts = results[unique[u].first].geometry.chain(unique[u].second);
+                ll.chains += 1;
+                ll.vertices += pts.size();
+                for (size_t s = 0; s + 1 < pts.size(); ++s) {
+                    if (pts[s] == pts[s + 1]) {
+                        continue; // a zero-length segment is the subsequence check's to report
+                    }
+                    segs.push_back({pts[s], pts[s + 1], static_cast<uint32_t>(segs.size())});
+                    seg_chain.emplace_back(u, s);
+                }
+            }
+            ll.segments = segs.size();
+            // One violation per pair of chains (or per chain, meeting itself):
+            // the worst way they meet (overlap, then cross, then touch), at the
+            // first place found.
+            struct Meeting {
+                Intersection x;
+                size_t ua, ub;
+                int rank;
+            };
+            auto rank_of = [](SegmentRelation r) {
+                return r == SegmentRelation::overlap ? 3 : r == SegmentRelation::cross ? 2 : 1;
+            };
+            std::map<std::pair<uint64_t, uint64_t>, Meeting> meetings;
+            for (const auto& x : find_intersections(segs, m_options.threads)) {
+                const size_t ua = seg_chain[x.first].first, ub = seg_chain[x.second].first;
+                const uint64_t ida = results[unique[ua].first].table.chains[unique[ua].second].id;
+                const uint64_t idb = results[unique[ub].first].table.chains[unique[ub].second].id;
+                const auto key = std::make_pair(std::min(ida, idb), std::max(ida, idb));
+                const int rank = rank_of(x.relation);
+                auto [it, fresh] = meetings.try_emplace(key, Meeting{x, ua, ub, rank});
+                if (!fresh && rank > it->second.rank) {
+                    it->second = Meeting{x, ua, ub, rank};
+                }
+            }
+            for (const auto& [ids, m] : meetings) {
+                const char* kind = m.ua == m.ub                               ? "self_intersections"
+                                   : m.x.relation == SegmentRelation::overlap ? "overlaps"
+                                                                              : "crossings";
+                const char* rel = m.x.relation == SegmentRelation::cross     ? "cross"
+                                  : m.x.relation == SegmentRelation::touch   ? "touch"
+                                  : m.x.relation == SegmentRelation::overlap ? "overlap"
+                                                                             : "meet";
+                std::vector<uint64_t> chain_ids{ids.first};
+                if (ids.second != ids.first) {
+                    chain_ids.push_back(ids.second);
+                }
+                add(ll, {kind, level, k, node_code(nodes[unique[m.ua].first]), chain_ids, m.x.x, m.x.y, 0, 0,
+                         std::string("segments ") + std::to_string(seg_chain[m.x.first].second) + " and " +
+                             std::to_string(seg_chain[m.x.second].second) + " " + rel});
+            }
+            m_report.chains += ll.chains;
+            m_report.segments += ll.segments;
+            m_report.points += ll.points;
+            m_report.by_level_lod.push_back(std::move(ll));
+        }
+    }
+
+    /// From a node's original store: each unit's area sign, and the unit holding each user point.
+    void original_facts(const chains::ChainStore& store, std::map<std::string, int>& area_sign,
+                        std::vector<UserPoint>& user_points) const
+    {
+        std::set<std::string> units;
+        for (const auto& c : store.constraints) {
+            units.insert(store.strings[c.unit]);
+        }
+        std::vector<GridPoint> grid(m_options.user_points.size());
+        std::vector<bool> valid(grid.size(), false);
+        for (size_t i = 0; i < grid.size(); ++i) {
+            const auto g = m_proj.to_grid(m_options.user_points[i].lon, m_options.user_points[i].lat);
+            if (g) {
+                grid[i] = *g;
+                valid[i] = true;
+            }
+        }
+        for (const auto& unit : units) {
+            int128 a = 0;
+            std::vector<PointInPolygon> pips;
+            for (size_t i = 0; i < grid.size(); ++i) {
+                pips.emplace_back(grid[i]);
+            }
+            for (const auto& c : store.chains) {
+                const bool left = store.strings[c.left] == unit, right = store.strings[c.right] == unit;
+                if (left == right) {
+                    continue;
+                }
+                const auto pts = store.chain_points(c);
+                const int128 part = twice_area_open(pts);
+                a += left ? part : -part;
+                for (auto& pip : pips) {
+                    for (size_t s = 0; s + 1 < pts.size(); ++s) {
+                        pip.add_segment(pts[s], pts[s + 1]);
+                    }
+                }
+            }
+            area_sign[unit] = sign(a);
+            for (size_t i = 0; i < grid.size(); ++i) {
+                if (valid[i] && pips[i].location() == PointLocation::inside) {
+                    user_points.push_back({i, grid[i], unit});
+                }
+            }
+        }
+    }
+
+    /// The table indices of the partition's own units (those whose whole boundary the node holds).
+    static std::vector<uint32_t> units_in_table(const datatree::ChainTable& t, const chains::ChainStore& store)
+    {
+        std::set<std::string> mine;
+        for (const auto& c : store.constraints) {
+            mine.insert(store.strings[c.unit]);
+        }
+        std::vector<uint32_t> out;
+        for (uint32_t i = 1; i < t.strings.size(); ++i) {
+            if (mine.contains(t.strings[i])) {
+                out.push_back(i);
+            }
+        }
+        return out;
+    }
+
+    static PointLocation locate(const NodeResult& r, uint32_t unit, GridPoint p)
+    {
+        PointInPolygon pip(p);
+        for (size_t c = 0; c < r.table.chains.size(); ++c) {
+            const auto& e = r.table.chains[c];
+            if ((e.left == unit) != (e.right == unit)) {
+                const auto pts = r.geometry.chain(c);
+                for (size_t s = 0; s + 1 < pts.size(); ++s) {
+                    pip.add_segment(pts[s], pts[s + 1]);
+                }
+            }
+        }
+        return pip.location();
+    }
+
+    /// Sign of the unit's area from its chains (left side positive): exact.
+    static int unit_area_sign(const NodeResult& r, uint32_t unit)
+    {
+        int128 a = 0;
+        for (size_t c = 0; c < r.table.chains.size(); ++c) {
+            const auto& e = r.table.chains[c];
+            if ((e.left == unit) == (e.right == unit)) {
+                continue;
+            }
+            const int128 part = twice_area_open(r.geometry.chain(c));
+            a += e.left == unit ? part : -part;
+        }
+        return sign(a);
+    }
+
+    NodeResult check_node(uint32_t n, uint32_t k, const std::unordered_map<uint64_t, Original>& owned,
+                          const chains::ChainStore& store,
+                          const std::map<const chains::ChainStore*, std::vector<double>>& eps,
+                          const std::map<std::string, int>& area_sign, const std::vector<UserPoint>& user_points) const
+    {
+        NodeResult r;
+        const auto& node = m_sk.nodes[n];
+        const std::string code = node_code(n);
+        auto violation = [&](const char* kind, std::vector<uint64_t> ids, GridPoint at, std::string detail) {
+            r.violations.push_back(
+                {kind, "", k, code, std::move(ids), double(at.x), double(at.y), 0, 0, std::move(detail)});
+        };
+        const GridPoint corner{node.box.min_x, node.box.min_y};
+        if (auto st = m_tree.read_table(n, r.table); !st.ok()) {
+            violation("skeleton", {}, corner, st.error);
+            return r;
+        }
+        if (auto st = m_tree.read_geometry(n, k, r.geometry); !st.ok()) {
+            violation("skeleton", {}, corner, st.error);
+            return r;
+        }
+        r.ok = true;
+        double worst = 0.0; // largest L2 deviation, grid units
+        for (size_t c = 0; c < r.table.chains.size(); ++c) {
+            const auto& e = r.table.chains[c];
+            const auto pts = r.geometry.chain(c);
+            for (const auto& p : pts) {
+                if (p.x < node.box.min_x || p.x > node.box.max_x || p.y < node.box.min_y || p.y > node.box.max_y) {
+                    violation("skeleton", {e.id}, p, "point outside the node's bounding box");
+                    break;
+                }
+            }
+            const auto it = owned.find(e.id);
+            if (it == owned.end()) {
+                violation("skeleton", {e.id}, pts.front(), "chain not in the original stores of its level");
+                continue;
+            }
+            const Original& o = it->second;
+            const auto orig = o.store->chain_points(*o.info);
+            // Check 1: a subsequence with the same ends.
+            std::vector<size_t> at; // position in orig of each simplified point
+            bool subsequence = pts.size() >= 2 && pts.front() == orig.front() && pts.back() == orig.back();
+            if (subsequence) {
+                at.push_back(0);
+                size_t j = 0;
+                for (size_t i = 1; i < pts.size() && subsequence; ++i) {
+                    if (i + 1 == pts.size()) {
+                        j = orig.size() - 1; // the last point is the original's last
+                        subsequence = j > at.back();
+                    } else {
+                        ++j;
+                        while (j < orig.size() && orig[j] != pts[i]) {
+                            ++j;
+                        }
+                        subsequence = j + 1 < orig.size();
+                    }
+                    at.push_back(j);
+                }
+            }
+            if (!subsequence) {
+                violation("not_subsequence", {e.id}, pts.front(),
+                          "not a subsequence of its original (" + std::to_string(orig.size()) +
+                              " points) with the same ends");
+                continue;
+            }
+            // Check 2: every skipped vertex within eps (exact), and the reverse direction.
+            const simplify::Tolerance tol(k == 0 ? 0.0 : eps.at(o.store)[o.index], m_metric);
+            bool exceeded = false;
+            for (size_t i = 0; i + 1 < pts.size() && !exceeded; ++i) {
+                for (size_t m = at[i] + 1; m < at[i + 1]; ++m) {
+                    worst = std::max(worst, l2_distance(orig[m], pts[i], pts[i + 1]));
+                    if (!simplify::within(orig[m], pts[i], pts[i + 1], tol)) {
+                        violation("eps_exceeded", {e.id}, orig[m],
+                                  "original vertex " + std::to_string(m) + " farther than eps " +
+                                      std::to_string(tol.eps * m_sk.grid_m()) + " m (grid units " +
+                                      std::to_string(tol.eps) + ")");
+                        exceeded = true;
+                        break;
+                    }
+                }
+                if (!exceeded && m_metric != simplify::Metric::l2 && at[i + 1] > at[i] + 1) {
+                    exceeded = reverse_exceeded(orig.subspan(at[i], at[i + 1] - at[i] + 1), pts[i], pts[i + 1], tol);
+                    if (exceeded) {
+                        violation("eps_exceeded", {e.id}, pts[i],
+                                  "segment " + std::to_string(i) + " strays farther than eps from its original");
+                    }
+                }
+            }
+            // Check 4: rings keep 3 vertices and their orientation.
+            if (e.flags & chains::chain_closed) {
+                std::set<GridPoint> distinct(pts.begin(), pts.end());
+                if (pts.size() < 4 || pts.front() != pts.back() || distinct.size() < 3) {
+                    violation("ring_collapsed", {e.id}, pts.front(),
+                              "closed ring with " + std::to_string(distinct.size()) + " distinct vertices");
+                } else if (sign(twice_area(pts)) != sign(twice_area(orig))) {
+                    violation("ring_orientation", {e.id}, pts.front(), "orientation differs from the original's");
+                }
+            }
+        }
+        // Check 7: the skeleton's error bound holds.
+        if (worst * m_sk.grid_m() > node.lods[k].error_m * (1 + 1e-9) + 1e-9) {
+            violation("skeleton", {}, corner,
+                      "LOD error_m " + std::to_string(node.lods[k].error_m) + " below the measured " +
+                          std::to_string(worst * m_sk.grid_m()));
+        }
+        // Checks 5 and 6: internal points inside their units, units' boundaries closed with their area sign.
+        for (uint32_t u : units_in_table(r.table, store)) {
+            const auto rings = view::unit_rings(r.table, r.geometry, u);
+            bool closed = !rings.empty();
+            for (const auto& ring : rings) {
+                if (!ring.closed) {
+                    closed = false;
+                    violation("invalid_polygons", {}, ring.points.back(),
+                              "unit " + r.table.strings[u] + ": boundary does not close");
+                    break;
+                }
+            }
+            if (closed) {
+                const auto want = area_sign.find(r.table.strings[u]);
+                const int now = unit_area_sign(r, u);
+                if (want != area_sign.end() && now != want->second) {
+                    violation("invalid_polygons", {}, rings.front().points.front(),
+                              "unit " + r.table.strings[u] + ": area sign " + std::to_string(now) + ", originally " +
+                                  std::to_string(want->second));
+                }
+            }
+        }
+        for (const auto& cp : store.constraints) {
+            const std::string& unit = store.strings[cp.unit];
+            const auto ui = std::find(r.table.strings.begin(), r.table.strings.end(), unit);
+            ++r.points;
+            const uint32_t u = static_cast<uint32_t>(ui - r.table.strings.begin());
+            if (ui == r.table.strings.end() || locate(r, u, cp.p) != PointLocation::inside) {
+                violation("point_constraints", {}, cp.p,
+                          std::string(cp.kind == chains::constraint_internal ? "internal" : "user") + " point of " +
+                              unit + " not inside it");
+            }
+        }
+        for (const auto& up : user_points) {
+            ++r.points;
+            const auto ui = std::find(r.table.strings.begin(), r.table.strings.end(), up.unit);
+            if (ui == r.table.strings.end() ||
+                locate(r, static_cast<uint32_t>(ui - r.table.strings.begin()), up.p) != PointLocation::inside) {
+                violation("point_constraints", {}, up.p,
+                          "user point " + std::to_string(up.index) + " left unit " + up.unit);
+            }
+        }
+        return r;
+    }
+
+    /// The reverse direction for L1 and Linf (for L2 it follows from the
+    /// forward one): points of the segment, at every original vertex's
+    /// projection and half-way between, within eps of the original subchain.
+    /// In double precision; an excess below 1e-9 of eps is not reported.
+    bool reverse_exceeded(std::span<const GridPoint> sub, GridPoint a, GridPoint b,
+                          const simplify::Tolerance& tol) const
+    {
+        const double dx = double(b.x) - a.x, dy = double(b.y) - a.y, len2 = dx * dx + dy * dy;
+        std::vector<double> ts{0.0, 1.0};
+        for (const auto& p : sub) {
+            ts.push_back(len2 > 0 ? std::clamp(((p.x - a.x) * dx + (p.y - a.y) * dy) / len2, 0.0, 1.0) : 0.0);
+        }
+        std::sort(ts.begin(), ts.end());
+        const size_t n = ts.size();
+        for (size_t i = 0; i + 1 < n; ++i) {
+            ts.push_back(0.5 * (ts[i] + ts[i + 1]));
+        }
+        for (double t : ts) {
+            const double qx = a.x + t * dx, qy = a.y + t * dy;
+            double best = INFINITY;
+            for (size_t s = 0; s + 1 < sub.size(); ++s) {
+                best = std::min(best, point_segment(qx, qy, sub[s], sub[s + 1]));
+            }
+            if (best > tol.eps * (1 + 1e-9)) {
+                return true;
+            }
+        }
+        return false;
+    }
+
+    /// Distance in the metric from (qx, qy) to segment ab, double, by ternary search on the convex function.
+    double point_segment(double qx, double qy, GridPoint a, GridPoint b) const
+    {
+        auto d = [&](double t) {
+            const double px = a.x + t * (double(b.x) - a.x) - qx, py = a.y + t * (double(b.y) - a.y) - qy;
+            return m_metric == simplify::Metric::l1 ? std::abs(px) + std::abs(py)
+                                                    : std::max(std::abs(px), std::abs(py));
+        };
+        double lo = 0, hi = 1;
+        for (int i = 0; i < 60; ++i) {
+            const double m1 = lo + (hi - lo) / 3, m2 = hi - (hi - lo) / 3;
+            if (d(m1) < d(m2)) {
+                hi = m2;
+            } else {
+                lo = m1;
+            }
+        }
+        return std::min({d(0), d(1), d(0.5 * (lo + hi))});
+    }
+
+    const reader::Tree& m_tree;
+    const datatree::Skeleton& m_sk;
+    fs::path m_original;
+    const Options& m_options;
+    simplify::SimplifyOptions m_opt;
+    Projection m_proj;
+    simplify::Metric m_metric;
+    Report m_report;
+};
+
+} // namespace
+
+Report verify_tree(const reader::Tree& tree, const fs::path& original, const Options& options)
+{
+    Verifier v(tree, original, options);
+    return v.run();
+}
+
+} // namespace tigerlod::verify

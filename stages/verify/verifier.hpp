@@ -1,0 +1,81 @@
+#pragma once
+/// @file verifier.hpp
+/// Exact verification of a decoded Data Tree against the original chain
+/// stores: what a reader would see, checked with the integer predicates of
+/// core/geometry.hpp. The report's schema is in REPORT.md beside this file.
+
+#include "reader/reader.hpp"
+#include "stages/simplify/simplifier.hpp"
+
+#include <array>
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace tigerlod::verify {
+
+/// The kinds of violation, in report order.
+inline constexpr std::array<const char*, 11> kinds = {
+    "crossings",          ///< two chains cross or touch other than at a shared end point
+    "overlaps",           ///< two chains share a collinear piece
+    "self_intersections", ///< a chain meets itself other than at consecutive segments
+    "eps_exceeded",       ///< an original vertex farther than eps from the simplified chain, or the reverse
+    "not_subsequence",    ///< the simplified chain is not a subsequence of its original with the same ends
+    "ring_collapsed",     ///< a closed ring with fewer than 3 distinct vertices
+    "ring_orientation",   ///< a closed ring whose orientation differs from its original's
+    "point_constraints",  ///< a unit's internal point or a user point no longer inside its unit
+    "invalid_polygons",   ///< a unit's boundary does not close, or its area changed sign
+    "border_mismatch",    ///< a chain shown by two nodes with different coordinates
+    "skeleton",           ///< skeleton or payload inconsistent: unreadable payload, box, counts, errors
+};
+
+struct Violation {
+    std::string kind;
+    std::string level;
+    uint32_t lod = 0;
+    std::string node;             ///< unit code of the node ("" for the root)
+    std::vector<uint64_t> chains; ///< sorted
+    double x = 0, y = 0;          ///< grid units
+    double lon = 0, lat = 0;
+    std::string detail;
+};
+
+/// Counts for one (level, LOD).
+struct LevelLod {
+    std::string level;
+    uint32_t lod = 0;
+    double eps_m = 0;
+    uint64_t nodes = 0, chains = 0, segments = 0, vertices = 0, points = 0;
+    std::map<std::string, uint64_t> violations; ///< by kind, every kind present
+};
+
+struct Options {
+    simplify::SimplifyOptions tolerance; ///< class_scale, projection_scale as simplify had them
+    std::vector<simplify::LonLat> user_points;
+    unsigned threads = 1;
+    size_t max_items = 10000; ///< violations listed one by one at most; all are counted
+};
+
+struct Report {
+    uint64_t nodes = 0, lods = 0, chains = 0, segments = 0, points = 0;
+    std::map<std::string, uint64_t> violations; ///< totals by kind
+    std::vector<LevelLod> by_level_lod;
+    std::vector<Violation> items;
+    uint64_t items_dropped = 0;
+    double seconds = 0;
+    uint64_t total() const
+    {
+        uint64_t n = 0;
+        for (const auto& [k, v] : violations) {
+            n += v;
+        }
+        return n;
+    }
+};
+
+/// Verify `tree` against the stores of `original` (a tigerlod-ingest output).
+/// Throws input_error when `original` does not match the tree (levels, missing stores).
+Report verify_tree(const reader::Tree& tree, const std::filesystem::path& original, const Options& options);
+
+} // namespace tigerlod::verify

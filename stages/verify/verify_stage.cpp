@@ -1,0 +1,317 @@
+#include "stages/verify/verify_stage.hpp"
+
+#include "core/fs.hpp"
+#include "stages/simplify/simplify_stage.hpp"
+#include "stages/verify/verifier.hpp"
+
+#include <gdal.h>
+#include <nlohmann/json.hpp>
+#include <ogr_api.h>
+#include <ogr_srs_api.h>
+
+#include <charconv>
+#include <cstdio>
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <thread>
+
+namespace fs = std::filesystem;
+using json = nlohmann::ordered_json;
+
+namespace tigerlod::verify {
+
+void VerifyStage::add_args(ArgSet& args)
+{
+    args.positional("TREE", &m_tree, "a Data Tree folder (tigerlod-pack)");
+    args.positional("ORIGINAL", &m_original, "the tigerlod-ingest output the tree was built from");
+    args.positional("OUTPUT", &m_output, "a folder for verify-report.json and violations.gpkg (written atomically)");
+    args.group("Tolerances (as tigerlod-simplify had them)");
+    args.add("class-scale", &m_class_scale, "eps scaled by feature class, e.g. S1400=0.5,H3010=2", "LIST");
+    args.add("no-projection-scale", &m_no_projection_scale, "eps in projected metres, not ground metres");
+    args.add("points", &m_points, "user points (GeoJSON points or CSV lon,lat) that must stay in their unit", "FILE");
+    args.group("Report");
+    args.add("compare", &m_compare, "an earlier verify-report.json: report new and fixed violations and vertex counts",
+             "FILE");
+    args.add("max-items", &m_max_items, "violations listed one by one at most (all are counted)", "N");
+    args.group("Run");
+    args.add("threads", &m_threads, "worker threads, 0 for all cores; the report does not depend on it", "N");
+    args.add("overwrite", &m_overwrite, "replace OUTPUT if it exists");
+}
+
+void VerifyStage::initialize()
+{
+    if (m_threads < 0 || m_threads > 1024) {
+        throw usage_error("verify: option '--threads' must be in 0..1024");
+    }
+    if (m_max_items < 0) {
+        throw usage_error("verify: option '--max-items' must be >= 0");
+    }
+    if (!m_compare.empty() && !fs::is_regular_file(m_compare)) {
+        throw usage_error("verify: --compare " + m_compare + ": no such file");
+    }
+    if (!m_points.empty() && !fs::is_regular_file(m_points)) {
+        throw usage_error("verify: --points " + m_points + ": no such file");
+    }
+    if (!fs::is_directory(m_original)) {
+        throw usage_error("verify: " + m_original + ": not a folder");
+    }
+}
+
+std::string VerifyStage::help_notes() const
+{
+    return "Outputs:\n"
+           "  OUTPUT/verify-report.json  counts checked, violations by kind and by level and LOD, each violation\n"
+           "                             with node, chain ids, kind and lon/lat (schema: stages/verify/REPORT.md)\n"
+           "  OUTPUT/violations.gpkg     the violations as points, for QGIS\n"
+           "Exit codes: 0 clean; 1 a violation was found (or the tree is unreadable); 2 usage error;\n"
+           "  3 environment (cannot write).\n";
+}
+
+namespace {
+
+std::string ids_text(const std::vector<uint64_t>& ids)
+{
+    std::string s;
+    for (uint64_t id : ids) {
+        s += (s.empty() ? "" : ",") + std::to_string(id);
+    }
+    return s;
+}
+
+std::string key_of(const json& item)
+{
+    std::string chains;
+    for (const auto& c : item.at("chains")) {
+        chains += c.get<std::string>() + ",";
+    }
+    return item.at("kind").get<std::string>() + "|" + item.at("level").get<std::string>() + "|" +
+           std::to_string(item.at("lod").get<int>()) + "|" + item.at("node").get<std::string>() + "|" + chains + "|" +
+           item.at("detail").get<std::string>();
+}
+
+void write_gpkg(const fs::path& path, const Report& r)
+{
+    GDALAllRegister();
+    GDALDatasetH ds = GDALCreate(GDALGetDriverByName("GPKG"), path.c_str(), 0, 0, 0, GDT_Unknown, nullptr);
+    if (ds == nullptr) {
+        throw environment_error("verify: cannot create " + path.string() + ": " + CPLGetLastErrorMsg());
+    }
+    OGRSpatialReferenceH srs = OSRNewSpatialReference(nullptr);
+    OSRImportFromEPSG(srs, 4269);
+    OSRSetAxisMappingStrategy(srs, OAMS_TRADITIONAL_GIS_ORDER);
+    OGRLayerH layer = GDALDatasetCreateLayer(ds, "violations", srs, wkbPoint, nullptr);
+    OSRDestroySpatialReference(srs);
+    const std::pair<const char*, OGRFieldType> fields[] = {{"kind", OFTString},   {"level", OFTString},
+                                                           {"lod", OFTInteger},   {"node", OFTString},
+                                                           {"chains", OFTString}, {"detail", OFTString}};
+    for (const auto& [name, type] : fields) {
+        OGRFieldDefnH fd = OGR_Fld_Create(name, type);
+        OGR_L_CreateField(layer, fd, TRUE);
+        OGR_Fld_Destroy(fd);
+    }
+    bool ok = true;
+    for (const auto& v : r.items) {
+        OGRFeatureH f = OGR_F_Create(OGR_L_GetLayerDefn(layer));
+        OGR_F_SetFieldString(f, 0, v.kind.c_str());
+        OGR_F_SetFieldString(f, 1, v.level.c_str());
+        OGR_F_SetFieldInteger(f, 2, static_cast<int>(v.lod));
+        OGR_F_SetFieldString(f, 3, v.node.c_str());
+        OGR_F_SetFieldString(f, 4, ids_text(v.chains).c_str());
+        OGR_F_SetFieldString(f, 5, v.detail.c_str());
+        OGRGeometryH pt = OGR_G_CreateGeometry(wkbPoint);
+        OGR_G_SetPoint_2D(pt, 0, v.lon, v.lat);
+        OGR_F_SetGeometryDirectly(f, pt);
+        ok = ok && OGR_L_CreateFeature(layer, f) == OGRERR_NONE;
+        OGR_F_Destroy(f);
+    }
+    GDALClose(ds);
+    if (!ok) {
+        throw environment_error("verify: cannot write " + path.string());
+    }
+}
+
+} // namespace
+
+int VerifyStage::run(const StageContext& ctx)
+{
+    std::string error;
+    const auto tree = reader::Tree::open(m_tree, error);
+    OutputDir out(m_output, m_overwrite);
+    Options options;
+    options.threads =
+        m_threads > 0 ? static_cast<unsigned>(m_threads) : std::max(1U, std::thread::hardware_concurrency());
+    options.max_items = static_cast<size_t>(m_max_items);
+    options.tolerance.projection_scale = !m_no_projection_scale;
+    if (!m_class_scale.empty()) {
+        std::stringstream ss(m_class_scale);
+        std::string item;
+        while (std::getline(ss, item, ',')) {
+            const auto eq = item.find('=');
+            double v = 0;
+            const char* b = item.data() + (eq == std::string::npos ? 0 : eq + 1);
+            const auto [p, ec] = std::from_chars(b, item.data() + item.size(), v);
+            if (eq == std::string::npos || eq == 0 || ec != std::errc() || p != item.data() + item.size() || !(v > 0)) {
+                throw usage_error("verify: option '--class-scale' has '" + item +
+                                  "', not CLASS=FACTOR with FACTOR > 0");
+            }
+            options.tolerance.class_scale[item.substr(0, eq)] = v;
+        }
+    }
+    if (!m_points.empty()) {
+        options.user_points = simplify::read_points(m_points);
+    }
+    Report r;
+    if (!tree) {
+        // An unreadable skeleton is the tree's failure: one violation, nothing else can be checked.
+        r.violations["skeleton"] = 1;
+        r.items.push_back({"skeleton", "", 0, "", {}, 0, 0, 0, 0, error});
+    } else {
+        r = verify_tree(*tree, m_original, options);
+    }
+    ctx.log.info("verify: checked");
+
+    json report;
+    report["schema"] = "tigerlod.verify-report/1";
+    report["tree"] = m_tree;
+    report["original"] = m_original;
+    report["clean"] = r.total() == 0;
+    report["checked"] = {
+        {"nodes", r.nodes}, {"lods", r.lods}, {"chains", r.chains}, {"segments", r.segments}, {"points", r.points}};
+    json counts = json::object();
+    for (const char* k : kinds) {
+        counts[k] = r.violations[k];
+    }
+    report["violations"] = counts;
+    json by = json::array();
+    for (const auto& ll : r.by_level_lod) {
+        json v = json::object();
+        for (const char* k : kinds) {
+            v[k] = ll.violations.at(k);
+        }
+        by.push_back({{"level", ll.level},
+                      {"lod", ll.lod},
+                      {"eps_m", ll.eps_m},
+                      {"nodes", ll.nodes},
+                      {"chains", ll.chains},
+                      {"segments", ll.segments},
+                      {"vertices", ll.vertices},
+                      {"points", ll.points},
+                      {"violations", v}});
+    }
+    report["by_level_lod"] = by;
+    json items = json::array();
+    for (const auto& v : r.items) {
+        json ids = json::array();
+        for (uint64_t id : v.chains) {
+            ids.push_back(std::to_string(id)); // strings: 64-bit ids do not survive JavaScript numbers
+        }
+        items.push_back({{"kind", v.kind},
+                         {"level", v.level},
+                         {"lod", v.lod},
+                         {"node", v.node},
+                         {"chains", ids},
+                         {"lon", v.lon},
+                         {"lat", v.lat},
+                         {"x", v.x},
+                         {"y", v.y},
+                         {"detail", v.detail}});
+    }
+    report["items"] = items;
+    report["items_dropped"] = r.items_dropped;
+    report["seconds"] = r.seconds;
+    report["segments_per_second"] = r.seconds > 0 ? double(r.segments) / r.seconds : 0.0;
+
+    std::string compare_text;
+    if (!m_compare.empty()) {
+        json old;
+        try {
+            std::ifstream in(m_compare);
+            old = json::parse(in);
+            if (old.value("schema", "") != "tigerlod.verify-report/1") {
+                throw input_error("not a tigerlod.verify-report/1");
+            }
+            std::set<std::string> was, now;
+            for (const auto& it : old.at("items")) {
+                was.insert(key_of(it));
+            }
+            json fresh = json::array(), fixed = json::array();
+            for (const auto& it : report["items"]) {
+                now.insert(key_of(it));
+                if (!was.contains(key_of(it))) {
+                    fresh.push_back(it);
+                }
+            }
+            for (const auto& it : old.at("items")) {
+                if (!now.contains(key_of(it))) {
+                    fixed.push_back(it);
+                }
+            }
+            json vertices = json::array();
+            for (const auto& ll : report["by_level_lod"]) {
+                int64_t before = -1;
+                for (const auto& o : old.at("by_level_lod")) {
+                    if (o.at("level") == ll.at("level") && o.at("lod") == ll.at("lod")) {
+                        before = o.at("vertices").get<int64_t>();
+                    }
+                }
+                const auto after = ll.at("vertices").get<int64_t>();
+                vertices.push_back({{"level", ll.at("level")},
+                                    {"lod", ll.at("lod")},
+                                    {"before", before < 0 ? json(nullptr) : json(before)},
+                                    {"after", after},
+                                    {"change", before < 0 ? json(nullptr) : json(after - before)}});
+            }
+            report["compare"] = {{"against", m_compare}, {"new", fresh.size()},  {"fixed", fixed.size()},
+                                 {"new_items", fresh},   {"fixed_items", fixed}, {"vertices", vertices}};
+            compare_text = "since " + m_compare + ": " + std::to_string(fresh.size()) + " new, " +
+                           std::to_string(fixed.size()) + " fixed violations\n";
+        } catch (const std::exception& e) {
+            throw input_error("verify: --compare " + m_compare + ": " + e.what());
+        }
+    }
+    write_file_atomic(out.path() / "verify-report.json", report.dump(2) + "\n");
+    write_gpkg(out.path() / "violations.gpkg", r);
+    out.commit();
+
+    // One screen for people.
+    std::printf("verify: %s against %s\n", m_tree.c_str(), m_original.c_str());
+    std::printf("  checked %llu nodes x %llu LODs: %llu chains, %llu segments, %llu points in %.2f s\n",
+                static_cast<unsigned long long>(r.nodes), static_cast<unsigned long long>(r.lods),
+                static_cast<unsigned long long>(r.chains), static_cast<unsigned long long>(r.segments),
+                static_cast<unsigned long long>(r.points), r.seconds);
+    if (r.total() == 0) {
+        std::printf("  CLEAN: no violations\n");
+    } else {
+        std::printf("  %llu VIOLATIONS:\n", static_cast<unsigned long long>(r.total()));
+        for (const char* k : kinds) {
+            if (r.violations[k] > 0) {
+                std::printf("    %-20s %llu\n", k, static_cast<unsigned long long>(r.violations[k]));
+            }
+        }
+        for (const auto& ll : r.by_level_lod) {
+            uint64_t n = 0;
+            for (const auto& [k, c] : ll.violations) {
+                n += c;
+            }
+            if (n > 0) {
+                std::printf("    at %s LOD %u (eps %g m): %llu\n", ll.level.c_str(), ll.lod, ll.eps_m,
+                            static_cast<unsigned long long>(n));
+            }
+        }
+        size_t shown = 0;
+        for (const auto& v : r.items) {
+            if (shown++ == 5) {
+                break;
+            }
+            std::printf("    e.g. %s at %s LOD %u node %s chains %s (%.6f, %.6f): %s\n", v.kind.c_str(),
+                        v.level.c_str(), v.lod, v.node.c_str(), ids_text(v.chains).c_str(), v.lon, v.lat,
+                        v.detail.c_str());
+        }
+    }
+    std::printf("%s", compare_text.c_str());
+    std::printf("report: %s/verify-report.json, violations: %s/violations.gpkg\n", m_output.c_str(), m_output.c_str());
+    return r.total() == 0 ? exit_ok : exit_data;
+}
+
+} // namespace tigerlod::verify

@@ -1,0 +1,32 @@
+#pragma once
+/// @file verify_stage.hpp
+/// tigerlod-verify: exact verification of a Data Tree against the original
+/// chain stores; a JSON report, a GeoPackage of the violations, a summary.
+
+#include "core/stage.hpp"
+
+#include <string>
+
+namespace tigerlod::verify {
+
+class VerifyStage final : public Stage {
+  public:
+    static constexpr const char* name = "verify";
+    static constexpr const char* description =
+        "Verify a Data Tree as a reader decodes it against the original chain stores, exactly: subsequences,\n"
+        "eps, no crossings or overlaps within and across nodes, rings, internal and user points, unit\n"
+        "polygons, skeleton consistency. Exit 0 when clean, 1 when any violation is found.";
+    void add_args(ArgSet& args) override;
+    void initialize() override;
+    int run(const StageContext& ctx) override;
+    std::string help_notes() const override;
+
+  private:
+    std::string m_tree, m_original, m_output, m_class_scale, m_points, m_compare;
+    bool m_no_projection_scale = false;
+    bool m_overwrite = false;
+    int m_threads = 0;
+    int m_max_items = 10000;
+}; // class VerifyStage
+
+} // namespace tigerlod::verify
