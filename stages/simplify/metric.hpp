@@ -36,7 +36,7 @@ struct Tolerance {
 /// (a may equal b). Exact.
 bool within(GridPoint p, GridPoint a, GridPoint b, const Tolerance& tol) noexcept;
 
-/// Squared L2 / L1 / Linf distance from p to segment ab, as a double (for
+/// L2, L1 or Linf distance from p to segment ab, as a double (for
 /// reports and the conflict graph; never for decisions that must be exact).
 double distance(GridPoint p, GridPoint a, GridPoint b, Metric m) noexcept;
 

@@ -50,7 +50,7 @@ int sign(int128 v)
 /// L2 distance from p to segment ab in grid units (double; for error_m and reports only).
 double l2_distance(GridPoint p, GridPoint a, GridPoint b)
 {
-    return std::sqrt(simplify::distance(p, a, b, simplify::Metric::l2));
+    return simplify::distance(p, a, b, simplify::Metric::l2);
 }
 
 /// An original chain of a level: its store, its record and its tolerance at the LOD.
@@ -108,8 +108,13 @@ class Verifier {
   private:
     void add(LevelLod& ll, Violation v)
     {
-        ++ll.violations[v.kind];
-        ++m_report.violations[v.kind];
+        if (v.kind == "input_problem") {
+            ++ll.input_problems;
+            ++m_report.input_problems;
+        } else {
+            ++ll.violations[v.kind];
+            ++m_report.violations[v.kind];
+        }
         if (m_report.items.size() >= m_options.max_items) {
             ++m_report.items_dropped;
             return;
@@ -167,6 +172,7 @@ class Verifier {
             }
         }
         // The units whose boundary each node's original map holds, and their original area sign.
+        std::set<std::pair<uint64_t, uint64_t>> input_meetings; // chain pairs that meet at LOD 0
         std::vector<std::vector<UserPoint>> user_points(nodes.size());
         std::vector<std::map<std::string, int>> area_sign(nodes.size());
         parallel_each(nodes.size(), m_options.threads, [&](size_t i) {
@@ -271,8 +277,16 @@ class Verifier {
                     it->second = Meeting{x, ua, ub, rank};
                 }
             }
+            if (k == 0) {
+                for (const auto& [ids, m] : meetings) {
+                    input_meetings.insert(ids);
+                }
+            }
             for (const auto& [ids, m] : meetings) {
-                const char* kind = m.ua == m.ub                               ? "self_intersections"
+                // Chains that already meet in the original map: an input problem
+                // (ingest reported and flagged it), not one the pipeline made.
+                const char* kind = input_meetings.contains(ids)               ? "input_problem"
+                                   : m.ua == m.ub                             ? "self_intersections"
                                    : m.x.relation == SegmentRelation::overlap ? "overlaps"
                                                                               : "crossings";
                 const char* rel = m.x.relation == SegmentRelation::cross     ? "cross"

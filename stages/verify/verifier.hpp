@@ -48,6 +48,7 @@ struct LevelLod {
     double eps_m = 0;
     uint64_t nodes = 0, chains = 0, segments = 0, vertices = 0, points = 0;
     std::map<std::string, uint64_t> violations; ///< by kind, every kind present
+    uint64_t input_problems = 0;                ///< meetings already in the original map
 };
 
 struct Options {
@@ -60,6 +61,10 @@ struct Options {
 struct Report {
     uint64_t nodes = 0, lods = 0, chains = 0, segments = 0, points = 0;
     std::map<std::string, uint64_t> violations; ///< totals by kind
+    /// Chains that meet in the tree and already met in the original map (the
+    /// crossings ingest reports and flags): listed as items of kind
+    /// "input_problem", not counted as violations.
+    uint64_t input_problems = 0;
     std::vector<LevelLod> by_level_lod;
     std::vector<Violation> items;
     uint64_t items_dropped = 0;

@@ -183,6 +183,7 @@ int VerifyStage::run(const StageContext& ctx)
         counts[k] = r.violations[k];
     }
     report["violations"] = counts;
+    report["input_problems"] = r.input_problems;
     json by = json::array();
     for (const auto& ll : r.by_level_lod) {
         json v = json::object();
@@ -197,7 +198,8 @@ int VerifyStage::run(const StageContext& ctx)
                       {"segments", ll.segments},
                       {"vertices", ll.vertices},
                       {"points", ll.points},
-                      {"violations", v}});
+                      {"violations", v},
+                      {"input_problems", ll.input_problems}});
     }
     report["by_level_lod"] = by;
     json items = json::array();
@@ -231,19 +233,25 @@ int VerifyStage::run(const StageContext& ctx)
             if (old.value("schema", "") != "tigerlod.verify-report/1") {
                 throw input_error("not a tigerlod.verify-report/1");
             }
+            // Input problems are the input's, not the run's: not compared.
+            auto counted = [](const json& it) { return it.at("kind") != "input_problem"; };
             std::set<std::string> was, now;
             for (const auto& it : old.at("items")) {
-                was.insert(key_of(it));
+                if (counted(it)) {
+                    was.insert(key_of(it));
+                }
             }
             json fresh = json::array(), fixed = json::array();
             for (const auto& it : report["items"]) {
-                now.insert(key_of(it));
-                if (!was.contains(key_of(it))) {
-                    fresh.push_back(it);
+                if (counted(it)) {
+                    now.insert(key_of(it));
+                    if (!was.contains(key_of(it))) {
+                        fresh.push_back(it);
+                    }
                 }
             }
             for (const auto& it : old.at("items")) {
-                if (!now.contains(key_of(it))) {
+                if (counted(it) && !now.contains(key_of(it))) {
                     fixed.push_back(it);
                 }
             }
@@ -301,6 +309,9 @@ int VerifyStage::run(const StageContext& ctx)
         }
         size_t shown = 0;
         for (const auto& v : r.items) {
+            if (v.kind == "input_problem") {
+                continue;
+            }
             if (shown++ == 5) {
                 break;
             }
@@ -308,6 +319,11 @@ int VerifyStage::run(const StageContext& ctx)
                         v.level.c_str(), v.lod, v.node.c_str(), ids_text(v.chains).c_str(), v.lon, v.lat,
                         v.detail.c_str());
         }
+    }
+    if (r.input_problems > 0) {
+        std::printf("  %llu input problems: chains that already meet in the original map (see the ingest report);\n"
+                    "  listed as kind input_problem, not counted as violations\n",
+                    static_cast<unsigned long long>(r.input_problems));
     }
     std::printf("%s", compare_text.c_str());
     std::printf("report: %s/verify-report.json, violations: %s/violations.gpkg\n", m_output.c_str(), m_output.c_str());

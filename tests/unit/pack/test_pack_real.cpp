@@ -332,3 +332,35 @@ TEST_F(PackReal, DumpAndExport)
         << slurp(dir / "out");
     fs::remove_all(dir / "bad");
 }
+
+TEST_F(PackReal, VerifyIsCleanOnRealDataAndCatchesDamage)
+{
+    const std::string d = dir.string();
+    ASSERT_EQ(run("verify", d + "/tree " + d + "/ingest " + d + "/v1", dir / "out"), 0) << slurp(dir / "out");
+    EXPECT_NE(slurp(dir / "out").find("CLEAN: no violations"), std::string::npos) << slurp(dir / "out");
+    const std::string report = slurp(dir / "v1" / "verify-report.json");
+    EXPECT_NE(report.find("\"schema\": \"tigerlod.verify-report/1\""), std::string::npos);
+    EXPECT_NE(report.find("\"clean\": true"), std::string::npos);
+    EXPECT_TRUE(fs::exists(dir / "v1" / "violations.gpkg"));
+    // A tree with a damaged payload: reported as such, exit 1, and --compare names it as new.
+    fs::copy(dir / "tree", dir / "bad", fs::copy_options::recursive);
+    const auto t = open(dir / "bad");
+    const auto& ref = t->skeleton().nodes[3].lods[2].payload;
+    {
+        std::fstream f(dir / "bad" / t->skeleton().tiles[ref.tile].file,
+                       std::ios::in | std::ios::out | std::ios::binary);
+        f.seekp(static_cast<std::streamoff>(ref.offset + ref.size / 2));
+        f.put('\x11');
+    }
+    EXPECT_EQ(run("verify", "--compare " + d + "/v1/verify-report.json " + d + "/bad " + d + "/ingest " + d + "/v2",
+                  dir / "out"),
+              1)
+        << slurp(dir / "out");
+    EXPECT_NE(slurp(dir / "out").find("skeleton"), std::string::npos) << slurp(dir / "out");
+    EXPECT_NE(slurp(dir / "out").find(": 1 new, 0 fixed violations"), std::string::npos) << slurp(dir / "out");
+    EXPECT_NE(slurp(dir / "v2" / "verify-report.json").find("checksum mismatch"), std::string::npos);
+    // Usage errors.
+    EXPECT_EQ(run("verify", d + "/tree " + d + "/nowhere " + d + "/v3", dir / "out"), 2);
+    EXPECT_EQ(run("verify", d + "/tree " + d + "/ingest " + d + "/v1", dir / "out"), 2); // exists
+    fs::remove_all(dir / "bad");
+}

@@ -1,0 +1,408 @@
+// tigerlod-verify on hand-made trees: for every check, a tree that breaks it
+// and the exact violations expected; the clean tree reports zero.
+#include "formats/chains/chain_store.hpp"
+#include "stages/pack/packer.hpp"
+#include "stages/verify/verifier.hpp"
+
+#include <gtest/gtest.h>
+
+#include <functional>
+#include <map>
+
+namespace fs = std::filesystem;
+using namespace tigerlod;
+using chains::ChainStore;
+using Pts = std::vector<GridPoint>;
+
+namespace {
+
+ChainStore store(uint32_t level, uint32_t nlevels, const std::string& level_name, const std::string& partition)
+{
+    ChainStore s;
+    s.level_index = level;
+    s.level_count = nlevels;
+    s.level_name = level_name;
+    s.partition = partition;
+    s.projection.grid_m = 1.0;
+    s.halo_m = 1000;
+    return s;
+}
+
+void chain(ChainStore& s, uint64_t id, const std::string& left, const std::string& right, const Pts& pts,
+           bool halo = false)
+{
+    const uint32_t flags = (pts.front() == pts.back() ? chains::chain_closed : 0U) | (halo ? chains::chain_halo : 0U);
+    s.add_chain({id, s.intern(left), s.intern(right), s.intern("X0000"), flags, 0, 0}, pts);
+}
+
+void point(ChainStore& s, const std::string& unit, GridPoint p)
+{
+    s.constraints.push_back({s.intern(unit), chains::constraint_internal, p});
+}
+
+/// A map: original stores, and their simplification at one eps with some chains replaced.
+struct Map {
+    std::vector<ChainStore> stores;
+    double eps_m = 300;
+    std::map<uint64_t, Pts> simplified; ///< chains that differ at LOD 1
+};
+
+/// Expected counts: every kind not named must be 0.
+using Counts = std::map<std::string, uint64_t>;
+
+class Verify : public ::testing::Test {
+  protected:
+    fs::path dir;
+    void SetUp() override
+    {
+        dir = fs::temp_directory_path() /
+              ("tigerlod-verify-" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+        fs::remove_all(dir);
+    }
+    void TearDown() override { fs::remove_all(dir); }
+
+    /// Pack `m`, let `tamper` change payloads or the skeleton, write, verify.
+    verify::Report
+    run(const Map& m, const std::function<void(pack::PackedTree&, std::vector<std::vector<std::string>>&)>& tamper = {},
+        verify::Options options = {})
+    {
+        for (auto s : m.stores) {
+            s.canonicalize();
+            fs::create_directories(dir / "orig" / s.level_name);
+            chains::write(dir / "orig" / s.level_name / (s.partition + ".tlc"), s);
+            ChainStore t = s;
+            t.eps_m = m.eps_m;
+            t.chains.clear();
+            t.points.clear();
+            for (const auto& c : s.chains) {
+                const auto it = m.simplified.find(c.id);
+                const auto pts = s.chain_points(c);
+                t.add_chain(c, it == m.simplified.end() || (c.flags & chains::chain_halo) ? Pts(pts.begin(), pts.end())
+                                                                                          : it->second);
+            }
+            t.canonicalize();
+            char name[32];
+            std::snprintf(name, sizeof name, "eps-%gm", m.eps_m);
+            fs::create_directories(dir / "simp" / name / s.level_name);
+            chains::write(dir / "simp" / name / s.level_name / (s.partition + ".tlc"), t);
+        }
+        pack::PackedTree tree = pack::build_tree(dir / "orig", dir / "simp", {});
+        if (tamper) {
+            auto& sk = tree.skeleton;
+            std::vector<std::vector<std::string>> payloads(sk.nodes.size());
+            for (size_t n = 0; n < sk.nodes.size(); ++n) {
+                auto get = [&](const datatree::PayloadRef& r) {
+                    return tree.tile_bytes[r.tile].substr(r.offset, r.size);
+                };
+                payloads[n].push_back(get(sk.nodes[n].table));
+                for (const auto& l : sk.nodes[n].lods) {
+                    payloads[n].push_back(get(l.payload));
+                }
+            }
+            tamper(tree, payloads);
+            pack::layout_tiles(tree, payloads, 1ULL << 30);
+        }
+        pack::write_tree(dir / "tree", tree);
+        std::string error;
+        const auto t = reader::Tree::open(dir / "tree", error);
+        EXPECT_TRUE(t) << error;
+        options.tolerance.projection_scale = false; // eps in grid metres: exact expectations
+        return verify::verify_tree(*t, dir / "orig", options);
+    }
+
+    static void expect(const verify::Report& r, const Counts& want)
+    {
+        for (const char* k : verify::kinds) {
+            const auto it = want.find(k);
+            EXPECT_EQ(r.violations.at(k), it == want.end() ? 0U : it->second) << "kind " << k;
+        }
+        if (::testing::Test::HasFailure()) {
+            for (const auto& v : r.items) {
+                std::printf("  %s %s lod %u node %s (%g, %g): %s\n", v.kind.c_str(), v.level.c_str(), v.lod,
+                            v.node.c_str(), v.x, v.y, v.detail.c_str());
+            }
+        }
+    }
+};
+
+/// Replace chain `id`'s geometry at `lod` of node `node` in the payloads (and
+/// loosen the skeleton's error bound from that LOD on).
+void set_chain(const pack::PackedTree& tree, std::vector<std::vector<std::string>>& payloads, uint32_t node,
+               uint32_t lod, uint64_t id, const Pts& pts)
+{
+    const auto& n = tree.skeleton.nodes[node];
+    const auto table =
+        datatree::decode_table(std::as_bytes(std::span(payloads[node][0].data(), payloads[node][0].size())), "t");
+    const auto& bytes = payloads[node][1 + lod];
+    const auto g = datatree::decode_geometry(std::as_bytes(std::span(bytes.data(), bytes.size())),
+                                             {n.box.min_x, n.box.min_y}, n.chains, n.lods[lod].vertices, "g");
+    datatree::Geometry out;
+    for (size_t c = 0; c < g.chain_count(); ++c) {
+        if (table.chains[c].id == id) {
+            out.add_chain(pts);
+        } else {
+            out.add_chain(g.chain(c));
+        }
+    }
+    payloads[node][1 + lod] = datatree::encode_geometry(out, {n.box.min_x, n.box.min_y});
+    auto& l = const_cast<pack::PackedTree&>(tree).skeleton.nodes[node].lods;
+    l[lod].vertices = out.points.size();
+    // A loose error bound, so that only the intended violations show.
+    for (size_t k = lod; k < l.size(); ++k) {
+        l[k].error_m = 1e9;
+    }
+}
+
+/// County A (a square) split into tracts A1 (west, with a pocket reaching east
+/// at 500..800 x 400..600) and A2 (east); optionally an island tract I in A1.
+Map county_a(bool island, GridPoint a1_point)
+{
+    Map m;
+    ChainStore l0 = store(0, 2, "county", "all");
+    chain(l0, 1, "A", "", {{0, 0}, {1000, 0}, {1000, 1000}, {0, 1000}, {0, 0}});
+    point(l0, "A", {500, 500});
+    ChainStore l1 = store(1, 2, "tract", "A");
+    chain(l1, 10, "A2", "", {{500, 0}, {1000, 0}, {1000, 1000}, {500, 1000}});
+    chain(l1, 11, "A1", "", {{500, 1000}, {0, 1000}, {0, 0}, {500, 0}});
+    chain(l1, 12, "A1", "A2", {{500, 0}, {500, 400}, {800, 400}, {800, 600}, {500, 600}, {500, 1000}});
+    point(l1, "A1", a1_point);
+    point(l1, "A2", {900, 500});
+    if (island) {
+        chain(l1, 13, "I", "A1", {{450, 450}, {550, 450}, {550, 550}, {450, 550}, {450, 450}});
+        point(l1, "I", {500, 500});
+    }
+    m.stores = {l0, l1};
+    return m;
+}
+
+/// One level of unrelated lines (no units): partition "all".
+Map lines(const std::vector<std::pair<uint64_t, Pts>>& cs, double eps_m)
+{
+    Map m;
+    m.eps_m = eps_m;
+    ChainStore s = store(0, 1, "lines", "all");
+    for (const auto& [id, pts] : cs) {
+        chain(s, id, "", "", pts);
+    }
+    m.stores = {s};
+    return m;
+}
+
+} // namespace
+
+TEST_F(Verify, CleanTreeReportsZero)
+{
+    Map m = county_a(true, {300, 200});
+    m.simplified[11] = {{500, 1000}, {0, 1000}, {0, 0}, {500, 0}}; // as it was
+    const auto r = run(m);
+    expect(r, {});
+    EXPECT_EQ(r.nodes, 2U);
+    EXPECT_EQ(r.lods, 2U);
+    EXPECT_EQ(r.by_level_lod.size(), 4U);
+    EXPECT_GT(r.segments, 0U);
+    EXPECT_EQ(r.points, 2U * (1 + 3)); // per LOD: A; A1, A2, I
+}
+
+TEST_F(Verify, ShortcutAcrossAnIslandIsACrossing)
+{
+    Map m = county_a(true, {300, 200});
+    // Within eps (the pocket's corners are exactly 300 from x = 500) and a
+    // subsequence, but it cuts through island I.
+    m.simplified[12] = {{500, 0}, {500, 400}, {500, 600}, {500, 1000}};
+    const auto r = run(m);
+    expect(r, {{"crossings", 1}});
+    ASSERT_EQ(r.items.size(), 1U);
+    const auto& v = r.items[0];
+    EXPECT_EQ(v.kind, "crossings");
+    EXPECT_EQ(v.level, "tract");
+    EXPECT_EQ(v.lod, 1U);
+    EXPECT_EQ(v.node, "A");
+    EXPECT_EQ(v.chains, (std::vector<uint64_t>{12, 13}));
+    EXPECT_EQ(v.x, 500.0);
+    EXPECT_TRUE(v.y == 450.0 || v.y == 550.0) << v.y;
+    EXPECT_NEAR(v.lon, -96.0, 0.1); // grid 1 m around the Albers origin
+}
+
+TEST_F(Verify, VertexFartherThanEps)
+{
+    Map m = county_a(false, {300, 200});
+    m.simplified[11] = {{500, 1000}, {0, 0}, {500, 0}}; // (0, 1000) is 447 m from the shortcut
+    const auto r = run(m);
+    expect(r, {{"eps_exceeded", 1}});
+    EXPECT_EQ(r.items.at(0).chains, (std::vector<uint64_t>{11}));
+    EXPECT_EQ(r.items.at(0).x, 0.0);
+    EXPECT_EQ(r.items.at(0).y, 1000.0);
+}
+
+TEST_F(Verify, MovedVertexIsNotASubsequence)
+{
+    const auto r = run(county_a(false, {300, 200}), [](pack::PackedTree& t, auto& p) {
+        set_chain(t, p, 1, 1, 11, {{500, 1000}, {0, 1000}, {1, 0}, {500, 0}});
+    });
+    expect(r, {{"not_subsequence", 1}});
+}
+
+TEST_F(Verify, InternalPointLeftOnTheOtherSide)
+{
+    Map m = county_a(false, {650, 500});        // A1's point in its pocket
+    m.simplified[12] = {{500, 0}, {500, 1000}}; // the pocket goes to A2
+    const auto r = run(m);
+    expect(r, {{"point_constraints", 1}});
+    EXPECT_EQ(r.items.at(0).x, 650.0);
+    EXPECT_NE(r.items.at(0).detail.find("internal point of A1"), std::string::npos);
+}
+
+TEST_F(Verify, UserPointLeftOnTheOtherSide)
+{
+    Map m = county_a(false, {300, 200});
+    m.simplified[12] = {{500, 0}, {500, 400}, {500, 600}, {500, 1000}}; // the pocket goes to A2
+    verify::Options o;
+    // A user point in the pocket, given in lon/lat.
+    Projection proj(m.stores[0].projection);
+    double lon = 0, lat = 0;
+    proj.to_lonlat(700, 500, lon, lat);
+    o.user_points.push_back({lon, lat});
+    const auto r = run(m, {}, o);
+    expect(r, {{"point_constraints", 1}});
+    EXPECT_NE(r.items.at(0).detail.find("user point 0 left unit A1"), std::string::npos) << r.items.at(0).detail;
+}
+
+TEST_F(Verify, UnitWhoseAreaChangedSign)
+{
+    // The island's ring with its sides swapped in the tree: I's boundary
+    // closes, but I now has a negative area (at both LODs).
+    const auto r = run(county_a(true, {300, 200}), [](pack::PackedTree& t, auto& p) {
+        auto table = datatree::decode_table(std::as_bytes(std::span(p[1][0].data(), p[1][0].size())), "t");
+        for (auto& c : table.chains) {
+            if (c.id == 13) {
+                std::swap(c.left, c.right);
+            }
+        }
+        p[1][0] = datatree::encode_table(table);
+        (void)t;
+    });
+    expect(r, {{"invalid_polygons", 2}});
+    EXPECT_NE(r.items.at(0).detail.find("unit I: area sign -1, originally 1"), std::string::npos)
+        << r.items.at(0).detail;
+}
+
+TEST_F(Verify, UnitWhoseBoundaryDoesNotClose)
+{
+    // Chain 10 with its sides swapped: A2's boundary no longer closes.
+    const auto r = run(county_a(false, {300, 200}), [](pack::PackedTree&, auto& p) {
+        auto table = datatree::decode_table(std::as_bytes(std::span(p[1][0].data(), p[1][0].size())), "t");
+        for (auto& c : table.chains) {
+            if (c.id == 10) {
+                std::swap(c.left, c.right);
+            }
+        }
+        p[1][0] = datatree::encode_table(table);
+    });
+    expect(r, {{"invalid_polygons", 2}});
+    EXPECT_NE(r.items.at(0).detail.find("unit A2: boundary does not close"), std::string::npos) << r.items.at(0).detail;
+}
+
+TEST_F(Verify, BorderShownDifferentlyByTwoNodes)
+{
+    // Counties A and B, one tract each; their border has a vertex that 300 m drops.
+    Map m;
+    ChainStore l0 = store(0, 2, "county", "all");
+    chain(l0, 1, "A", "B", {{1000, 0}, {1010, 500}, {1000, 1000}});
+    chain(l0, 2, "A", "", {{1000, 1000}, {0, 1000}, {0, 0}, {1000, 0}});
+    chain(l0, 3, "B", "", {{1000, 0}, {2000, 0}, {2000, 1000}, {1000, 1000}});
+    point(l0, "A", {500, 500});
+    point(l0, "B", {1500, 500});
+    ChainStore a = store(1, 2, "tract", "A");
+    chain(a, 11, "A1", "B1", {{1000, 0}, {1010, 500}, {1000, 1000}});
+    chain(a, 12, "A1", "", {{1000, 1000}, {0, 1000}, {0, 0}, {1000, 0}});
+    chain(a, 13, "B1", "", {{1000, 0}, {2000, 0}, {2000, 1000}, {1000, 1000}}, true);
+    point(a, "A1", {500, 500});
+    ChainStore b = store(1, 2, "tract", "B");
+    chain(b, 13, "B1", "", {{1000, 0}, {2000, 0}, {2000, 1000}, {1000, 1000}});
+    chain(b, 11, "A1", "B1", {{1000, 0}, {1010, 500}, {1000, 1000}}, true);
+    point(b, "B1", {1500, 500});
+    m.stores = {l0, a, b};
+    m.simplified[1] = {{1000, 0}, {1000, 1000}};
+    m.simplified[11] = {{1000, 0}, {1000, 1000}};
+    expect(run(m), {});
+    // Node B (index 2) shows the border with the original vertex at LOD 1.
+    const auto r = run(m, [](pack::PackedTree& t, auto& p) {
+        ASSERT_EQ(t.skeleton.strings[t.skeleton.nodes[2].code], "B");
+        set_chain(t, p, 2, 1, 11, {{1000, 0}, {1010, 500}, {1000, 1000}});
+    });
+    expect(r, {{"border_mismatch", 1}});
+    EXPECT_EQ(r.items.at(0).node, "B");
+    EXPECT_EQ(r.items.at(0).chains, (std::vector<uint64_t>{11}));
+}
+
+TEST_F(Verify, ChainsThatOverlap)
+{
+    const auto m = lines({{1, {{0, 0}, {300, 0}}}, {2, {{0, 100}, {100, 50}, {300, 100}}}}, 60);
+    const auto r = run(m, [](pack::PackedTree& t, auto& p) {
+        set_chain(t, p, 0, 1, 2, {{0, 100}, {100, 0}, {200, 0}, {300, 100}});
+    });
+    expect(r, {{"overlaps", 1}, {"not_subsequence", 1}});
+}
+
+TEST_F(Verify, ChainThatCrossesItself)
+{
+    // Dropping (920, 300), 67.6 m from the shortcut (800, 0)-(920, 700), is
+    // within 70 m, but the shortcut cuts (900, 400)-(200, 0) at (865.2, 380.1).
+    auto m = lines({{3, {{900, 400}, {200, 0}, {800, 0}, {920, 300}, {920, 700}, {200, 900}}}}, 70);
+    m.simplified[3] = {{900, 400}, {200, 0}, {800, 0}, {920, 700}, {200, 900}};
+    const auto r = run(m);
+    expect(r, {{"self_intersections", 1}});
+    EXPECT_EQ(r.items.at(0).chains, (std::vector<uint64_t>{3}));
+}
+
+TEST_F(Verify, RingCollapsed)
+{
+    // Chain stores refuse such a ring, so it is put in the tree directly.
+    const auto m = lines({{4, {{0, 0}, {40, 0}, {40, 40}, {0, 40}, {0, 0}}}}, 60);
+    const auto r = run(m, [](pack::PackedTree& t, auto& p) { set_chain(t, p, 0, 1, 4, {{0, 0}, {40, 0}, {0, 0}}); });
+    expect(r, {{"ring_collapsed", 1}, {"self_intersections", 1}});
+}
+
+TEST_F(Verify, RingOrientationFlipped)
+{
+    // A counter-clockwise ring through the corners of a square in bow-tie
+    // order, going round the outside; keeping only the corners flips its area.
+    auto m = lines({{5, {{0, 0}, {100, 100}, {100, 0}, {100, -50}, {-50, -50}, {-50, 100}, {0, 100}, {0, 0}}}}, 60);
+    const auto r = run(m, [](pack::PackedTree& t, auto& p) {
+        set_chain(t, p, 0, 1, 5, {{0, 0}, {100, 100}, {100, 0}, {0, 100}, {0, 0}});
+    });
+    expect(r, {{"ring_orientation", 1}, {"self_intersections", 1}, {"eps_exceeded", 1}});
+}
+
+TEST_F(Verify, SkeletonInconsistencies)
+{
+    Map m = lines({{1, {{0, 0}, {100, 30}, {200, 0}}}}, 60);
+    m.simplified[1] = {{0, 0}, {200, 0}};
+    // The LOD 1 error claims 0 m while the chain moved 30 m.
+    auto r = run(m, [](pack::PackedTree& t, auto&) { t.skeleton.nodes[0].lods[1].error_m = 0; });
+    expect(r, {{"skeleton", 1}});
+    EXPECT_NE(r.items.at(0).detail.find("below the measured 30"), std::string::npos)
+        << "[" << r.items.at(0).detail << "]";
+    // A box that does not hold the chain: both LODs.
+    fs::remove_all(dir);
+    r = run(m, [](pack::PackedTree& t, auto&) { t.skeleton.nodes[0].box.max_x -= 1; });
+    expect(r, {{"skeleton", 2}});
+    // A payload that does not decode: reported, the rest checked.
+    fs::remove_all(dir);
+    r = run(m, [](pack::PackedTree&, auto& p) { p[0][2][5] = static_cast<char>(p[0][2][5] ^ 0x55); });
+    expect(r, {{"skeleton", 1}});
+    EXPECT_EQ(r.items.at(0).lod, 1U);
+}
+
+TEST_F(Verify, CrossingsAlreadyInTheInputAreInputProblemsNotViolations)
+{
+    // Two lines that cross in the original map (ingest reports and flags such
+    // chains); the tree keeps them crossing at both LODs.
+    const auto m = lines({{1, {{0, 0}, {100, 100}}}, {2, {{0, 100}, {100, 0}}}}, 60);
+    const auto r = run(m);
+    expect(r, {});
+    EXPECT_EQ(r.input_problems, 2U);
+    ASSERT_EQ(r.items.size(), 2U);
+    EXPECT_EQ(r.items[0].kind, "input_problem");
+    EXPECT_EQ(r.items[0].x, 50.0);
+}
