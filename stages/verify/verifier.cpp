@@ -50,7 +50,11 @@ int sign(int128 v)
 /// L2 distance from p to segment ab in grid units (double; for error_m and reports only).
 double l2_distance(GridPoint p, GridPoint a, GridPoint b)
 {
-    return simplify::distance(p, a, b, simplify::Metric::l2);
+    const double dx = double(b.x) - a.x, dy = double(b.y) - a.y;
+    const double ux = double(p.x) - a.x, uy = double(p.y) - a.y;
+    const double len2 = dx * dx + dy * dy;
+    const double t = len2 > 0 ? std::clamp((ux * dx + uy * dy) / len2, 0.0, 1.0) : 0.0;
+    return std::hypot(ux - t * dx, uy - t * dy);
 }
 
 /// An original chain of a level: its store, its record and its tolerance at the LOD.
