@@ -24,7 +24,7 @@ class PackStage final : public Stage {
 
   private:
     std::string m_original, m_simplified, m_output;
-    double m_tile_mb = 32;
+    double m_tile_mb = 4;
     int m_draco_speed = 0;
     int m_threads = 0;
 }; // class PackStage

@@ -16,7 +16,7 @@ namespace tigerlod::pack {
 struct PackOptions {
     /// A subtree whose payloads fit in this many bytes goes into one tile;
     /// small sibling subtrees are grouped up to it.
-    uint64_t tile_bytes = 32ULL << 20;
+    uint64_t tile_bytes = 4ULL << 20;
     int draco_speed = 0;
     unsigned threads = 1;
 };
