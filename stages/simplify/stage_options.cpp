@@ -65,18 +65,7 @@ void CommonOptions::initialize(const std::string& stage)
         fail("metric", "must be l2, l1 or linf, not '" + m_metric + "'");
     }
     options.metric = *metric;
-    options.class_scale.clear();
-    std::stringstream cs(m_class_scale);
-    while (std::getline(cs, item, ',')) {
-        const auto eq = item.find('=');
-        double v = 0;
-        if (eq == std::string::npos || eq == 0 ||
-            std::from_chars(item.data() + eq + 1, item.data() + item.size(), v).ptr != item.data() + item.size() ||
-            !(v > 0)) {
-            fail("class-scale", "has '" + item + "'; expected CLASS=FACTOR with FACTOR > 0");
-        }
-        options.class_scale[item.substr(0, eq)] = v;
-    }
+    options.class_scale = parse_class_scale(m_class_scale, stage);
     options.projection_scale = !m_no_projection_scale;
     if (!(m_pixel_fraction > 0 && m_pixel_fraction <= 0.5)) {
         fail("pixel-fraction", "must be in (0, 0.5]");
@@ -95,6 +84,25 @@ void CommonOptions::initialize(const std::string& stage)
     options.color.max_classes = static_cast<uint32_t>(m_max_classes);
     options.color.metric = options.metric;
     options.threads = m_threads == 0 ? std::max(1U, std::thread::hardware_concurrency()) : unsigned(m_threads);
+}
+
+std::map<std::string, double> parse_class_scale(const std::string& list, const std::string& stage)
+{
+    std::map<std::string, double> out;
+    std::stringstream cs(list);
+    std::string item;
+    while (std::getline(cs, item, ',')) {
+        const auto eq = item.find('=');
+        double v = 0;
+        if (eq == std::string::npos || eq == 0 ||
+            std::from_chars(item.data() + eq + 1, item.data() + item.size(), v).ptr != item.data() + item.size() ||
+            !(v > 0)) {
+            throw usage_error(stage + ": option '--class-scale' has '" + item +
+                              "'; expected CLASS=FACTOR with FACTOR > 0");
+        }
+        out[item.substr(0, eq)] = v;
+    }
+    return out;
 }
 
 std::string tolerance_dir(double eps_m)

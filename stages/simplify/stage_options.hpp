@@ -7,6 +7,7 @@
 #include "stages/simplify/simplifier.hpp"
 
 #include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -43,6 +44,9 @@ class CommonOptions {
 
 /// Folder name of a tolerance: "eps-1m", "eps-0.5m".
 std::string tolerance_dir(double eps_m);
+
+/// Parse `--class-scale` (CLASS=FACTOR,...; FACTOR > 0). Throws usage_error naming `stage`.
+std::map<std::string, double> parse_class_scale(const std::string& list, const std::string& stage);
 
 /// The stores under `input`, sorted by (level, partition); only `level` if not empty.
 /// Throws usage_error if `input` is not a folder or holds no store.

@@ -2,6 +2,7 @@
 
 #include "core/fs.hpp"
 #include "stages/simplify/simplify_stage.hpp"
+#include "stages/simplify/stage_options.hpp"
 #include "stages/verify/verifier.hpp"
 
 #include <gdal.h>
@@ -56,6 +57,7 @@ void VerifyStage::initialize()
     if (!fs::is_directory(m_original)) {
         throw usage_error("verify: " + m_original + ": not a folder");
     }
+    simplify::parse_class_scale(m_class_scale, "verify"); // validated before any data is read
 }
 
 std::string VerifyStage::help_notes() const
@@ -143,21 +145,7 @@ int VerifyStage::run(const StageContext& ctx)
         m_threads > 0 ? static_cast<unsigned>(m_threads) : std::max(1U, std::thread::hardware_concurrency());
     options.max_items = static_cast<size_t>(m_max_items);
     options.tolerance.projection_scale = !m_no_projection_scale;
-    if (!m_class_scale.empty()) {
-        std::stringstream ss(m_class_scale);
-        std::string item;
-        while (std::getline(ss, item, ',')) {
-            const auto eq = item.find('=');
-            double v = 0;
-            const char* b = item.data() + (eq == std::string::npos ? 0 : eq + 1);
-            const auto [p, ec] = std::from_chars(b, item.data() + item.size(), v);
-            if (eq == std::string::npos || eq == 0 || ec != std::errc() || p != item.data() + item.size() || !(v > 0)) {
-                throw usage_error("verify: option '--class-scale' has '" + item +
-                                  "', not CLASS=FACTOR with FACTOR > 0");
-            }
-            options.tolerance.class_scale[item.substr(0, eq)] = v;
-        }
-    }
+    options.tolerance.class_scale = simplify::parse_class_scale(m_class_scale, "verify");
     if (!m_points.empty()) {
         options.user_points = simplify::read_points(m_points);
     }
