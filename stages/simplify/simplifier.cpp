@@ -244,6 +244,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         Work& w = work[i];
         if (!w.fixed) {
             w.cand = proximate_shortcuts(points_of(w), w.tol, opt.max_reach);
+            w.cand.shrink_to_fit(); // the scan grew it by doubling: up to half of it was slack
         }
     });
     st.seconds_candidates += since(t0);
@@ -302,6 +303,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         for (size_t v = 0; v < n; ++v) {
             w.first[v + 1] += w.first[v];
         }
+        w.cand.shrink_to_fit(); // point culling removed some
         w.state.assign(w.cand.size(), unknown);
     }
     st.seconds_constraints += since(t0);
@@ -454,13 +456,23 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     };
 
     if (!opt.lazy) {
-        std::vector<std::pair<uint32_t, uint32_t>> all;
+        // Every candidate, but only those the far rule cannot settle are
+        // listed: listing all of them cost 8 bytes each (1 GB for one South
+        // Dakota county map at 64 m, whose 65 M candidates are 98% far).
+        std::vector<std::pair<uint32_t, uint32_t>> near;
         for (uint32_t wi = 0; wi < work.size(); ++wi) {
-            for (uint32_t ci = 0; ci < work[wi].cand.size(); ++ci) {
-                all.emplace_back(wi, ci);
+            const auto& b = blocked[wi];
+            auto& w = work[wi];
+            for (uint32_t ci = 0; ci < w.cand.size(); ++ci) {
+                if (!b.empty() && b[w.cand[ci].to] == b[w.cand[ci].from]) {
+                    w.state[ci] = good;
+                    ++st.proved_far;
+                } else {
+                    near.emplace_back(wi, ci);
+                }
             }
         }
-        raster_test(all);
+        raster_test(near);
     }
 
     for (;;) {
