@@ -1,5 +1,7 @@
 #include "stages/simplify/coloring.hpp"
 
+#include "stages/simplify/cell_cover.hpp"
+
 #include "core/errors.hpp"
 
 #include <algorithm>
@@ -77,34 +79,10 @@ std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> cha
     std::vector<std::pair<uint64_t, uint32_t>> entries;
     for (uint32_t i = 0; i < segs.size(); ++i) {
         const Seg& s = segs[i];
-        // The cells the segment's r-neighbourhood touches, row by row: the
-        // part of the segment within the row's band widened by r, widened by r.
-        const auto y0 = static_cast<int64_t>(std::floor((std::min(s.ay, s.by) - s.r) / cell));
-        const auto y1 = static_cast<int64_t>(std::floor((std::max(s.ay, s.by) + s.r) / cell));
-        for (int64_t y = y0; y <= y1; ++y) {
-            const double lo = double(y) * cell - s.r, hi = double(y + 1) * cell + s.r;
-            double t0 = 0, t1 = 1;
-            const double dy = s.by - s.ay;
-            if (dy != 0) {
-                double ta = (lo - s.ay) / dy, tb = (hi - s.ay) / dy;
-                if (ta > tb) {
-                    std::swap(ta, tb);
-                }
-                t0 = std::max(t0, ta);
-                t1 = std::min(t1, tb);
-            }
-            if (t0 > t1) {
-                t0 = t1 = std::clamp(t0, 0.0, 1.0); // rounding at a band's edge: keep one point
-            }
-            const double xa = s.ax + t0 * (s.bx - s.ax), xb = s.ax + t1 * (s.bx - s.ax);
-            const auto x0 = static_cast<int64_t>(std::floor((std::min(xa, xb) - s.r) / cell));
-            const auto x1 = static_cast<int64_t>(std::floor((std::max(xa, xb) + s.r) / cell));
-            for (int64_t x = x0; x <= x1; ++x) {
-                const uint64_t key =
-                    (static_cast<uint64_t>(x + (1LL << 31)) << 32) | static_cast<uint32_t>(y + (1LL << 31));
-                entries.emplace_back(key, i);
-            }
-        }
+        cover_cells(s.ax, s.ay, s.bx, s.by, s.r, cell, 0.0, 0.0, [&](int64_t x, int64_t y) {
+            entries.emplace_back(
+                (static_cast<uint64_t>(x + (1LL << 31)) << 32) | static_cast<uint32_t>(y + (1LL << 31)), i);
+        });
     }
     std::sort(entries.begin(), entries.end());
     std::unordered_set<uint64_t> known;
@@ -312,18 +290,14 @@ ColorResult color_tiles(std::span<const ChainGeom> chains, const ColorOptions& o
     const double size = opt.tile_pixels * out.pixel;
     const auto nx = static_cast<uint64_t>(std::ceil((x1 - x0) / size)) + (x1 == x0 ? 1 : 0);
     const auto ny = static_cast<uint64_t>(std::ceil((y1 - y0) / size)) + (y1 == y0 ? 1 : 0);
-    // Members of each top-level tile, from each segment's reach.
+    // Members of each top-level tile: the tiles each segment's reach touches.
     std::vector<std::pair<uint64_t, uint32_t>> member_of;
     for (const auto& s : segs) {
-        const auto tx0 = static_cast<int64_t>(std::floor((std::min(s.ax, s.bx) - s.r - x0) / size));
-        const auto tx1 = static_cast<int64_t>(std::floor((std::max(s.ax, s.bx) + s.r - x0) / size));
-        const auto ty0 = static_cast<int64_t>(std::floor((std::min(s.ay, s.by) - s.r - y0) / size));
-        const auto ty1 = static_cast<int64_t>(std::floor((std::max(s.ay, s.by) + s.r - y0) / size));
-        for (int64_t ty = std::max<int64_t>(ty0, 0); ty <= std::min<int64_t>(ty1, int64_t(ny) - 1); ++ty) {
-            for (int64_t tx = std::max<int64_t>(tx0, 0); tx <= std::min<int64_t>(tx1, int64_t(nx) - 1); ++tx) {
+        cover_cells(s.ax, s.ay, s.bx, s.by, s.r, size, x0, y0, [&](int64_t tx, int64_t ty) {
+            if (tx >= 0 && ty >= 0 && uint64_t(tx) < nx && uint64_t(ty) < ny) {
                 member_of.emplace_back(uint64_t(ty) * nx + uint64_t(tx), s.chain);
             }
-        }
+        });
     }
     std::sort(member_of.begin(), member_of.end());
     member_of.erase(std::unique(member_of.begin(), member_of.end()), member_of.end());
