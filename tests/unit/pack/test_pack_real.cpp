@@ -359,6 +359,16 @@ TEST_F(PackReal, VerifyIsCleanOnRealDataAndCatchesDamage)
     EXPECT_NE(slurp(dir / "out").find("skeleton"), std::string::npos) << slurp(dir / "out");
     EXPECT_NE(slurp(dir / "out").find(": 1 new, 0 fixed violations"), std::string::npos) << slurp(dir / "out");
     EXPECT_NE(slurp(dir / "v2" / "verify-report.json").find("checksum mismatch"), std::string::npos);
+    // An unreadable skeleton: one skeleton violation naming the file, exit 1.
+    {
+        std::fstream f(dir / "bad" / "skeleton.tls", std::ios::in | std::ios::out | std::ios::binary);
+        f.seekp(40);
+        f.put('\x7E');
+    }
+    EXPECT_EQ(run("verify", d + "/bad " + d + "/ingest " + d + "/v4", dir / "out"), 1) << slurp(dir / "out");
+    const std::string broken = slurp(dir / "v4" / "verify-report.json");
+    EXPECT_NE(broken.find("\"skeleton\": 1"), std::string::npos) << broken;
+    EXPECT_NE(broken.find("skeleton.tls: checksum mismatch"), std::string::npos) << broken;
     // Usage errors.
     EXPECT_EQ(run("verify", d + "/tree " + d + "/nowhere " + d + "/v3", dir / "out"), 2);
     EXPECT_EQ(run("verify", d + "/tree " + d + "/ingest " + d + "/v1", dir / "out"), 2); // exists
