@@ -8,7 +8,11 @@
 /// Topology never uses a tolerance.
 
 #include <algorithm>
+#include <cmath>
+#include <cstddef>
 #include <cstdint>
+#include <span>
+#include <vector>
 
 namespace tigerlod {
 
@@ -136,5 +140,50 @@ class PointInPolygon {
     bool m_inside = false;
     bool m_on_boundary = false;
 }; // class PointInPolygon
+
+/// Euclidean distance from p to the closed segment ab, in grid units. In
+/// double precision: for reports and error bounds, never for a decision that
+/// must be exact. tigerlod-pack writes each LOD's error with it and
+/// tigerlod-verify checks that error with it.
+inline double point_segment_distance(GridPoint p, GridPoint a, GridPoint b) noexcept
+{
+    const double dx = double(b.x) - a.x, dy = double(b.y) - a.y;
+    const double ux = double(p.x) - a.x, uy = double(p.y) - a.y;
+    const double len2 = dx * dx + dy * dy;
+    const double t = len2 > 0 ? std::clamp((ux * dx + uy * dy) / len2, 0.0, 1.0) : 0.0;
+    const double ex = ux - t * dx, ey = uy - t * dy;
+    return std::sqrt(ex * ex + ey * ey);
+}
+
+/// Whether `simp` is a subsequence of `orig` with the same first and last
+/// point; if so, `at` gets the position in `orig` of each point of `simp`:
+/// each at its first match after the previous one, the last at orig's last.
+inline bool match_subsequence(std::span<const GridPoint> orig, std::span<const GridPoint> simp, std::vector<size_t>& at)
+{
+    at.clear();
+    if (simp.size() < 2 || orig.empty() || simp.front() != orig.front() || simp.back() != orig.back()) {
+        return false;
+    }
+    at.push_back(0);
+    size_t j = 0;
+    for (size_t i = 1; i < simp.size(); ++i) {
+        if (i + 1 == simp.size()) {
+            j = orig.size() - 1;
+            if (j <= at.back()) {
+                return false;
+            }
+        } else {
+            ++j;
+            while (j < orig.size() && orig[j] != simp[i]) {
+                ++j;
+            }
+            if (j + 1 >= orig.size()) {
+                return false;
+            }
+        }
+        at.push_back(j);
+    }
+    return true;
+}
 
 } // namespace tigerlod

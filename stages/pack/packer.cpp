@@ -39,45 +39,19 @@ std::vector<fs::path> store_files(const fs::path& dir)
     return out;
 }
 
-/// Distance from p to segment ab, in grid units.
-double segment_distance(GridPoint p, GridPoint a, GridPoint b)
-{
-    const double abx = double(b.x) - a.x, aby = double(b.y) - a.y;
-    const double apx = double(p.x) - a.x, apy = double(p.y) - a.y;
-    const double len2 = abx * abx + aby * aby;
-    double t = len2 > 0 ? (apx * abx + apy * aby) / len2 : 0.0;
-    t = std::clamp(t, 0.0, 1.0);
-    const double dx = apx - t * abx, dy = apy - t * aby;
-    return std::sqrt(dx * dx + dy * dy);
-}
-
 /// Largest distance of an original vertex from the simplified chain, which must be a
 /// subsequence with the same endpoints; -1 if it is not.
 double deviation(std::span<const GridPoint> orig, std::span<const GridPoint> simp)
 {
-    if (simp.size() < 2 || simp.front() != orig.front() || simp.back() != orig.back()) {
+    std::vector<size_t> at;
+    if (!match_subsequence(orig, simp, at)) {
         return -1.0;
     }
     double worst = 0.0;
-    size_t j = 0;
     for (size_t i = 0; i + 1 < simp.size(); ++i) {
-        const size_t from = j;
-        // The next occurrence of simp[i + 1]; the last simplified point is the last original one.
-        size_t k = from + 1;
-        if (i + 2 == simp.size()) {
-            k = orig.size() - 1;
-        } else {
-            while (k < orig.size() && orig[k] != simp[i + 1]) {
-                ++k;
-            }
+        for (size_t m = at[i] + 1; m < at[i + 1]; ++m) {
+            worst = std::max(worst, point_segment_distance(orig[m], simp[i], simp[i + 1]));
         }
-        if (k >= orig.size() || k <= from) {
-            return -1.0;
-        }
-        for (size_t m = from + 1; m < k; ++m) {
-            worst = std::max(worst, segment_distance(orig[m], simp[i], simp[i + 1]));
-        }
-        j = k;
     }
     return worst;
 }

@@ -22,18 +22,9 @@ namespace tigerlod::verify {
 
 namespace {
 
-/// Twice the signed area of a closed point sequence (first == last), exact.
+/// The shoelace terms of a point sequence: twice the signed area when it is
+/// closed (first == last), and summed over a closed boundary's pieces, too.
 int128 twice_area(std::span<const GridPoint> pts)
-{
-    int128 a = 0;
-    for (size_t i = 0; i + 1 < pts.size(); ++i) {
-        a += int128{pts[i].x} * pts[i + 1].y - int128{pts[i + 1].x} * pts[i].y;
-    }
-    return a;
-}
-
-/// The shoelace terms of an open point sequence; summed over a closed boundary, twice its area.
-int128 twice_area_open(std::span<const GridPoint> pts)
 {
     int128 a = 0;
     for (size_t i = 0; i + 1 < pts.size(); ++i) {
@@ -45,16 +36,6 @@ int128 twice_area_open(std::span<const GridPoint> pts)
 int sign(int128 v)
 {
     return (v > 0) - (v < 0);
-}
-
-/// L2 distance from p to segment ab in grid units (double; for error_m and reports only).
-double l2_distance(GridPoint p, GridPoint a, GridPoint b)
-{
-    const double dx = double(b.x) - a.x, dy = double(b.y) - a.y;
-    const double ux = double(p.x) - a.x, uy = double(p.y) - a.y;
-    const double len2 = dx * dx + dy * dy;
-    const double t = len2 > 0 ? std::clamp((ux * dx + uy * dy) / len2, 0.0, 1.0) : 0.0;
-    return std::hypot(ux - t * dx, uy - t * dy);
 }
 
 /// An original chain of a level: its store, its record and its tolerance at the LOD.
@@ -341,7 +322,7 @@ class Verifier {
                     continue;
                 }
                 const auto pts = store.chain_points(c);
-                const int128 part = twice_area_open(pts);
+                const int128 part = twice_area(pts);
                 a += left ? part : -part;
                 for (auto& pip : pips) {
                     for (size_t s = 0; s + 1 < pts.size(); ++s) {
@@ -398,7 +379,7 @@ class Verifier {
             if ((e.left == unit) == (e.right == unit)) {
                 continue;
             }
-            const int128 part = twice_area_open(r.geometry.chain(c));
+            const int128 part = twice_area(r.geometry.chain(c));
             a += e.left == unit ? part : -part;
         }
         return sign(a);
@@ -445,24 +426,7 @@ class Verifier {
             const auto orig = o.store->chain_points(*o.info);
             // Check 1: a subsequence with the same ends.
             std::vector<size_t> at; // position in orig of each simplified point
-            bool subsequence = pts.size() >= 2 && pts.front() == orig.front() && pts.back() == orig.back();
-            if (subsequence) {
-                at.push_back(0);
-                size_t j = 0;
-                for (size_t i = 1; i < pts.size() && subsequence; ++i) {
-                    if (i + 1 == pts.size()) {
-                        j = orig.size() - 1; // the last point is the original's last
-                        subsequence = j > at.back();
-                    } else {
-                        ++j;
-                        while (j < orig.size() && orig[j] != pts[i]) {
-                            ++j;
-                        }
-                        subsequence = j + 1 < orig.size();
-                    }
-                    at.push_back(j);
-                }
-            }
+            const bool subsequence = match_subsequence(orig, pts, at);
             if (!subsequence) {
                 violation("not_subsequence", {e.id}, pts.front(),
                           "not a subsequence of its original (" + std::to_string(orig.size()) +
@@ -474,7 +438,7 @@ class Verifier {
             bool exceeded = false;
             for (size_t i = 0; i + 1 < pts.size() && !exceeded; ++i) {
                 for (size_t m = at[i] + 1; m < at[i + 1]; ++m) {
-                    worst = std::max(worst, l2_distance(orig[m], pts[i], pts[i + 1]));
+                    worst = std::max(worst, point_segment_distance(orig[m], pts[i], pts[i + 1]));
                     if (!simplify::within(orig[m], pts[i], pts[i + 1], tol)) {
                         violation("eps_exceeded", {e.id}, orig[m],
                                   "original vertex " + std::to_string(m) + " farther than eps " +

@@ -3,7 +3,9 @@
 #include <gtest/gtest.h>
 
 using tigerlod::GridPoint;
+using tigerlod::match_subsequence;
 using tigerlod::orientation;
+using tigerlod::point_segment_distance;
 using tigerlod::PointInPolygon;
 using tigerlod::PointLocation;
 using tigerlod::segment_relation;
@@ -101,4 +103,25 @@ TEST(PointInPolygon, InsideOutsideBoundary)
     EXPECT_EQ(where({3, 5}), PointLocation::boundary);
     EXPECT_EQ(where({1, 3}), PointLocation::inside); // ray passes through hole vertices (3,3), (7,3)
     EXPECT_EQ(where({1, 7}), PointLocation::inside);
+}
+
+TEST(Geometry, PointSegmentDistance)
+{
+    EXPECT_EQ(point_segment_distance({100, 30}, {0, 0}, {200, 0}), 30.0);
+    EXPECT_EQ(point_segment_distance({-3, 4}, {0, 0}, {200, 0}), 5.0); // beyond an end: to the end
+    EXPECT_EQ(point_segment_distance({3, 4}, {0, 0}, {0, 0}), 5.0);    // a point segment
+}
+
+TEST(Geometry, MatchSubsequence)
+{
+    const std::vector<GridPoint> orig{{0, 0}, {1, 0}, {2, 0}, {3, 0}, {0, 0}};
+    std::vector<size_t> at;
+    EXPECT_TRUE(match_subsequence(orig, std::vector<GridPoint>{{0, 0}, {2, 0}, {0, 0}}, at));
+    EXPECT_EQ(at, (std::vector<size_t>{0, 2, 4})); // a ring: the last point is the original's last
+    EXPECT_TRUE(match_subsequence(orig, orig, at));
+    EXPECT_EQ(at, (std::vector<size_t>{0, 1, 2, 3, 4}));
+    EXPECT_FALSE(match_subsequence(orig, std::vector<GridPoint>{{0, 0}, {3, 0}, {2, 0}, {0, 0}}, at)); // order
+    EXPECT_FALSE(match_subsequence(orig, std::vector<GridPoint>{{0, 0}, {5, 0}, {0, 0}}, at));         // foreign
+    EXPECT_FALSE(match_subsequence(orig, std::vector<GridPoint>{{1, 0}, {0, 0}}, at));                 // moved end
+    EXPECT_FALSE(match_subsequence(orig, std::vector<GridPoint>{{0, 0}}, at));                         // one point
 }
