@@ -58,12 +58,20 @@ std::string ExportStage::help_notes() const
 
 namespace {
 
-struct Gdal {
+/// The dataset being written under a temporary name: closed, and the file
+/// removed, unless it was renamed into place (nothing half-written is left).
+struct TempDataset {
     GDALDatasetH ds = nullptr;
-    ~Gdal()
+    fs::path path;
+    bool kept = false;
+    ~TempDataset()
     {
         if (ds != nullptr) {
             GDALClose(ds);
+        }
+        if (!kept) {
+            std::error_code ec;
+            fs::remove(path, ec);
         }
     }
 };
@@ -106,6 +114,11 @@ int ExportStage::run(const StageContext& ctx)
     } else {
         nodes.push_back(view::find_node(s, m_node));
     }
+    const auto lod = static_cast<uint32_t>(m_lod);
+    if (lod >= s.lod_eps_m.size()) {
+        throw usage_error("export: no LOD " + std::to_string(lod) + " (the tree has " +
+                          std::to_string(s.lod_eps_m.size()) + ")");
+    }
     const Projection proj(view::projection_of(s));
     const fs::path out(m_output);
     const bool gpkg = out.extension() == ".gpkg";
@@ -113,7 +126,8 @@ int ExportStage::run(const StageContext& ctx)
         out.parent_path() / (out.stem().string() + ".tmp-" + std::to_string(::getpid()) + out.extension().string());
     GDALAllRegister();
     GDALDriverH driver = GDALGetDriverByName(gpkg ? "GPKG" : "GeoJSON");
-    Gdal g;
+    TempDataset g;
+    g.path = tmp;
     g.ds = GDALCreate(driver, tmp.c_str(), 0, 0, 0, GDT_Unknown, nullptr);
     if (g.ds == nullptr) {
         throw environment_error("export: cannot create " + tmp.string() + ": " + CPLGetLastErrorMsg());
@@ -151,11 +165,6 @@ int ExportStage::run(const StageContext& ctx)
     };
     std::set<uint64_t> written;
     size_t nchains = 0, nunits = 0, incomplete = 0;
-    const auto lod = static_cast<uint32_t>(m_lod);
-    if (lod >= s.lod_eps_m.size()) {
-        throw usage_error("export: no LOD " + std::to_string(lod) + " (the tree has " +
-                          std::to_string(s.lod_eps_m.size()) + ")");
-    }
     for (uint32_t n : nodes) {
         const auto m = view::read_node(*tree, n, lod);
         const std::string code = n == 0 ? "root" : s.strings[s.nodes[n].code];
@@ -232,9 +241,9 @@ int ExportStage::run(const StageContext& ctx)
     std::error_code ec;
     fs::rename(tmp, out, ec);
     if (ec) {
-        fs::remove(tmp, ec);
         throw environment_error("export: cannot rename " + tmp.string() + " to " + m_output);
     }
+    g.kept = true;
     ctx.log.info("export: done");
     std::printf("export: %zu nodes, %zu chains, %zu unit polygons (%zu units incomplete in a node, skipped there)\n"
                 "outputs in %s\n",

@@ -120,6 +120,9 @@ PackedTree build_tree(const fs::path& original, const fs::path& simplified, cons
         } else {
             throw input_error(simplified.string() + ": not a tigerlod-simplify output folder");
         }
+        if (eps_dirs.empty()) {
+            throw input_error(simplified.string() + ": no eps-<E>m folders: not a tigerlod-simplify output folder");
+        }
         std::sort(eps_dirs.begin(), eps_dirs.end());
         for (const auto& [eps, dir] : eps_dirs) {
             if (!(eps > lod_eps.back())) {

@@ -137,6 +137,20 @@ void write_gpkg(const fs::path& path, const Report& r)
 
 int VerifyStage::run(const StageContext& ctx)
 {
+    // The earlier report first: a bad one is found before the work, not after.
+    json old;
+    if (!m_compare.empty()) {
+        try {
+            std::ifstream in(m_compare);
+            old = json::parse(in);
+            if (old.value("schema", "") != "tigerlod.verify-report/1" || !old.contains("items") ||
+                !old.contains("by_level_lod")) {
+                throw input_error("not a tigerlod.verify-report/1");
+            }
+        } catch (const std::exception& e) {
+            throw input_error("verify: --compare " + m_compare + ": " + e.what());
+        }
+    }
     std::string error;
     const auto tree = reader::Tree::open(m_tree, error);
     OutputDir out(m_output, m_overwrite);
@@ -214,13 +228,7 @@ int VerifyStage::run(const StageContext& ctx)
 
     std::string compare_text;
     if (!m_compare.empty()) {
-        json old;
         try {
-            std::ifstream in(m_compare);
-            old = json::parse(in);
-            if (old.value("schema", "") != "tigerlod.verify-report/1") {
-                throw input_error("not a tigerlod.verify-report/1");
-            }
             // Input problems are the input's, not the run's: not compared.
             auto counted = [](const json& it) { return it.at("kind") != "input_problem"; };
             std::set<std::string> was, now;

@@ -391,6 +391,7 @@ TEST_F(Cli, EveryValidatedConfigKeyRejectsBadValues)
         {"ingest: {halo_m: -5}\n", "'ingest.halo_m' must be >= 0"},
         {"projection: {nope: 1}\n", "unknown key 'projection.nope'"},
         {"simplify: {tolerance: [1]}\n", "unknown key 'simplify.tolerance'"},
+        {"pack: {tile_size: 4}\n", "unknown key 'pack.tile_size'"},
     };
     for (const auto& [extra, fragment] : cases) {
         SCOPED_TRACE(extra);
@@ -547,4 +548,56 @@ TEST_F(Cli, ColorAndSimplifyRejectBadInput)
     expect_failure(run("color", in), 1, "51063.tlc: checksum mismatch (corrupt file)");
     expect_failure(run("simplify", in), 1, "51063.tlc: checksum mismatch (corrupt file)");
     EXPECT_FALSE(fs::exists(m_dir / "res"));
+}
+
+TEST_F(Cli, PackDumpExportAndVerifyRejectBadInput)
+{
+    make_tiger();
+    const std::string in = (m_dir / "in").string(), simp = (m_dir / "simp").string(), tree = (m_dir / "tree").string();
+    ASSERT_EQ(run("ingest", tiger_config().string() + " " + in).code, 0);
+    ASSERT_EQ(run("simplify", in + " " + simp + " --tolerances 8").code, 0);
+    ASSERT_EQ(run("pack", in + " " + simp + " " + tree).code, 0) << slurp(m_dir / "stderr");
+    // pack
+    const std::string pack_args = in + " " + simp + " " + out();
+    expect_failure(run("pack", pack_args + " --tile-mb 0"), 2, "option '--tile-mb' must be in (0, 4096]");
+    expect_failure(run("pack", pack_args + " --draco-speed 11"), 2, "option '--draco-speed' must be in 0..10");
+    expect_failure(run("pack", pack_args + " --threads -1"), 2, "option '--threads' must be in 0..1024");
+    expect_failure(run("pack", in + " " + (m_dir / "nosimp").string() + " " + out()), 1,
+                   "nosimp: not a tigerlod-simplify output folder");
+    expect_failure(run("pack", in + " " + in + " " + out()), 1, "no eps-<E>m folders: not a tigerlod-simplify output");
+    // dump
+    expect_failure(run("dump", tree + " --lod 1"), 2, "'--lod' and '--geojson' need '--node'");
+    expect_failure(run("dump", tree + " --node root --lod -1"), 2, "option '--lod' must be >= 0");
+    expect_failure(run("dump", tree + " --node root --lod 5"), 2, "no LOD 5 (the tree has 2)");
+    expect_failure(run("dump", in + "/tract/51063.tlc --node root"), 2, "'--node' needs a Data Tree");
+    // export: nothing written under any name
+    auto no_export = [&] {
+        for (const auto& e : fs::directory_iterator(m_dir)) {
+            EXPECT_NE(e.path().filename().string().rfind("x", 0), 0U) << e.path();
+        }
+    };
+    const std::string gpkg = (m_dir / "x.gpkg").string();
+    expect_failure(run("export", tree + " " + gpkg + " --node root --level tract"), 2,
+                   "give '--node' or '--level', not both");
+    expect_failure(run("export", tree + " " + (m_dir / "x.shp").string()), 2, "OUTPUT must end in .gpkg or .geojson");
+    expect_failure(run("export", tree + " " + gpkg + " --layer roads"), 2, "option '--layer' must be chains or units");
+    expect_failure(run("export", tree + " " + gpkg + " --lod 7"), 2, "no LOD 7 (the tree has 2)");
+    expect_failure(run("export", tree + " " + gpkg + " --node nowhere"), 2, "no node 'nowhere'");
+    expect_failure(run("export", tree + " " + gpkg + " --level nowhere"), 2, "no level 'nowhere' in the tree");
+    no_export();
+    // verify
+    const std::string verify_args = tree + " " + in + " " + out();
+    expect_failure(run("verify", verify_args + " --class-scale S1400"), 2, "expected CLASS=FACTOR");
+    expect_failure(run("verify", verify_args + " --points " + (m_dir / "nopoints.csv").string()), 2,
+                   "--points " + (m_dir / "nopoints.csv").string() + ": no such file");
+    expect_failure(run("verify", verify_args + " --compare " + (m_dir / "old.json").string()), 2, "no such file");
+    std::ofstream(m_dir / "old.json") << R"({"schema": "tigerlod.color-report/1"})";
+    expect_failure(run("verify", verify_args + " --compare " + (m_dir / "old.json").string()), 1,
+                   "old.json: not a tigerlod.verify-report/1");
+    std::ofstream(m_dir / "old.json") << "{\"schema\": ";
+    expect_failure(run("verify", verify_args + " --compare " + (m_dir / "old.json").string()), 1, "old.json: ");
+    expect_failure(run("verify", verify_args + " --max-items -1"), 2, "option '--max-items' must be >= 0");
+    expect_failure(run("verify", tree + " " + (m_dir / "noingest").string() + " " + out()), 2, "not a folder");
+    // A clean run for contrast: exit 0.
+    EXPECT_EQ(run("verify", verify_args).code, 0) << slurp(m_dir / "stderr");
 }
