@@ -1,6 +1,7 @@
 #include "stages/simplify/raster.hpp"
 
 #include "core/errors.hpp"
+#include "stages/simplify/cell_cover.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -87,6 +88,7 @@ void main() {
 constexpr const char* test_vs = R"(#version 450 core
 layout(location = 0) in vec4 a_seg;
 layout(location = 1) in uint a_id;
+layout(location = 2) in vec2 a_clip; // the part drawn: t0, t1 along a_seg
 uniform vec2 u_size;
 uniform float u_half_width;
 flat out vec4 v_seg;
@@ -96,8 +98,10 @@ void main() {
     float len = length(d);
     vec2 u = len > 0.0 ? d / len : vec2(1.0, 0.0);
     vec2 n = vec2(-u.y, u.x) * u_half_width;
-    vec2 p = (gl_VertexID < 2 ? a : b) + ((gl_VertexID & 1) == 0 ? n : -n);
-    gl_Position = vec4(p / u_size * 2.0 - 1.0, 0.0, 1.0);
+    vec2 p = mix(a, b, gl_VertexID < 2 ? a_clip.x : a_clip.y) + ((gl_VertexID & 1) == 0 ? n : -n);
+    // Depth 0.9995 under GL_GREATER: only where a tent was drawn (tents'
+    // depths are below 1 / 1.001, the background is 1).
+    gl_Position = vec4(p / u_size * 2.0 - 1.0, 0.999, 1.0);
     v_seg = a_seg;
     v_id = a_id;
 }
@@ -140,6 +144,7 @@ struct TentInstance {
 struct TestInstance {
     float ax, ay, bx, by;
     uint32_t id;
+    float t0, t1;
 };
 
 } // namespace
@@ -149,6 +154,7 @@ struct Raster::Impl {
     GLuint tent_prog = 0, test_prog = 0;
     GLuint vao_tent = 0, vao_test = 0, vbo_tent = 0, vbo_test = 0, ssbo = 0;
     GLuint fbo = 0, rb_depth = 0, rb_color = 0;
+    std::vector<uint8_t> near; ///< per cell of a tile: a tested part may have fragments there
     explicit Impl(const gl::Api& api) : gl(api) {}
 
     /// The info log of a shader or program (glGetShaderInfoLog / glGetProgramInfoLog).
@@ -224,10 +230,14 @@ Raster::Raster(gl::Context& ctx, const RasterOptions& opt)
     gl.VertexAttribPointer(0, 4, GL_FLOAT, GL_FALSE, sizeof(TestInstance), nullptr);
     gl.VertexAttribIPointer(1, 1, GL_UNSIGNED_INT, sizeof(TestInstance),
                             reinterpret_cast<const void*>(offsetof(TestInstance, id)));
+    gl.VertexAttribPointer(2, 2, GL_FLOAT, GL_FALSE, sizeof(TestInstance),
+                           reinterpret_cast<const void*>(offsetof(TestInstance, t0)));
     gl.EnableVertexAttribArray(0);
     gl.EnableVertexAttribArray(1);
+    gl.EnableVertexAttribArray(2);
     gl.VertexAttribDivisor(0, 1);
     gl.VertexAttribDivisor(1, 1);
+    gl.VertexAttribDivisor(2, 1);
     gl.BindVertexArray(0);
     gl.GenBuffers(1, &I.ssbo);
 
@@ -300,6 +310,39 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     };
     const auto t0 = std::chrono::steady_clock::now();
 
+    // Cells (of kCell pixels) that a tested part's fragments can fall in.
+    // Only the tents reaching one of them are drawn: every tent covering a
+    // tested pixel is among them, in the same order, so the stencil there is
+    // what drawing them all gives.
+    constexpr double kCell = 8;
+    const auto cw = static_cast<int64_t>(std::ceil(tile.width / kCell)),
+               ch = static_cast<int64_t>(std::ceil(tile.height / kCell));
+    I.near.assign(size_t(cw * ch), 0);
+    auto in_grid = [&](int64_t x, int64_t y) { return x >= 0 && y >= 0 && x < cw && y < ch; };
+    std::vector<TestInstance> tinst(segs.size());
+    for (size_t k = 0; k < segs.size(); ++k) {
+        const auto& sg = segs[k];
+        auto& ti = tinst[k];
+        px(sg.a, ti.ax, ti.ay);
+        px(sg.b, ti.bx, ti.by);
+        ti.t0 = sg.t0;
+        ti.t1 = sg.t1;
+        const double dx = double(ti.bx) - ti.ax, dy = double(ti.by) - ti.ay;
+        m_stats.drawn_pixels += std::hypot(dx, dy) * (double(sg.t1) - sg.t0);
+        cover_cells(ti.ax + sg.t0 * dx, ti.ay + sg.t0 * dy, ti.ax + sg.t1 * dx, ti.ay + sg.t1 * dy, 2.0, kCell, 0.0,
+                    0.0, [&](int64_t x, int64_t y) {
+                        if (in_grid(x, y)) {
+                            I.near[size_t(y * cw + x)] = 1;
+                        }
+                    });
+    }
+    auto reaches_test = [&](const TentInstance& ti, double r) {
+        bool hit = false;
+        cover_cells(ti.ax, ti.ay, ti.bx, ti.by, r, kCell, 0.0, 0.0,
+                    [&](int64_t x, int64_t y) { hit = hit || (in_grid(x, y) && I.near[size_t(y * cw + x)] != 0); });
+        return hit;
+    };
+
     // Tent instances grouped by class; one draw call per class sets the stencil reference.
     std::vector<uint32_t> order(tents.size());
     for (uint32_t i = 0; i < order.size(); ++i) {
@@ -314,12 +357,21 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         const auto eps_px = static_cast<float>(t.eps * inv);
         eps_max = std::max(eps_max, double(eps_px));
         const auto first = static_cast<GLuint>(inst.size());
+        // The tent's quad reaches eps (times the metric's L2 reach) plus the margin.
+        const double reach = double(eps_px) * l2_reach(m_opt.metric) + m_opt.margin_px + 1.0;
         for (size_t k = 0; k + 1 < t.points.size(); ++k) {
             TentInstance ti{};
             px(t.points[k], ti.ax, ti.ay);
             px(t.points[k + 1], ti.bx, ti.by);
             ti.eps = eps_px;
-            inst.push_back(ti);
+            if (reaches_test(ti, reach)) {
+                inst.push_back(ti);
+            } else {
+                ++m_stats.tent_segments_skipped;
+            }
+        }
+        if (inst.size() == first) {
+            continue;
         }
         const auto count = static_cast<GLsizei>(inst.size() - first);
         if (!ranges.empty() && ranges.back().first == t.cls) {
@@ -361,13 +413,12 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         sorder[i] = i;
     }
     std::stable_sort(sorder.begin(), sorder.end(), [&](uint32_t a, uint32_t b) { return segs[a].cls < segs[b].cls; });
-    std::vector<TestInstance> tinst(segs.size());
+    std::vector<TestInstance> sorted(segs.size());
     std::vector<std::pair<uint8_t, std::pair<GLuint, GLsizei>>> sranges;
     for (uint32_t k = 0; k < sorder.size(); ++k) {
         const auto& s = segs[sorder[k]];
-        px(s.a, tinst[k].ax, tinst[k].ay);
-        px(s.b, tinst[k].bx, tinst[k].by);
-        tinst[k].id = k; // local index; mapped back below
+        sorted[k] = tinst[sorder[k]];
+        sorted[k].id = k; // local index; mapped back below
         if (!sranges.empty() && sranges.back().first == s.cls) {
             ++sranges.back().second.second;
         } else {
@@ -375,7 +426,12 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         }
     }
     m_stats.drawn_segments += segs.size();
-    gl.Disable(GL_DEPTH_TEST);
+    // A fragment fails where another class's region is: stencil != class,
+    // and a tent was drawn there (depth below the background's 1). Pixels
+    // outside every band are no one's region: a shortcut's half-pixel quad
+    // grazing the edge of its own band is not a failure.
+    gl.Enable(GL_DEPTH_TEST);
+    gl.DepthFunc(GL_GREATER);
     gl.DepthMask(GL_FALSE);
     gl.StencilMask(0);
     gl.StencilOp(GL_KEEP, GL_KEEP, GL_KEEP);
@@ -385,7 +441,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     gl.Uniform1f(I.loc(I.test_prog, "u_end_margin"), float(m_opt.endpoint_margin_px));
     gl.BindVertexArray(I.vao_test);
     gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_test);
-    gl.BufferData(GL_ARRAY_BUFFER, GLsizeiptr(tinst.size() * sizeof(TestInstance)), tinst.data(), GL_STREAM_DRAW);
+    gl.BufferData(GL_ARRAY_BUFFER, GLsizeiptr(sorted.size() * sizeof(TestInstance)), sorted.data(), GL_STREAM_DRAW);
     if (!segs.empty() && m_opt.compliance == Compliance::ssbo) {
         std::vector<uint32_t> flags(segs.size(), 0);
         gl.BindBuffer(GL_SHADER_STORAGE_BUFFER, I.ssbo);

@@ -36,17 +36,23 @@ struct TentChain {
     uint8_t cls = 0;
 };
 
-/// A shortcut to test; `id` indexes the caller's result vector.
+/// A shortcut to test; `id` indexes the caller's result vector. Only the
+/// part between a + t0 (b - a) and a + t1 (b - a) is drawn, where the caller
+/// knows the rest cannot fail; the ends' margin stays that of a and b. One
+/// shortcut may be given as several parts with the same id.
 struct TestSegment {
     GridPoint a, b;
     uint8_t cls = 0;
     uint32_t id = 0;
+    float t0 = 0, t1 = 1;
 };
 
 struct RasterStats {
     size_t tiles = 0;
-    size_t tent_segments = 0;
-    size_t drawn_segments = 0;
+    size_t tent_segments = 0;         ///< drawn: those whose reach touches a tested part
+    size_t tent_segments_skipped = 0; ///< of the tiles' chains, too far from every tested part
+    size_t drawn_segments = 0;        ///< parts drawn
+    double drawn_pixels = 0;          ///< their length in pixels
     size_t readback_rounds = 0;
     double voronoi_seconds = 0;
     double compliance_seconds = 0;
@@ -61,7 +67,9 @@ class Raster {
     Raster& operator=(const Raster&) = delete;
 
     /// Draw the eps-Voronoi diagram of `tents` in `tile`, test `segs`, and set
-    /// fails[seg.id] = 1 for each that leaves its chain's region.
+    /// fails[seg.id] = 1 for each that leaves its chain's region. Only the
+    /// tents whose reach comes near a tested part are drawn: the diagram is
+    /// exact where it is read, and its cost follows the tested geometry.
     void run_tile(const TileSpec& tile, std::span<const TentChain> tents, std::span<const TestSegment> segs,
                   std::vector<uint8_t>& fails);
 

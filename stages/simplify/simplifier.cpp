@@ -5,6 +5,7 @@
 #include "core/segment_grid.hpp"
 #include "stages/simplify/candidates.hpp"
 #include "stages/simplify/cell_cover.hpp"
+#include "stages/simplify/near_parts.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -21,6 +22,10 @@ void ToleranceStats::add(const ToleranceStats& o)
     output_vertices += o.output_vertices;
     candidates += o.candidates;
     drawn_segments += o.drawn_segments;
+    drawn_parts += o.drawn_parts;
+    drawn_pixels += o.drawn_pixels;
+    tent_segments += o.tent_segments;
+    tent_segments_skipped += o.tent_segments_skipped;
     proved_far += o.proved_far;
     banned_raster += o.banned_raster;
     banned_exact += o.banned_exact;
@@ -398,6 +403,18 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         });
     }
 
+    // The blocked segments of each owned chain, for the parts of a shortcut
+    // that can fail (near_parts.hpp): L2 only, as the far rule.
+    std::vector<std::vector<uint32_t>> blocked_at(work.size());
+    for (size_t wi = 0; wi < work.size(); ++wi) {
+        const auto& b = blocked[wi];
+        for (uint32_t k = 0; k + 1 < b.size(); ++k) {
+            if (b[k + 1] > b[k]) {
+                blocked_at[wi].push_back(k);
+            }
+        }
+    }
+
     // Raster test of (work, candidate) pairs, tile by tile.
     auto raster_test = [&](const std::vector<std::pair<uint32_t, uint32_t>>& all_tests) {
         const auto before = raster.stats();
@@ -417,18 +434,30 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             }
         }
         std::vector<std::vector<TestSegment>> per_tile(colors->tiles.size());
+        std::vector<std::pair<double, double>> parts;
         for (uint32_t id = 0; id < tests.size(); ++id) {
             const auto [wi, ci] = tests[id];
             const auto pts = points_of(work[wi]);
-            const GridPoint a = pts[work[wi].cand[ci].from], b = pts[work[wi].cand[ci].to];
-            for (const auto& [t, cls] : tiles_of[wi]) {
-                const TileSpec& s = colors->tiles[t].spec;
-                const double x1 = s.x0 + s.width * s.pixel, y1 = s.y0 + s.height * s.pixel;
-                if (std::max(a.x, b.x) + s.pixel < s.x0 || std::min(a.x, b.x) - s.pixel > x1 ||
-                    std::max(a.y, b.y) + s.pixel < s.y0 || std::min(a.y, b.y) - s.pixel > y1) {
-                    continue;
+            const Shortcut sc = work[wi].cand[ci];
+            const GridPoint a = pts[sc.from], b = pts[sc.to];
+            if (blocked[wi].empty() || !opt.clip_tests) {
+                parts.assign(1, {0.0, 1.0});
+            } else {
+                // Slack of 2 grid units on the radius, and a pixel at each end of a part.
+                parts = near_parts(pts, sc.from, sc.to, blocked_at[wi], work[wi].tol.eps + 2, colors->pixel + 2);
+            }
+            for (const auto& [p0, p1] : parts) {
+                const double ax = a.x + p0 * double(b.x - a.x), ay = a.y + p0 * double(b.y - a.y);
+                const double bx = a.x + p1 * double(b.x - a.x), by = a.y + p1 * double(b.y - a.y);
+                for (const auto& [t, cls] : tiles_of[wi]) {
+                    const TileSpec& s = colors->tiles[t].spec;
+                    const double x1 = s.x0 + s.width * s.pixel, y1 = s.y0 + s.height * s.pixel;
+                    if (std::max(ax, bx) + s.pixel < s.x0 || std::min(ax, bx) - s.pixel > x1 ||
+                        std::max(ay, by) + s.pixel < s.y0 || std::min(ay, by) - s.pixel > y1) {
+                        continue;
+                    }
+                    per_tile[t].push_back({a, b, cls, id, float(p0), float(p1)});
                 }
-                per_tile[t].push_back({a, b, cls, id});
             }
         }
         std::vector<uint8_t> fails(tests.size(), 0);
@@ -449,7 +478,11 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             st.banned_raster += fails[id];
         }
         const auto& after = raster.stats();
-        st.drawn_segments += after.drawn_segments - before.drawn_segments;
+        st.drawn_segments += tests.size();
+        st.drawn_parts += after.drawn_segments - before.drawn_segments;
+        st.drawn_pixels += after.drawn_pixels - before.drawn_pixels;
+        st.tent_segments += after.tent_segments - before.tent_segments;
+        st.tent_segments_skipped += after.tent_segments_skipped - before.tent_segments_skipped;
         st.seconds_voronoi += after.voronoi_seconds - before.voronoi_seconds;
         st.seconds_compliance += after.compliance_seconds - before.compliance_seconds;
     };

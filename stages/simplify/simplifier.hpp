@@ -26,7 +26,8 @@ struct SimplifyOptions {
     uint32_t max_reach = 0;                    ///< cap on a shortcut's reach in vertices (0: none)
     bool point_constraints = true;             ///< units' internal points and user points keep their side
     std::vector<LonLat> user_points;
-    bool lazy = true; ///< test only shortcuts on shortest paths
+    bool lazy = true;       ///< test only shortcuts on shortest paths
+    bool clip_tests = true; ///< draw only the parts of a shortcut that can fail (near_parts.hpp); off for tests
     ColorOptions color;
     unsigned threads = 1;
 };
@@ -38,7 +39,11 @@ struct ToleranceStats {
     size_t input_vertices = 0;
     size_t output_vertices = 0;
     size_t candidates = 0;
-    size_t drawn_segments = 0;
+    size_t drawn_segments = 0;        ///< shortcuts the raster tested
+    size_t drawn_parts = 0;           ///< parts of them drawn (near_parts.hpp), once per tile
+    double drawn_pixels = 0;          ///< their length in pixels
+    size_t tent_segments = 0;         ///< tents drawn
+    size_t tent_segments_skipped = 0; ///< tents of the tiles' chains too far from every drawn part
     size_t proved_far = 0; ///< shortcuts accepted without drawing: farther from every other chain than its reach
     size_t banned_raster = 0;
     size_t banned_exact = 0;

@@ -275,6 +275,10 @@ int SimplifyStage::run(const StageContext& ctx)
         j["output_vertices"] = t.output_vertices;
         j["candidates"] = t.candidates;
         j["drawn_segments"] = t.drawn_segments;
+        j["drawn_parts"] = t.drawn_parts;
+        j["drawn_pixels"] = std::llround(t.drawn_pixels);
+        j["tents_drawn"] = t.tent_segments;
+        j["tents_skipped"] = t.tent_segments_skipped;
         j["proved_far"] = t.proved_far;
         j["banned"] = {{"raster", t.banned_raster}, {"exact", t.banned_exact}, {"point_constraints", t.banned_points}};
         j["self_intersection_repairs"] = t.self_intersection_repairs;

@@ -5,6 +5,7 @@
 #include "gl/context.hpp"
 #include "stages/simplify/candidates.hpp"
 #include "stages/simplify/coloring.hpp"
+#include "stages/simplify/near_parts.hpp"
 #include "stages/simplify/raster.hpp"
 #include "stages/simplify/simplifier.hpp"
 
@@ -274,6 +275,92 @@ TEST(Raster, ShortcutThroughANeighboursRegionFailsAndOriginalEdgesPass)
     }
 }
 
+TEST(Raster, ShortcutGrazingTheEdgeOfItsOwnBandPasses)
+{
+    // The shortcut a0-a2 passes 99.9 units from a's middle vertex, eps 100:
+    // near x = 2000 the band reaches 0.1 units above it, and the pixel
+    // centres a quarter pixel above are in no one's region. Not a failure:
+    // only another class's region fails a shortcut.
+    const Pts a{{0, 0}, {2000, -100}, {4000, 0}};
+    const TentChain tents[] = {{a, 100, 1}};
+    TileSpec tile;
+    tile.x0 = -500;
+    tile.y0 = -1000;
+    tile.pixel = 25;
+    tile.width = tile.height = 256;
+    const TestSegment segs[] = {{a[0], a[2], 1, 0},             // a's own
+                                {a[0], a[2], 2, 1},             // the same as another class's: in a's region
+                                {{0, 150}, {4000, 150}, 1, 2}}; // above a's band: no one's region
+    for (Compliance mode : {Compliance::ssbo, Compliance::readback}) {
+        std::vector<uint8_t> fails(3, 0);
+        raster(mode).run_tile(tile, tents, segs, fails);
+        EXPECT_EQ(fails, (std::vector<uint8_t>{0, 1, 0})) << (mode == Compliance::ssbo ? "ssbo" : "readback");
+    }
+}
+
+TEST(Raster, OnlyTheGivenPartOfAShortcutIsTested)
+{
+    // b's region crosses the middle of a's shortcut: the whole shortcut
+    // fails, its first and last quarters pass.
+    const Pts a{{0, 0}, {2000, 50}, {4000, 0}};
+    const Pts b{{2000, 400}, {2000, 30}};
+    const TentChain tents[] = {{a, 100, 1}, {b, 100, 2}};
+    TileSpec tile;
+    tile.x0 = -500;
+    tile.y0 = -1000;
+    tile.pixel = 25;
+    tile.width = tile.height = 256;
+    TestSegment whole{a[0], a[2], 1, 0}, first{a[0], a[2], 1, 1}, last{a[0], a[2], 1, 2}, middle{a[0], a[2], 1, 3};
+    first.t1 = 0.25f;
+    last.t0 = 0.75f;
+    middle.t0 = 0.45f;
+    middle.t1 = 0.55f;
+    const TestSegment segs[] = {whole, first, last, middle};
+    for (Compliance mode : {Compliance::ssbo, Compliance::readback}) {
+        std::vector<uint8_t> fails(4, 0);
+        raster(mode).run_tile(tile, tents, segs, fails);
+        EXPECT_EQ(fails, (std::vector<uint8_t>{1, 0, 0, 1})) << (mode == Compliance::ssbo ? "ssbo" : "readback");
+    }
+}
+
+TEST(NearParts, CapsuleIntervalsAreExact)
+{
+    // A disk only: segment pq points away from ab.
+    auto iv = capsule_interval({0, 0}, {100, 0}, {50, 10}, {50, 20}, 15);
+    ASSERT_TRUE(iv);
+    EXPECT_NEAR(iv->first, 0.5 - std::sqrt(125.0) / 100, 1e-12);
+    EXPECT_NEAR(iv->second, 0.5 + std::sqrt(125.0) / 100, 1e-12);
+    // Parallel at distance 5, r 10: the rectangle and both disks.
+    iv = capsule_interval({0, 0}, {100, 0}, {20, 5}, {60, 5}, 10);
+    ASSERT_TRUE(iv);
+    EXPECT_NEAR(iv->first, 0.2 - std::sqrt(75.0) / 100, 1e-12);
+    EXPECT_NEAR(iv->second, 0.6 + std::sqrt(75.0) / 100, 1e-12);
+    // Crossing: the rectangle alone decides, clamped to the segment.
+    iv = capsule_interval({0, 0}, {100, 0}, {90, -50}, {90, 50}, 20);
+    ASSERT_TRUE(iv);
+    EXPECT_NEAR(iv->first, 0.7, 1e-12);
+    EXPECT_EQ(iv->second, 1.0);
+    // Too far.
+    EXPECT_FALSE(capsule_interval({0, 0}, {100, 0}, {0, 30}, {100, 30}, 29.9));
+}
+
+TEST(NearParts, OnlyBlockedSegmentsGiveParts)
+{
+    // A straight chain of 5 vertices; segments 0 and 3 blocked.
+    const Pts pts{{0, 0}, {100, 0}, {200, 0}, {300, 0}, {400, 0}};
+    const std::vector<uint32_t> blocked{0, 3};
+    const auto parts = near_parts(pts, 0, 4, blocked, 10, 4);
+    ASSERT_EQ(parts.size(), 2U);
+    EXPECT_EQ(parts[0].first, 0.0);
+    EXPECT_NEAR(parts[0].second, (110 + 4) / 400.0, 1e-8);
+    EXPECT_NEAR(parts[1].first, (290 - 4) / 400.0, 1e-8);
+    EXPECT_EQ(parts[1].second, 1.0);
+    EXPECT_TRUE(near_parts(pts, 1, 3, blocked, 10, 4).empty()) << "segments 1 and 2 are clear";
+    const auto one = near_parts(pts, 2, 4, blocked, 10, 4);
+    ASSERT_EQ(one.size(), 1U);
+    EXPECT_NEAR(one[0].first, (90 - 4) / 200.0, 1e-8);
+}
+
 TEST(Simplify, IslandInABayIsNotJumped)
 {
     // A bay 200 wide and 150 deep; an island ring inside it.
@@ -453,6 +540,39 @@ TEST(Simplify, LazyEqualsExhaustive)
         EXPECT_EQ(chains::to_text(all), chains::to_text(some)) << "eps " << eps;
         EXPECT_EQ(a.output_vertices, b.output_vertices);
         EXPECT_LE(b.drawn_segments, a.drawn_segments);
+    }
+}
+
+/// Three wiggly arms of 60 vertices, 3000 units long, from a junction at the
+/// origin: close to each other only near it.
+ChainStore star_map()
+{
+    MapBuilder m;
+    for (int arm = 0; arm < 3; ++arm) {
+        const double angle = arm * 2.0943951023931953;
+        Pts p{{0, 0}};
+        for (int i = 1; i <= 60; ++i) {
+            const double along = i * 50.0, across = ((i * 37 + arm * 5) % 7) * 6.0 - 18;
+            p.push_back({int32_t(std::lround(along * std::cos(angle) - across * std::sin(angle))),
+                         int32_t(std::lround(along * std::sin(angle) + across * std::cos(angle)))});
+        }
+        m.chain(uint64_t(arm + 1), p);
+    }
+    return m.s;
+}
+
+TEST(Simplify, DrawingOnlyTheNearPartsChangesNothing)
+{
+    const auto map = star_map();
+    for (double eps : {0.3, 0.6, 1.2}) {
+        SimplifyOptions whole = plain();
+        whole.clip_tests = false;
+        ToleranceStats a, b;
+        const auto clipped = run(map, eps, plain(), &a);
+        const auto full = run(map, eps, whole, &b);
+        EXPECT_EQ(chains::to_text(clipped), chains::to_text(full)) << "eps " << eps;
+        EXPECT_EQ(a.drawn_segments, b.drawn_segments);
+        EXPECT_LT(a.drawn_pixels, b.drawn_pixels) << "eps " << eps;
     }
 }
 

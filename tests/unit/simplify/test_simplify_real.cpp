@@ -147,10 +147,11 @@ TEST(SimplifyReal, FloydIsByteIdenticalAcrossThreadCountsAndModes)
     const auto stores = ingest_floyd();
     auto ctx = gl::Context::create(gl::Backend::osmesa);
     Raster raster(*ctx, RasterOptions{});
-    auto all = [&](unsigned threads, bool lazy) {
+    auto all = [&](unsigned threads, bool lazy, bool clip = true) {
         SimplifyOptions opt;
         opt.threads = threads;
         opt.lazy = lazy;
+        opt.clip_tests = clip;
         std::string bytes;
         for (const auto& s : stores) {
             if (s.level_name != "tract" && s.level_name != "block_group") {
@@ -164,4 +165,5 @@ TEST(SimplifyReal, FloydIsByteIdenticalAcrossThreadCountsAndModes)
     const std::string one = all(1, false);
     EXPECT_EQ(one, all(2, false));
     EXPECT_EQ(one, all(2, true));
+    EXPECT_EQ(one, all(2, false, false)) << "drawing whole shortcuts, not their near parts";
 }
