@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <numbers>
 
 namespace tigerlod::simplify {
 
@@ -19,15 +18,48 @@ bool proximate_exact(std::span<const GridPoint> pts, uint32_t j, uint32_t k, con
     return true;
 }
 
-double wrap(double a) noexcept
+/// The directions from A counter-clockwise to B, an arc of less than pi;
+/// vectors need not be unit.
+struct Arc {
+    double ax = 0, ay = 0, bx = 0, by = 0;
+    /// v within the arc, its edges included (or excluded when `strict`).
+    bool holds(double x, double y, bool strict = false) const noexcept
+    {
+        const double c1 = ax * y - ay * x, c2 = x * by - y * bx;
+        return strict ? (c1 > 0 && c2 > 0) : (c1 >= 0 && c2 >= 0);
+    }
+    /// This arc narrowed to its intersection with `o` (both under pi); false if empty.
+    bool intersect(const Arc& o) noexcept
+    {
+        Arc r;
+        if (o.holds(ax, ay)) {
+            r.ax = ax;
+            r.ay = ay;
+        } else if (holds(o.ax, o.ay)) {
+            r.ax = o.ax;
+            r.ay = o.ay;
+        } else {
+            return false;
+        }
+        if (o.holds(bx, by)) {
+            r.bx = bx;
+            r.by = by;
+        } else if (holds(o.bx, o.by)) {
+            r.bx = o.bx;
+            r.by = o.by;
+        } else {
+            return false;
+        }
+        *this = r;
+        return true;
+    }
+};
+
+/// The arc of directions within half-angle h of unit direction (ux, uy),
+/// given sin h and cos h (h < pi / 2).
+Arc arc_around(double ux, double uy, double sin_h, double cos_h) noexcept
 {
-    while (a > std::numbers::pi) {
-        a -= 2 * std::numbers::pi;
-    }
-    while (a <= -std::numbers::pi) {
-        a += 2 * std::numbers::pi;
-    }
-    return a;
+    return {ux * cos_h + uy * sin_h, uy * cos_h - ux * sin_h, ux * cos_h - uy * sin_h, uy * cos_h + ux * sin_h};
 }
 
 } // namespace
@@ -41,34 +73,52 @@ std::vector<Shortcut> proximate_shortcuts(std::span<const GridPoint> pts, const 
     const double r_eps =
         std::sqrt(std::max(0.0, double(tol.metric == Metric::l2 ? tol.threshold : tol.threshold * tol.threshold))) *
         l2_reach(tol.metric);
-    constexpr double slack = 1e-9; // radians; far above the double error of atan2/asin
+    // Two wedges, without trigonometry: every constraint's half-angle
+    // widened by `slack` (outside it: surely not proximate; empty: stop) and
+    // narrowed by it (strictly inside: surely within eps, when no vertex lies
+    // beyond the end). Between them, the exact test decides.
+    constexpr double slack = 1e-9; // radians; far above the double error of the rotations
+    const double cos_s = std::cos(slack), sin_s = std::sin(slack);
     for (uint32_t j = 0; j + 2 < n; ++j) {
         const GridPoint a = pts[j];
-        bool constrained = false;       // any vertex farther than r_eps seen yet
-        double ref = 0, lo = 0, hi = 0; // wedge [ref + lo, ref + hi]
-        double far2 = 0;                // max squared distance of an intermediate vertex from a
+        enum { open, set, empty };
+        auto wide_state = open, narrow_state = open;
+        Arc wide, narrow;
+        double far2 = 0; // max squared distance of an intermediate vertex from a
         const auto last = static_cast<uint32_t>(max_reach ? std::min<uint64_t>(n - 1, uint64_t{j} + max_reach) : n - 1);
         for (uint32_t k = j + 2; k <= last; ++k) {
-            // Vertex k - 1 becomes an intermediate vertex: narrow the wedge.
+            // Vertex k - 1 becomes an intermediate vertex: narrow the wedges.
             const GridPoint q = pts[k - 1];
             const double qx = double(q.x) - a.x, qy = double(q.y) - a.y;
             const double r2 = qx * qx + qy * qy;
             far2 = std::max(far2, r2);
             if (r2 > r_eps * r_eps) {
-                const double phi = std::atan2(qy, qx);
-                const double half = std::asin(std::min(1.0, r_eps / std::sqrt(r2)));
-                if (!constrained) {
-                    constrained = true;
-                    ref = phi;
-                    lo = -half;
-                    hi = half;
-                } else {
-                    const double c = wrap(phi - ref);
-                    lo = std::max(lo, c - half);
-                    hi = std::min(hi, c + half);
+                const double len = std::sqrt(r2), ux = qx / len, uy = qy / len;
+                const double sin_h = std::min(1.0, r_eps / len), cos_h = std::sqrt(1 - sin_h * sin_h);
+                // h + slack; a half-angle this close to pi / 2 is left out
+                // of the wide wedge (wider is safe).
+                const double sin_w = sin_h * cos_s + cos_h * sin_s, cos_w = cos_h * cos_s - sin_h * sin_s;
+                if (cos_w > 1e-6) {
+                    const Arc c = arc_around(ux, uy, sin_w, cos_w);
+                    if (wide_state == open) {
+                        wide = c;
+                        wide_state = set;
+                    } else if (!wide.intersect(c)) {
+                        break; // no segment from a can pass near every vertex seen
+                    }
                 }
-                if (lo > hi + 2 * slack) {
-                    break; // no segment from a can pass near every vertex seen
+                // h - slack
+                const double sin_n = sin_h * cos_s - cos_h * sin_s, cos_n = cos_h * cos_s + sin_h * sin_s;
+                if (sin_n < 0) {
+                    narrow_state = empty;
+                } else if (narrow_state != empty) {
+                    const Arc c = arc_around(ux, uy, sin_n, cos_n);
+                    if (narrow_state == open) {
+                        narrow = c;
+                        narrow_state = set;
+                    } else if (!narrow.intersect(c)) {
+                        narrow_state = empty;
+                    }
                 }
             }
             const GridPoint b = pts[k];
@@ -76,17 +126,13 @@ std::vector<Shortcut> proximate_shortcuts(std::span<const GridPoint> pts, const 
                 continue;
             }
             const double bx = double(b.x) - a.x, by = double(b.y) - a.y;
-            const double len2 = bx * bx + by * by;
-            bool inside_clearly = true;
-            if (constrained) {
-                const double t = wrap(std::atan2(by, bx) - ref);
-                if (t < lo - slack || t > hi + slack) {
-                    continue; // the ray through b misses a vertex: not proximate
-                }
-                inside_clearly = t > lo + slack && t < hi - slack;
+            if (wide_state == set && !wide.holds(bx, by)) {
+                continue; // the ray through b misses a vertex: not proximate
             }
+            const bool inside_clearly = narrow_state == open || (narrow_state == set && narrow.holds(bx, by, true));
             // Clearly inside the wedge and no vertex beyond b: every
             // intermediate vertex projects onto the segment within eps (L2).
+            const double len2 = bx * bx + by * by;
             const bool sure = tol.metric == Metric::l2 && inside_clearly && far2 * (1 + 1e-12) < len2;
             if (sure || proximate_exact(pts, j, k, tol)) {
                 out.push_back({j, k});

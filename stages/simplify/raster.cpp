@@ -46,6 +46,7 @@ float seg_distance(vec2 p, vec2 a, vec2 b) {
 constexpr const char* tent_vs = R"(#version 450 core
 layout(location = 0) in vec4 a_seg; // a.xy, b.xy in tile pixels
 layout(location = 1) in float a_eps; // pixels
+layout(location = 3) in float a_corner; // 0, 1 at a; 2, 3 at b; even: left
 uniform vec2 u_size;
 uniform float u_reach;
 uniform float u_pad;
@@ -57,7 +58,8 @@ void main() {
     vec2 u = len > 0.0 ? d / len : vec2(1.0, 0.0);
     vec2 n = vec2(-u.y, u.x);
     float r = a_eps * u_reach + u_pad;
-    vec2 p = (gl_VertexID < 2 ? a - u * r : b + u * r) + ((gl_VertexID & 1) == 0 ? n * r : -n * r);
+    int c = int(a_corner);
+    vec2 p = (c < 2 ? a - u * r : b + u * r) + ((c & 1) == 0 ? n * r : -n * r);
     gl_Position = vec4(p / u_size * 2.0 - 1.0, 0.0, 1.0);
     v_seg = a_seg;
     v_eps = a_eps;
@@ -89,6 +91,7 @@ constexpr const char* test_vs = R"(#version 450 core
 layout(location = 0) in vec4 a_seg;
 layout(location = 1) in uint a_id;
 layout(location = 2) in vec2 a_clip; // the part drawn: t0, t1 along a_seg
+layout(location = 3) in float a_corner; // 0, 1 at a; 2, 3 at b; even: left
 uniform vec2 u_size;
 uniform float u_half_width;
 flat out vec4 v_seg;
@@ -98,7 +101,8 @@ void main() {
     float len = length(d);
     vec2 u = len > 0.0 ? d / len : vec2(1.0, 0.0);
     vec2 n = vec2(-u.y, u.x) * u_half_width;
-    vec2 p = mix(a, b, gl_VertexID < 2 ? a_clip.x : a_clip.y) + ((gl_VertexID & 1) == 0 ? n : -n);
+    int c = int(a_corner);
+    vec2 p = mix(a, b, c < 2 ? a_clip.x : a_clip.y) + ((c & 1) == 0 ? n : -n);
     // Depth 0.9995 under GL_GREATER: only where a tent was drawn (tents'
     // depths are below 1 / 1.001, the background is 1).
     gl_Position = vec4(p / u_size * 2.0 - 1.0, 0.999, 1.0);
@@ -147,6 +151,37 @@ struct TestInstance {
     float t0, t1;
 };
 
+/// A quad is drawn as two triangles whose six vertices carry the item and
+/// their corner: one non-instanced draw, which Mesa's draw module shades in
+/// wide batches (an instanced draw of four-vertex strips costs several
+/// microseconds per instance on llvmpipe).
+template <class T> struct QuadVertex {
+    T item;
+    float corner;
+};
+
+template <class T>
+void upload_quads(const gl::Api& gl, const std::vector<T>& items, std::vector<QuadVertex<T>>& staging)
+{
+    constexpr float corners[6] = {0, 1, 2, 2, 1, 3};
+    staging.resize(items.size() * 6);
+    for (size_t i = 0; i < items.size(); ++i) {
+        for (size_t c = 0; c < 6; ++c) {
+            staging[i * 6 + c] = {items[i], corners[c]};
+        }
+    }
+    gl.BufferData(GL_ARRAY_BUFFER, GLsizeiptr(staging.size() * sizeof(QuadVertex<T>)), staging.data(), GL_STREAM_DRAW);
+}
+
+GLint quad_first(size_t item)
+{
+    return static_cast<GLint>(item * 6);
+}
+GLsizei quad_count(size_t items)
+{
+    return static_cast<GLsizei>(items * 6);
+}
+
 } // namespace
 
 struct Raster::Impl {
@@ -155,6 +190,8 @@ struct Raster::Impl {
     GLuint vao_tent = 0, vao_test = 0, vbo_tent = 0, vbo_test = 0, ssbo = 0;
     GLuint fbo = 0, rb_depth = 0, rb_color = 0;
     std::vector<uint8_t> near; ///< per cell of a tile: a tested part may have fragments there
+    std::vector<QuadVertex<TentInstance>> tent_vertices;
+    std::vector<QuadVertex<TestInstance>> test_vertices;
     explicit Impl(const gl::Api& api) : gl(api) {}
 
     /// The info log of a shader or program (glGetShaderInfoLog / glGetProgramInfoLog).
@@ -215,29 +252,32 @@ Raster::Raster(gl::Context& ctx, const RasterOptions& opt)
     gl.GenBuffers(1, &I.vbo_tent);
     gl.BindVertexArray(I.vao_tent);
     gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_tent);
-    gl.VertexAttribPointer(0, 4, GL_FLOAT, GL_FALSE, sizeof(TentInstance), nullptr);
-    gl.VertexAttribPointer(1, 1, GL_FLOAT, GL_FALSE, sizeof(TentInstance),
+    using TentVertex = QuadVertex<TentInstance>;
+    gl.VertexAttribPointer(0, 4, GL_FLOAT, GL_FALSE, sizeof(TentVertex), nullptr);
+    gl.VertexAttribPointer(1, 1, GL_FLOAT, GL_FALSE, sizeof(TentVertex),
                            reinterpret_cast<const void*>(offsetof(TentInstance, eps)));
+    gl.VertexAttribPointer(3, 1, GL_FLOAT, GL_FALSE, sizeof(TentVertex),
+                           reinterpret_cast<const void*>(offsetof(TentVertex, corner)));
     gl.EnableVertexAttribArray(0);
     gl.EnableVertexAttribArray(1);
-    gl.VertexAttribDivisor(0, 1);
-    gl.VertexAttribDivisor(1, 1);
+    gl.EnableVertexAttribArray(3);
 
     gl.GenVertexArrays(1, &I.vao_test);
     gl.GenBuffers(1, &I.vbo_test);
     gl.BindVertexArray(I.vao_test);
     gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_test);
-    gl.VertexAttribPointer(0, 4, GL_FLOAT, GL_FALSE, sizeof(TestInstance), nullptr);
-    gl.VertexAttribIPointer(1, 1, GL_UNSIGNED_INT, sizeof(TestInstance),
+    using TestVertex = QuadVertex<TestInstance>;
+    gl.VertexAttribPointer(0, 4, GL_FLOAT, GL_FALSE, sizeof(TestVertex), nullptr);
+    gl.VertexAttribIPointer(1, 1, GL_UNSIGNED_INT, sizeof(TestVertex),
                             reinterpret_cast<const void*>(offsetof(TestInstance, id)));
-    gl.VertexAttribPointer(2, 2, GL_FLOAT, GL_FALSE, sizeof(TestInstance),
+    gl.VertexAttribPointer(2, 2, GL_FLOAT, GL_FALSE, sizeof(TestVertex),
                            reinterpret_cast<const void*>(offsetof(TestInstance, t0)));
+    gl.VertexAttribPointer(3, 1, GL_FLOAT, GL_FALSE, sizeof(TestVertex),
+                           reinterpret_cast<const void*>(offsetof(TestVertex, corner)));
     gl.EnableVertexAttribArray(0);
     gl.EnableVertexAttribArray(1);
     gl.EnableVertexAttribArray(2);
-    gl.VertexAttribDivisor(0, 1);
-    gl.VertexAttribDivisor(1, 1);
-    gl.VertexAttribDivisor(2, 1);
+    gl.EnableVertexAttribArray(3);
     gl.BindVertexArray(0);
     gl.GenBuffers(1, &I.ssbo);
 
@@ -393,7 +433,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     gl.Uniform1i(I.loc(I.tent_prog, "u_reset"), 0);
     gl.BindVertexArray(I.vao_tent);
     gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_tent);
-    gl.BufferData(GL_ARRAY_BUFFER, GLsizeiptr(inst.size() * sizeof(TentInstance)), inst.data(), GL_STREAM_DRAW);
+    upload_quads(gl, inst, I.tent_vertices);
     gl.Enable(GL_DEPTH_TEST);
     gl.DepthFunc(GL_LESS);
     gl.DepthMask(GL_TRUE);
@@ -402,7 +442,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     gl.StencilOp(GL_KEEP, GL_KEEP, GL_REPLACE);
     for (const auto& [cls, range] : ranges) {
         gl.StencilFunc(GL_ALWAYS, cls, 0xFF);
-        gl.DrawArraysInstancedBaseInstance(GL_TRIANGLE_STRIP, 0, 4, range.second, range.first);
+        gl.DrawArrays(GL_TRIANGLES, quad_first(range.first), quad_count(size_t(range.second)));
     }
     m_stats.voronoi_seconds += seconds_since(t0);
 
@@ -441,7 +481,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     gl.Uniform1f(I.loc(I.test_prog, "u_end_margin"), float(m_opt.endpoint_margin_px));
     gl.BindVertexArray(I.vao_test);
     gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_test);
-    gl.BufferData(GL_ARRAY_BUFFER, GLsizeiptr(sorted.size() * sizeof(TestInstance)), sorted.data(), GL_STREAM_DRAW);
+    upload_quads(gl, sorted, I.test_vertices);
     if (!segs.empty() && m_opt.compliance == Compliance::ssbo) {
         std::vector<uint32_t> flags(segs.size(), 0);
         gl.BindBuffer(GL_SHADER_STORAGE_BUFFER, I.ssbo);
@@ -449,7 +489,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         gl.BindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, I.ssbo);
         for (const auto& [cls, range] : sranges) {
             gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
-            gl.DrawArraysInstancedBaseInstance(GL_TRIANGLE_STRIP, 0, 4, range.second, range.first);
+            gl.DrawArrays(GL_TRIANGLES, quad_first(range.first), quad_count(size_t(range.second)));
         }
         gl.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
         gl.GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(flags.size() * 4), flags.data());
@@ -471,7 +511,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
                 gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
                 for (GLuint k = range.first; k < range.first + GLuint(range.second); ++k) {
                     if (!removed[k]) {
-                        gl.DrawArraysInstancedBaseInstance(GL_TRIANGLE_STRIP, 0, 4, 1, k);
+                        gl.DrawArrays(GL_TRIANGLES, quad_first(k), quad_count(1));
                     }
                 }
             }
@@ -511,7 +551,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     gl.StencilFunc(GL_ALWAYS, 0, 0xFF);
     gl.StencilOp(GL_REPLACE, GL_REPLACE, GL_REPLACE);
     if (!inst.empty()) {
-        gl.DrawArraysInstanced(GL_TRIANGLE_STRIP, 0, 4, GLsizei(inst.size()));
+        gl.DrawArrays(GL_TRIANGLES, 0, quad_count(inst.size()));
     }
     const GLenum err = gl.GetError();
     if (err != GL_NO_ERROR) {

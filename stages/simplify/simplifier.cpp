@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <unordered_map>
 
 namespace tigerlod::simplify {
 
@@ -44,6 +45,7 @@ void ToleranceStats::add(const ToleranceStats& o)
     seconds_constraints += o.seconds_constraints;
     seconds_shortest_path += o.seconds_shortest_path;
     seconds_exact += o.seconds_exact;
+    seconds_far += o.seconds_far;
 }
 
 namespace {
@@ -334,6 +336,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     // (eps_j in the metric plus the colouring margin) lies in its own
     // chain's eps-Voronoi region: proximate shortcuts stay within eps_i of
     // their chain, and no other region comes near. Those skip the raster.
+    t0 = Clock::now();
     const double margin = colors->pixel * opt.color.margin_px;
     double reach_max = 0;
     for (const double e : eps) {
@@ -362,6 +365,15 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     std::sort(grid.begin(), grid.end(), [](const GridSeg& a, const GridSeg& b) {
         return std::tie(a.key, a.chain, a.index) < std::tie(b.key, b.chain, b.index);
     });
+    // Where each cell's run starts: one hash probe per cell, not a binary
+    // search over every segment of the store.
+    std::unordered_map<uint64_t, uint32_t> cell_start;
+    cell_start.reserve(grid.size() / 2 + 1);
+    for (uint32_t g = 0; g < grid.size(); ++g) {
+        if (g == 0 || grid[g].key != grid[g - 1].key) {
+            cell_start.emplace(grid[g].key, g);
+        }
+    }
     // Whether a segment of another chain comes within `r` of segment ab.
     auto near_other = [&](uint32_t chain, GridPoint a, GridPoint b, double r) {
         bool found = false;
@@ -371,9 +383,11 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
                 return;
             }
             const uint64_t key = key_of(x, y);
-            auto it =
-                std::lower_bound(grid.begin(), grid.end(), key, [](const GridSeg& g, uint64_t k) { return g.key < k; });
-            for (; it != grid.end() && it->key == key && !found; ++it) {
+            const auto start = cell_start.find(key);
+            if (start == cell_start.end()) {
+                return;
+            }
+            for (auto it = grid.begin() + start->second; it != grid.end() && it->key == key && !found; ++it) {
                 if (it->chain == chain) {
                     continue;
                 }
@@ -414,6 +428,8 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             }
         }
     }
+
+    st.seconds_far += since(t0);
 
     // Raster test of (work, candidate) pairs, tile by tile.
     auto raster_test = [&](const std::vector<std::pair<uint32_t, uint32_t>>& all_tests) {

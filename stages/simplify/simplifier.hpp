@@ -57,6 +57,7 @@ struct ToleranceStats {
     uint32_t max_classes = 0;
     double seconds_color = 0, seconds_candidates = 0, seconds_voronoi = 0, seconds_compliance = 0,
            seconds_constraints = 0, seconds_shortest_path = 0, seconds_exact = 0;
+    double seconds_far = 0; ///< the far rule's grid and blocked segments
     void add(const ToleranceStats& o);
 };
 

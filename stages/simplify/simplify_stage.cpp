@@ -293,6 +293,7 @@ int SimplifyStage::run(const StageContext& ctx)
                         {"step1_voronoi", t.seconds_voronoi},
                         {"step2_compliance", t.seconds_compliance},
                         {"step3_constraints", t.seconds_constraints},
+                        {"far_rule", t.seconds_far},
                         {"step4_shortest_path", t.seconds_shortest_path},
                         {"exact_check", t.seconds_exact}};
         tols.push_back(std::move(j));
