@@ -71,11 +71,15 @@ std::vector<Seg> make_segments(std::span<const ChainGeom> chains, double pixel, 
 /// Conflict graph: chains i != j with segments closer than r_i + r_j.
 std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> chains, const std::vector<Seg>& segs)
 {
-    double rmax = 0;
+    double rmax = 0, length = 0;
     for (const auto& s : segs) {
         rmax = std::max(rmax, s.r);
+        length += std::hypot(s.bx - s.ax, s.by - s.ay);
     }
-    const double cell = std::max(2 * rmax, 1.0);
+    // At least the mean segment: small tolerances made 2 x reach cells a
+    // fraction of a segment, each segment filling dozens. The graph does not
+    // depend on the size (a pair within r_s + r_t shares a cell).
+    const double cell = std::max({2 * rmax, segs.empty() ? 0.0 : length / double(segs.size()), 1.0});
     std::vector<std::pair<uint64_t, uint32_t>> entries;
     for (uint32_t i = 0; i < segs.size(); ++i) {
         const Seg& s = segs[i];

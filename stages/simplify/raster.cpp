@@ -191,6 +191,9 @@ struct Raster::Impl {
     GLuint fbo = 0, rb_depth = 0, rb_color = 0;
     std::vector<uint8_t> near; ///< per cell of a tile: a tested part may have fragments there
     std::vector<QuadVertex<TentInstance>> tent_vertices;
+    bool batching = false;           ///< between begin_batch and end_batch
+    size_t batch_capacity = 0;       ///< flags allocated for the batch
+    std::vector<uint32_t> batch_ids; ///< the caller's id of each flag of the batch
     std::vector<QuadVertex<TestInstance>> test_vertices;
     explicit Impl(const gl::Api& api) : gl(api) {}
 
@@ -360,6 +363,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     I.near.assign(size_t(cw * ch), 0);
     auto in_grid = [&](int64_t x, int64_t y) { return x >= 0 && y >= 0 && x < cw && y < ch; };
     std::vector<TestInstance> tinst(segs.size());
+    int64_t near_x0 = cw, near_y0 = ch, near_x1 = -1, near_y1 = -1; // the marked cells' box
     for (size_t k = 0; k < segs.size(); ++k) {
         const auto& sg = segs[k];
         auto& ti = tinst[k];
@@ -372,11 +376,22 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         cover_cells(ti.ax + sg.t0 * dx, ti.ay + sg.t0 * dy, ti.ax + sg.t1 * dx, ti.ay + sg.t1 * dy, 2.0, kCell, 0.0,
                     0.0, [&](int64_t x, int64_t y) {
                         if (in_grid(x, y)) {
+                            near_x0 = std::min(near_x0, x);
+                            near_y0 = std::min(near_y0, y);
+                            near_x1 = std::max(near_x1, x);
+                            near_y1 = std::max(near_y1, y);
                             I.near[size_t(y * cw + x)] = 1;
                         }
                     });
     }
     auto reaches_test = [&](const TentInstance& ti, double r) {
+        // Most of a tile's chains lie mostly outside the tile: a box test first.
+        if (std::max(ti.ax, ti.bx) + r < double(near_x0) * kCell ||
+            std::min(ti.ax, ti.bx) - r > double(near_x1 + 1) * kCell ||
+            std::max(ti.ay, ti.by) + r < double(near_y0) * kCell ||
+            std::min(ti.ay, ti.by) - r > double(near_y1 + 1) * kCell) {
+            return false;
+        }
         bool hit = false;
         cover_cells(ti.ax, ti.ay, ti.bx, ti.by, r, kCell, 0.0, 0.0,
                     [&](int64_t x, int64_t y) { hit = hit || (in_grid(x, y) && I.near[size_t(y * cw + x)] != 0); });
@@ -453,12 +468,17 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         sorder[i] = i;
     }
     std::stable_sort(sorder.begin(), sorder.end(), [&](uint32_t a, uint32_t b) { return segs[a].cls < segs[b].cls; });
+    const bool deferred = I.batching && m_opt.compliance == Compliance::ssbo;
+    const size_t base = deferred ? I.batch_ids.size() : 0;
+    if (deferred && base + segs.size() > I.batch_capacity) {
+        throw std::logic_error("more shortcut parts than the batch was begun for");
+    }
     std::vector<TestInstance> sorted(segs.size());
     std::vector<std::pair<uint8_t, std::pair<GLuint, GLsizei>>> sranges;
     for (uint32_t k = 0; k < sorder.size(); ++k) {
         const auto& s = segs[sorder[k]];
         sorted[k] = tinst[sorder[k]];
-        sorted[k].id = k; // local index; mapped back below
+        sorted[k].id = static_cast<uint32_t>(base + k); // flag index; mapped back below
         if (!sranges.empty() && sranges.back().first == s.cls) {
             ++sranges.back().second.second;
         } else {
@@ -482,7 +502,17 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     gl.BindVertexArray(I.vao_test);
     gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_test);
     upload_quads(gl, sorted, I.test_vertices);
-    if (!segs.empty() && m_opt.compliance == Compliance::ssbo) {
+    if (!segs.empty() && deferred) {
+        // The flags land in the batch's buffer, read back once by end_batch:
+        // no wait per tile.
+        for (uint32_t k = 0; k < sorder.size(); ++k) {
+            I.batch_ids.push_back(segs[sorder[k]].id);
+        }
+        for (const auto& [cls, range] : sranges) {
+            gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
+            gl.DrawArrays(GL_TRIANGLES, quad_first(range.first), quad_count(size_t(range.second)));
+        }
+    } else if (!segs.empty() && m_opt.compliance == Compliance::ssbo) {
         std::vector<uint32_t> flags(segs.size(), 0);
         gl.BindBuffer(GL_SHADER_STORAGE_BUFFER, I.ssbo);
         gl.BufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(flags.size() * 4), flags.data(), GL_STREAM_READ);
@@ -559,6 +589,54 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
                                 m_ctx.describe());
     }
     m_stats.voronoi_seconds += seconds_since(t2);
+}
+
+void Raster::begin_batch(size_t parts)
+{
+    auto& I = *m_impl;
+    if (I.batching) {
+        throw std::logic_error("Raster::begin_batch inside a batch");
+    }
+    I.batching = true;
+    I.batch_ids.clear();
+    I.batch_capacity = parts;
+    if (m_opt.compliance == Compliance::ssbo && parts > 0) {
+        const std::vector<uint32_t> zeros(parts, 0);
+        const auto& gl = I.gl;
+        gl.BindBuffer(GL_SHADER_STORAGE_BUFFER, I.ssbo);
+        gl.BufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(parts * 4), zeros.data(), GL_STREAM_READ);
+        gl.BindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, I.ssbo);
+    }
+}
+
+void Raster::end_batch(std::vector<uint8_t>& fails)
+{
+    auto& I = *m_impl;
+    if (!I.batching) {
+        throw std::logic_error("Raster::end_batch without begin_batch");
+    }
+    I.batching = false;
+    if (I.batch_ids.empty()) {
+        return;
+    }
+    const auto t0 = std::chrono::steady_clock::now();
+    const auto& gl = I.gl;
+    std::vector<uint32_t> flags(I.batch_ids.size(), 0);
+    gl.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+    gl.BindBuffer(GL_SHADER_STORAGE_BUFFER, I.ssbo);
+    gl.GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(flags.size() * 4), flags.data());
+    const GLenum err = gl.GetError();
+    if (err != GL_NO_ERROR) {
+        throw environment_error("OpenGL error " + std::to_string(err) + " while reading the compliance flags on " +
+                                m_ctx.describe());
+    }
+    for (size_t k = 0; k < flags.size(); ++k) {
+        if (flags[k]) {
+            fails[I.batch_ids[k]] = 1;
+        }
+    }
+    I.batch_ids.clear();
+    m_stats.compliance_seconds += seconds_since(t0);
 }
 
 } // namespace tigerlod::simplify

@@ -67,11 +67,20 @@ class Raster {
     Raster& operator=(const Raster&) = delete;
 
     /// Draw the eps-Voronoi diagram of `tents` in `tile`, test `segs`, and set
-    /// fails[seg.id] = 1 for each that leaves its chain's region. Only the
+    /// fails[seg.id] = 1 for each that leaves its chain's region (inside a
+    /// batch: at end_batch). Only the
     /// tents whose reach comes near a tested part are drawn: the diagram is
     /// exact where it is read, and its cost follows the tested geometry.
     void run_tile(const TileSpec& tile, std::span<const TentChain> tents, std::span<const TestSegment> segs,
                   std::vector<uint8_t>& fails);
+
+    /// Batches the tiles run until end_batch, holding at most `parts` test
+    /// segments in all: with the storage-buffer compliance their flags are
+    /// read back once at the end, so the GL pipeline never waits per tile
+    /// (with the read-back compliance each tile still reads its pixels).
+    void begin_batch(size_t parts);
+    /// Sets fails[seg.id] = 1 for each failing segment of the batch.
+    void end_batch(std::vector<uint8_t>& fails);
 
     const RasterStats& stats() const noexcept { return m_stats; }
 

@@ -56,6 +56,21 @@ double since(Clock::time_point t0)
     return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
+/// The mean length of the store's segments, in grid units (0 if none).
+double mean_segment_length(const ChainStore& store)
+{
+    double sum = 0;
+    size_t n = 0;
+    for (const auto& c : store.chains) {
+        const auto pts = store.chain_points(c);
+        for (size_t i = 0; i + 1 < pts.size(); ++i) {
+            sum += std::hypot(double(pts[i + 1].x) - pts[i].x, double(pts[i + 1].y) - pts[i].y);
+            ++n;
+        }
+    }
+    return n ? sum / double(n) : 0.0;
+}
+
 /// Lazy rounds per chain before its remaining shortcuts are tested at once.
 constexpr uint32_t lazy_rounds = 3;
 
@@ -342,7 +357,10 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     for (const double e : eps) {
         reach_max = std::max(reach_max, e * l2_reach(opt.metric) + margin);
     }
-    const double cell = std::max(2 * reach_max, 1.0);
+    // Cells at least as wide as the mean segment: at 1 m a 2 x reach cell is
+    // 3 m, and a county's 100 m segments each filled dozens of them (74 s of
+    // the tract ladder's 1 m step). The answer does not depend on the size.
+    const double cell = std::max({2 * reach_max, mean_segment_length(store), 1.0});
     struct GridSeg {
         uint64_t key;
         uint32_t chain, index;
@@ -477,6 +495,11 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             }
         }
         std::vector<uint8_t> fails(tests.size(), 0);
+        size_t parts_in_all = 0;
+        for (const auto& p : per_tile) {
+            parts_in_all += p.size();
+        }
+        raster.begin_batch(parts_in_all);
         for (uint32_t t = 0; t < per_tile.size(); ++t) {
             if (per_tile[t].empty()) {
                 continue;
@@ -488,6 +511,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             }
             raster.run_tile(tile.spec, tents, per_tile[t], fails);
         }
+        raster.end_batch(fails);
         for (uint32_t id = 0; id < tests.size(); ++id) {
             const auto [wi, ci] = tests[id];
             work[wi].state[ci] = fails[id] ? bad_raster : good;
