@@ -26,10 +26,13 @@ namespace tigerlod::simplify {
 
 /// The interval of t in [0, 1] where a + t (b - a) lies within r of segment
 /// pq (L2), or nothing. In doubles; callers widen it for rounding.
-inline std::optional<std::pair<double, double>> capsule_interval(GridPoint a, GridPoint b, GridPoint p, GridPoint q,
-                                                                 double r)
+struct Point2 {
+    double x = 0, y = 0;
+};
+
+inline std::optional<std::pair<double, double>> capsule_interval(Point2 a, Point2 b, Point2 p, Point2 q, double r)
 {
-    const double dx = double(b.x) - double(a.x), dy = double(b.y) - double(a.y);
+    const double dx = b.x - a.x, dy = b.y - a.y;
     const double dd = dx * dx + dy * dy;
     if (dd == 0) {
         return std::nullopt;
@@ -42,8 +45,8 @@ inline std::optional<std::pair<double, double>> capsule_interval(GridPoint a, Gr
         }
     };
     // The disks at p and q: |a - c + t d|^2 <= r^2.
-    auto disk = [&](GridPoint c) {
-        const double ux = double(a.x) - double(c.x), uy = double(a.y) - double(c.y);
+    auto disk = [&](Point2 c) {
+        const double ux = a.x - c.x, uy = a.y - c.y;
         const double cross = ux * dy - uy * dx;
         const double disc = dd * r * r - cross * cross; // a quarter of the discriminant
         if (disc < 0) {
@@ -56,7 +59,7 @@ inline std::optional<std::pair<double, double>> capsule_interval(GridPoint a, Gr
     disk(q);
     // The rectangle around pq: its projection onto pq within [0, |pq|^2],
     // its distance to pq's line within r.
-    const double ex = double(q.x) - double(p.x), ey = double(q.y) - double(p.y);
+    const double ex = q.x - p.x, ey = q.y - p.y;
     const double ee = ex * ex + ey * ey;
     if (ee > 0) {
         double t0 = -1e300, t1 = 1e300;
@@ -76,7 +79,7 @@ inline std::optional<std::pair<double, double>> capsule_interval(GridPoint a, Gr
             t0 = std::max(t0, ta);
             t1 = std::min(t1, tb);
         };
-        const double ux = double(a.x) - double(p.x), uy = double(a.y) - double(p.y);
+        const double ux = a.x - p.x, uy = a.y - p.y;
         within(ux * ex + uy * ey, dx * ex + dy * ey, 0, ee);
         const double band = r * std::sqrt(ee);
         within(ex * uy - ey * ux, ex * dy - ey * dx, -band, band);
@@ -90,12 +93,27 @@ inline std::optional<std::pair<double, double>> capsule_interval(GridPoint a, Gr
     return std::pair{lo, hi};
 }
 
+inline std::optional<std::pair<double, double>> capsule_interval(GridPoint a, GridPoint b, GridPoint p, GridPoint q,
+                                                                 double r)
+{
+    auto d = [](GridPoint g) { return Point2{double(g.x), double(g.y)}; };
+    return capsule_interval(d(a), d(b), d(p), d(q), r);
+}
+
+/// A blocked segment pts[k] pts[k+1] of a chain, and the part of it (as
+/// parameters t0..t1 along it) that another chain comes near.
+struct NearSegment {
+    uint32_t k = 0;
+    double t0 = 0, t1 = 1;
+};
+
 /// The parts of shortcut ab (over pts[from..to]) to draw: the points within
-/// r of a segment k (pts[k], pts[k+1]) listed in `blocked` (sorted) with
+/// r of the near part of a segment listed in `blocked` (sorted by k) with
 /// from <= k < to, each widened by `pad` grid units, merged. Empty when the
-/// shortcut cannot fail.
+/// shortcut cannot fail: a point within eps_i of the clear part of a segment
+/// is as far from other chains as the point of the proof above.
 inline std::vector<std::pair<double, double>> near_parts(std::span<const GridPoint> pts, uint32_t from, uint32_t to,
-                                                         const std::vector<uint32_t>& blocked, double r, double pad)
+                                                         const std::vector<NearSegment>& blocked, double r, double pad)
 {
     std::vector<std::pair<double, double>> parts;
     const GridPoint a = pts[from], b = pts[to];
@@ -104,8 +122,15 @@ inline std::vector<std::pair<double, double>> near_parts(std::span<const GridPoi
         return parts;
     }
     const double widen = pad / len + 1e-9;
-    for (auto it = std::lower_bound(blocked.begin(), blocked.end(), from); it != blocked.end() && *it < to; ++it) {
-        if (const auto iv = capsule_interval(a, b, pts[*it], pts[*it + 1], r)) {
+    auto at = [](GridPoint p, GridPoint q, double t) {
+        return Point2{p.x + t * (double(q.x) - p.x), p.y + t * (double(q.y) - p.y)};
+    };
+    const Point2 fa{double(a.x), double(a.y)}, fb{double(b.x), double(b.y)};
+    for (auto it = std::lower_bound(blocked.begin(), blocked.end(), from,
+                                    [](const NearSegment&n, uint32_t k) { return n.k < k; });
+         it != blocked.end() && it->k < to; ++it) {
+        const GridPoint p = pts[it->k], q = pts[it->k + 1];
+        if (const auto iv = capsule_interval(fa, fb, at(p, q, it->t0), at(p, q, it->t1), r)) {
             parts.emplace_back(std::max(0.0, iv->first - widen), std::min(1.0, iv->second + widen));
         }
     }

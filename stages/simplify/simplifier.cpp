@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <optional>
 #include <unordered_map>
 
 namespace tigerlod::simplify {
@@ -393,33 +394,46 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         }
     }
     // Whether a segment of another chain comes within `r` of segment ab.
+    // The part of segment ab that another chain's segment comes within r of
+    // (the hull of those parts, as parameters along ab), or nothing.
     auto near_other = [&](uint32_t chain, GridPoint a, GridPoint b, double r) {
-        bool found = false;
+        std::optional<std::pair<double, double>> near;
+        const double reach = r * (1 + 1e-9) + 1;
         // The cells within r of ab (a segment within r of ab passes through one).
         cover_cells(a.x, a.y, b.x, b.y, r, cell, 0.0, 0.0, [&](int64_t x, int64_t y) {
-            if (found) {
-                return;
+            if (near && near->first == 0 && near->second == 1) {
+                return; // the whole segment already
             }
             const uint64_t key = key_of(x, y);
             const auto start = cell_start.find(key);
             if (start == cell_start.end()) {
                 return;
             }
-            for (auto it = grid.begin() + start->second; it != grid.end() && it->key == key && !found; ++it) {
+            for (auto it = grid.begin() + start->second; it != grid.end() && it->key == key; ++it) {
                 if (it->chain == chain) {
                     continue;
                 }
                 const auto p = store.chain_points(store.chains[it->chain]);
-                found = segment_distance(a, b, p[it->index], p[it->index + 1]) <= r * (1 + 1e-9) + 1;
+                if (segment_distance(a, b, p[it->index], p[it->index + 1]) > reach) {
+                    continue;
+                }
+                // Within reach: the part of ab near it; all of ab when ab is a point.
+                const auto iv = a == b ? std::optional{std::pair{0.0, 1.0}}
+                                       : capsule_interval(a, b, p[it->index], p[it->index + 1], reach);
+                const auto part = iv ? *iv : std::pair{0.0, 1.0}; // rounding: take all of it
+                near = near ? std::pair{std::min(near->first, part.first), std::max(near->second, part.second)} : part;
             }
         });
-        return found;
+        return near;
     };
     // Per owned chain, prefix counts of its segments that have another chain
     // within eps_i + the largest reach: a shortcut spanning only clear
     // segments lies within eps_i of them (L2), so farther than any other
-    // chain's reach from that chain.
+    // chain's reach from that chain. And the blocked segments with the part
+    // of each that is near another chain, for the parts of a shortcut that
+    // can fail (near_parts.hpp).
     std::vector<std::vector<uint32_t>> blocked(work.size());
+    std::vector<std::vector<NearSegment>> blocked_at(work.size());
     if (opt.metric == Metric::l2) {
         parallel_each(work.size(), opt.threads, [&](size_t wi) {
             const Work& w = work[wi];
@@ -430,21 +444,17 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             auto& b = blocked[wi];
             b.assign(pts.size(), 0);
             for (size_t k = 0; k + 1 < pts.size(); ++k) {
-                b[k + 1] = b[k] + (near_other(w.chain, pts[k], pts[k + 1], w.tol.eps + reach_max) ? 1 : 0);
+                const auto near = near_other(w.chain, pts[k], pts[k + 1], w.tol.eps + reach_max);
+                b[k + 1] = b[k] + (near ? 1 : 0);
+                if (near) {
+                    // Widened by 2 grid units for rounding.
+                    const double len = std::hypot(double(pts[k + 1].x) - pts[k].x, double(pts[k + 1].y) - pts[k].y);
+                    const double pad = len > 0 ? 2 / len : 1;
+                    blocked_at[wi].push_back({static_cast<uint32_t>(k), std::max(0.0, near->first - pad),
+                                              std::min(1.0, near->second + pad)});
+                }
             }
         });
-    }
-
-    // The blocked segments of each owned chain, for the parts of a shortcut
-    // that can fail (near_parts.hpp): L2 only, as the far rule.
-    std::vector<std::vector<uint32_t>> blocked_at(work.size());
-    for (size_t wi = 0; wi < work.size(); ++wi) {
-        const auto& b = blocked[wi];
-        for (uint32_t k = 0; k + 1 < b.size(); ++k) {
-            if (b[k + 1] > b[k]) {
-                blocked_at[wi].push_back(k);
-            }
-        }
     }
 
     st.seconds_far += since(t0);

@@ -325,30 +325,31 @@ TEST(Raster, OnlyTheGivenPartOfAShortcutIsTested)
 
 TEST(NearParts, CapsuleIntervalsAreExact)
 {
+    using G = GridPoint;
     // A disk only: segment pq points away from ab.
-    auto iv = capsule_interval({0, 0}, {100, 0}, {50, 10}, {50, 20}, 15);
+    auto iv = capsule_interval(G{0, 0}, G{100, 0}, G{50, 10}, G{50, 20}, 15);
     ASSERT_TRUE(iv);
     EXPECT_NEAR(iv->first, 0.5 - std::sqrt(125.0) / 100, 1e-12);
     EXPECT_NEAR(iv->second, 0.5 + std::sqrt(125.0) / 100, 1e-12);
     // Parallel at distance 5, r 10: the rectangle and both disks.
-    iv = capsule_interval({0, 0}, {100, 0}, {20, 5}, {60, 5}, 10);
+    iv = capsule_interval(G{0, 0}, G{100, 0}, G{20, 5}, G{60, 5}, 10);
     ASSERT_TRUE(iv);
     EXPECT_NEAR(iv->first, 0.2 - std::sqrt(75.0) / 100, 1e-12);
     EXPECT_NEAR(iv->second, 0.6 + std::sqrt(75.0) / 100, 1e-12);
     // Crossing: the rectangle alone decides, clamped to the segment.
-    iv = capsule_interval({0, 0}, {100, 0}, {90, -50}, {90, 50}, 20);
+    iv = capsule_interval(G{0, 0}, G{100, 0}, G{90, -50}, G{90, 50}, 20);
     ASSERT_TRUE(iv);
     EXPECT_NEAR(iv->first, 0.7, 1e-12);
     EXPECT_EQ(iv->second, 1.0);
     // Too far.
-    EXPECT_FALSE(capsule_interval({0, 0}, {100, 0}, {0, 30}, {100, 30}, 29.9));
+    EXPECT_FALSE(capsule_interval(G{0, 0}, G{100, 0}, G{0, 30}, G{100, 30}, 29.9));
 }
 
 TEST(NearParts, OnlyBlockedSegmentsGiveParts)
 {
     // A straight chain of 5 vertices; segments 0 and 3 blocked.
     const Pts pts{{0, 0}, {100, 0}, {200, 0}, {300, 0}, {400, 0}};
-    const std::vector<uint32_t> blocked{0, 3};
+    const std::vector<NearSegment> blocked{{0, 0, 1}, {3, 0, 1}};
     const auto parts = near_parts(pts, 0, 4, blocked, 10, 4);
     ASSERT_EQ(parts.size(), 2U);
     EXPECT_EQ(parts[0].first, 0.0);
@@ -359,6 +360,13 @@ TEST(NearParts, OnlyBlockedSegmentsGiveParts)
     const auto one = near_parts(pts, 2, 4, blocked, 10, 4);
     ASSERT_EQ(one.size(), 1U);
     EXPECT_NEAR(one[0].first, (90 - 4) / 200.0, 1e-8);
+    // Only the first quarter of segment 3 near another chain: the part ends
+    // within r of x = 325, not at the end.
+    const std::vector<NearSegment> quarter{{3, 0, 0.25}};
+    const auto q = near_parts(pts, 0, 4, quarter, 10, 4);
+    ASSERT_EQ(q.size(), 1U);
+    EXPECT_NEAR(q[0].first, (290 - 4) / 400.0, 1e-8);
+    EXPECT_NEAR(q[0].second, (335 + 4) / 400.0, 1e-8);
 }
 
 TEST(Simplify, IslandInABayIsNotJumped)
