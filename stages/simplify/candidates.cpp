@@ -31,23 +31,21 @@ struct Arc {
     /// This arc narrowed to its intersection with `o` (both under pi); false if empty.
     bool intersect(const Arc& o) noexcept
     {
+        // Each edge of the intersection: ours if o holds it, else o's if we hold that.
+        auto edge = [&](double x, double y, double ox, double oy, double& rx, double& ry) {
+            if (o.holds(x, y)) {
+                rx = x;
+                ry = y;
+            } else if (holds(ox, oy)) {
+                rx = ox;
+                ry = oy;
+            } else {
+                return false;
+            }
+            return true;
+        };
         Arc r;
-        if (o.holds(ax, ay)) {
-            r.ax = ax;
-            r.ay = ay;
-        } else if (holds(o.ax, o.ay)) {
-            r.ax = o.ax;
-            r.ay = o.ay;
-        } else {
-            return false;
-        }
-        if (o.holds(bx, by)) {
-            r.bx = bx;
-            r.by = by;
-        } else if (holds(o.bx, o.by)) {
-            r.bx = o.bx;
-            r.by = o.by;
-        } else {
+        if (!edge(ax, ay, o.ax, o.ay, r.ax, r.ay) || !edge(bx, by, o.bx, o.by, r.bx, r.by)) {
             return false;
         }
         *this = r;
