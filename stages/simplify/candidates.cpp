@@ -53,8 +53,8 @@ struct Arc {
     }
 };
 
-/// The arc of directions within half-angle h of unit direction (ux, uy),
-/// given sin h and cos h (h < pi / 2).
+/// The arc of directions within half-angle h of direction (ux, uy), given
+/// sin h and cos h times the same positive factor as |u| (h < pi / 2).
 Arc arc_around(double ux, double uy, double sin_h, double cos_h) noexcept
 {
     return {ux * cos_h + uy * sin_h, uy * cos_h - ux * sin_h, ux * cos_h - uy * sin_h, uy * cos_h + ux * sin_h};
@@ -68,9 +68,11 @@ std::vector<Shortcut> proximate_shortcuts(std::span<const GridPoint> pts, const 
     const auto n = static_cast<uint32_t>(pts.size());
     // The L2 disc that holds the metric's ball: a vertex must be within this
     // radius of the ray from v_j, so the wedge is a necessary condition.
-    const double r_eps =
-        std::sqrt(std::max(0.0, double(tol.metric == Metric::l2 ? tol.threshold : tol.threshold * tol.threshold))) *
-        l2_reach(tol.metric);
+    // Its square is an integer: threshold (L2), threshold^2 (L1), 2 threshold^2 (Linf).
+    const int128 reps2 = std::max<int128>(0, tol.metric == Metric::l2   ? tol.threshold
+                                             : tol.metric == Metric::l1 ? tol.threshold * tol.threshold
+                                                                        : 2 * tol.threshold * tol.threshold);
+    const double r_eps = std::sqrt(double(reps2));
     // Two wedges, without trigonometry: every constraint's half-angle
     // widened by `slack` (outside it: surely not proximate; empty: stop) and
     // narrowed by it (strictly inside: surely within eps, when no vertex lies
@@ -87,34 +89,36 @@ std::vector<Shortcut> proximate_shortcuts(std::span<const GridPoint> pts, const 
         for (uint32_t k = j + 2; k <= last; ++k) {
             // Vertex k - 1 becomes an intermediate vertex: narrow the wedges.
             const GridPoint q = pts[k - 1];
-            const double qx = double(q.x) - a.x, qy = double(q.y) - a.y;
-            const double r2 = qx * qx + qy * qy;
-            far2 = std::max(far2, r2);
-            if (r2 > r_eps * r_eps) {
-                const double len = std::sqrt(r2), ux = qx / len, uy = qy / len;
-                const double sin_h = std::min(1.0, r_eps / len), cos_h = std::sqrt(1 - sin_h * sin_h);
+            const int64_t qx = int64_t{q.x} - a.x, qy = int64_t{q.y} - a.y;
+            const int128 r2 = int128{qx} * qx + int128{qy} * qy;
+            far2 = std::max(far2, double(r2));
+            if (r2 > reps2) {
+                // The arc of directions within h of q, sin h = r_eps / |q|,
+                // as vectors scaled by |q|: c = |q| cos h, exact under the
+                // root (integers), so no division and one square root.
+                const double c = std::sqrt(double(r2 - reps2));
                 // h + slack; a half-angle this close to pi / 2 is left out
-                // of the wide wedge (wider is safe).
-                const double sin_w = sin_h * cos_s + cos_h * sin_s, cos_w = cos_h * cos_s - sin_h * sin_s;
-                if (cos_w > 1e-6) {
-                    const Arc c = arc_around(ux, uy, sin_w, cos_w);
+                // of the wide wedge (wider is safe; |q| <= c + r_eps).
+                const double sin_w = r_eps * cos_s + c * sin_s, cos_w = c * cos_s - r_eps * sin_s;
+                if (cos_w > 1e-6 * (c + r_eps)) {
+                    const Arc arc = arc_around(double(qx), double(qy), sin_w, cos_w);
                     if (wide_state == open) {
-                        wide = c;
+                        wide = arc;
                         wide_state = set;
-                    } else if (!wide.intersect(c)) {
+                    } else if (!wide.intersect(arc)) {
                         break; // no segment from a can pass near every vertex seen
                     }
                 }
                 // h - slack
-                const double sin_n = sin_h * cos_s - cos_h * sin_s, cos_n = cos_h * cos_s + sin_h * sin_s;
+                const double sin_n = r_eps * cos_s - c * sin_s, cos_n = c * cos_s + r_eps * sin_s;
                 if (sin_n < 0) {
                     narrow_state = empty;
                 } else if (narrow_state != empty) {
-                    const Arc c = arc_around(ux, uy, sin_n, cos_n);
+                    const Arc arc = arc_around(double(qx), double(qy), sin_n, cos_n);
                     if (narrow_state == open) {
-                        narrow = c;
+                        narrow = arc;
                         narrow_state = set;
-                    } else if (!narrow.intersect(c)) {
+                    } else if (!narrow.intersect(arc)) {
                         narrow_state = empty;
                     }
                 }
