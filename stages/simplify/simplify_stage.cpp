@@ -30,7 +30,8 @@ void SimplifyStage::add_args(ArgSet& args)
     args.add("points", &m_points, "user point constraints: GeoJSON points or CSV with lon,lat columns", "FILE");
     args.add("lazy", &m_lazy,
              "draw only the shortcuts starting at a vertex of the current shortest paths, round after\n"
-             "      round (same result, fewer segments drawn; each round redraws the tiles involved)");
+             "      round (the default: same result, fewer segments drawn)");
+    args.add("exhaustive", &m_exhaustive, "draw every shortcut the far rule cannot settle, in one round (same result)");
     args.add("compliance", &m_compliance,
              "ssbo: one pass setting a flag per shortcut in a storage buffer; readback: the paper's\n"
              "      unique-colour read-back loop (Algorithm 5.1)",
@@ -55,7 +56,10 @@ void SimplifyStage::initialize()
     auto& o = m_common.options;
     o.max_reach = static_cast<uint32_t>(m_max_reach);
     o.point_constraints = !m_no_point_constraints;
-    o.lazy = m_lazy;
+    if (m_lazy && m_exhaustive) {
+        throw usage_error("simplify: options '--lazy' and '--exhaustive' exclude each other");
+    }
+    o.lazy = !m_exhaustive;
 }
 
 std::string SimplifyStage::help_notes() const

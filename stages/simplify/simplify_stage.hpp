@@ -25,7 +25,8 @@ class SimplifyStage final : public Stage {
     std::string m_compliance = "ssbo";
     std::string m_gl = "osmesa";
     std::string m_colors;
-    bool m_lazy = false;
+    bool m_lazy = false; ///< the default, said explicitly
+    bool m_exhaustive = false;
     bool m_no_point_constraints = false;
     int m_max_reach = 0;
 }; // class SimplifyStage

@@ -462,13 +462,15 @@ TEST_F(Cli, ColorAndSimplifyRunTheLadderDeterministically)
     EXPECT_TRUE(s.err.empty()) << s.err;
     EXPECT_NE(s.out.find("eps 8 m:"), std::string::npos) << s.out;
     const std::string report = slurp(m_dir / "simp" / "simplify-report.json");
-    for (const char* key :
-         {"\"eps_m\"", "\"input_vertices\"", "\"output_vertices\"", "\"candidates\"", "\"drawn_segments\"",
-          "\"banned\"", "\"self_intersection_repairs\"", "\"seconds\"", "\"tiles\""}) {
+    for (const char* key : {"\"eps_m\"", "\"input_vertices\"", "\"output_vertices\"", "\"candidates\"",
+                            "\"drawn_segments\"", "\"drawn_pixels\"", "\"tents_drawn\"", "\"banned\"",
+                            "\"self_intersection_repairs\"", "\"seconds\"", "\"far_rule\"", "\"tiles\""}) {
         EXPECT_NE(report.find(key), std::string::npos) << key;
     }
-    // Computing the colours itself, on two threads, gives the same stores.
-    const Result s2 = run("simplify", in + " " + (m_dir / "simp2").string() + " --tolerances 1,8 --threads 2");
+    // Computing the colours itself, on two threads, testing every candidate
+    // in one round, gives the same stores.
+    const Result s2 =
+        run("simplify", in + " " + (m_dir / "simp2").string() + " --tolerances 1,8 --threads 2 --exhaustive");
     ASSERT_EQ(s2.code, 0) << s2.err;
     for (const auto& e : fs::recursive_directory_iterator(m_dir / "simp")) {
         if (e.is_regular_file() && e.path().extension() == ".tlc") {
@@ -523,6 +525,7 @@ TEST_F(Cli, ColorAndSimplifyRejectBadInput)
         << R"({"schema": "tigerlod.colors/1", "eps_m": 8, "metric": "l2", "pixel": 1, "tiles": []})";
     expect_failure(run("simplify", in + " --tolerances 8 --colors " + colors), 2, "made at eps");
     expect_failure(run("simplify", in + " --compliance occlusion"), 2, "must be ssbo or readback");
+    expect_failure(run("simplify", in + " --lazy --exhaustive"), 2, "'--lazy' and '--exhaustive' exclude each other");
     expect_failure(run("simplify", in + " --gl glx"), 2, "must be osmesa or egl");
     expect_failure(run("simplify", in + " --tolerances 800"), 2, "needs at least 1600");
     std::ofstream(m_dir / "points.csv") << "name,lon,lat\na,-95.99,40.001\nb,-95.99,north\n";
