@@ -461,7 +461,6 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
 
     // Raster test of (work, candidate) pairs, tile by tile.
     auto raster_test = [&](const std::vector<std::pair<uint32_t, uint32_t>>& all_tests) {
-        const auto before = raster.stats();
         std::vector<uint8_t> far(all_tests.size(), 0);
         for (size_t t = 0; t < all_tests.size(); ++t) {
             const auto [wi, ci] = all_tests[t];
@@ -509,25 +508,34 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         for (const auto& p : per_tile) {
             parts_in_all += p.size();
         }
-        raster.begin_batch(parts_in_all);
-        for (uint32_t t = 0; t < per_tile.size(); ++t) {
-            if (per_tile[t].empty()) {
-                continue;
+        RasterStats before, after;
+        auto gl_work = [&] {
+            before = raster.stats();
+            raster.begin_batch(parts_in_all);
+            for (uint32_t t = 0; t < per_tile.size(); ++t) {
+                if (per_tile[t].empty()) {
+                    continue;
+                }
+                const auto& tile = colors->tiles[t];
+                std::vector<TentChain> tents(tile.chains.size());
+                for (size_t m = 0; m < tile.chains.size(); ++m) {
+                    tents[m] = {store.chain_points(store.chains[tile.chains[m]]), eps[tile.chains[m]], tile.classes[m]};
+                }
+                raster.run_tile(tile.spec, tents, per_tile[t], fails);
             }
-            const auto& tile = colors->tiles[t];
-            std::vector<TentChain> tents(tile.chains.size());
-            for (size_t m = 0; m < tile.chains.size(); ++m) {
-                tents[m] = {store.chain_points(store.chains[tile.chains[m]]), eps[tile.chains[m]], tile.classes[m]};
-            }
-            raster.run_tile(tile.spec, tents, per_tile[t], fails);
+            raster.end_batch(fails);
+            after = raster.stats();
+        };
+        if (opt.gl_thread) {
+            opt.gl_thread(gl_work);
+        } else {
+            gl_work();
         }
-        raster.end_batch(fails);
         for (uint32_t id = 0; id < tests.size(); ++id) {
             const auto [wi, ci] = tests[id];
             work[wi].state[ci] = fails[id] ? bad_raster : good;
             st.banned_raster += fails[id];
         }
-        const auto& after = raster.stats();
         st.drawn_segments += tests.size();
         st.drawn_parts += after.drawn_segments - before.drawn_segments;
         st.drawn_pixels += after.drawn_pixels - before.drawn_pixels;

@@ -8,6 +8,7 @@
 #include "stages/simplify/metric.hpp"
 #include "stages/simplify/raster.hpp"
 
+#include <functional>
 #include <map>
 #include <string>
 #include <vector>
@@ -30,6 +31,10 @@ struct SimplifyOptions {
     bool clip_tests = true; ///< draw only the parts of a shortcut that can fail (near_parts.hpp); off for tests
     ColorOptions color;
     unsigned threads = 1;
+    /// Runs GL work on the thread that owns the context, waiting for it:
+    /// given, simplify_store hands every use of the Raster to it (several
+    /// stores can then be simplified at once); empty, it calls the Raster itself.
+    std::function<void(const std::function<void()>&)> gl_thread;
 };
 
 /// What happened at one tolerance (summed over stores by the caller).

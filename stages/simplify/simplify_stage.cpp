@@ -2,12 +2,20 @@
 
 #include "core/errors.hpp"
 #include "core/fs.hpp"
+#include "core/parallel.hpp"
 #include "gl/context.hpp"
 #include "stages/simplify/color_io.hpp"
 
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <thread>
+#include <mutex>
+#include <future>
+#include <functional>
+#include <deque>
+#include <condition_variable>
+#include <atomic>
 #include <cctype>
 #include <chrono>
 #include <cmath>
@@ -187,6 +195,59 @@ std::vector<LonLat> read_points(const std::string& path)
     return out;
 }
 
+namespace {
+
+/// GL work handed from worker threads to the thread that owns the context.
+class GlQueue {
+  public:
+    /// From a worker: runs `work` on the serving thread and waits for it;
+    /// its exception is rethrown here.
+    void run(const std::function<void()>& work)
+    {
+        std::packaged_task<void()> task(work);
+        auto done = task.get_future();
+        {
+            std::lock_guard lock(m_mutex);
+            m_jobs.push_back(std::move(task));
+        }
+        m_cv.notify_one();
+        done.get();
+    }
+    /// On the context's thread: runs the jobs until close() and none is left.
+    void serve()
+    {
+        for (;;) {
+            std::packaged_task<void()> task;
+            {
+                std::unique_lock lock(m_mutex);
+                m_cv.wait(lock, [&] { return m_closed || !m_jobs.empty(); });
+                if (m_jobs.empty()) {
+                    return;
+                }
+                task = std::move(m_jobs.front());
+                m_jobs.pop_front();
+            }
+            task();
+        }
+    }
+    void close()
+    {
+        {
+            std::lock_guard lock(m_mutex);
+            m_closed = true;
+        }
+        m_cv.notify_one();
+    }
+
+  private:
+    std::mutex m_mutex;
+    std::condition_variable m_cv;
+    std::deque<std::packaged_task<void()>> m_jobs;
+    bool m_closed = false;
+}; // class GlQueue
+
+} // namespace
+
 int SimplifyStage::run(const StageContext& ctx)
 {
     auto& o = m_common.options;
@@ -210,11 +271,13 @@ int SimplifyStage::run(const StageContext& ctx)
     for (const auto& [cls, f] : o.class_scale) {
         max_scale = std::max(max_scale, f);
     }
-    for (const auto& sf : stores) {
+    // One store at every tolerance; returns its statistics per tolerance.
+    auto simplify_one = [&](const auto& sf, const SimplifyOptions& so) {
+        std::vector<ToleranceStats> stats(m_common.tolerances.size());
         const auto store = chains::read(sf.path);
         // Partitions are simplified independently only if each sees every
         // chain within eps_i + eps_j of its own: its halo must be that wide.
-        const double need = 2 * m_common.tolerances.back() * max_scale * l2_reach(o.metric);
+        const double need = 2 * m_common.tolerances.back() * max_scale * l2_reach(so.metric);
         if (store.partition != "all" && store.halo_m < need) {
             throw usage_error(sf.path.string() + ": cut with a halo of " + std::to_string(store.halo_m) +
                               " m, but tolerance " + std::to_string(m_common.tolerances.back()) + " m needs at least " +
@@ -226,30 +289,75 @@ int SimplifyStage::run(const StageContext& ctx)
             ColorResult given;
             const ColorResult* colors = nullptr;
             if (!m_colors.empty()) {
-                const auto eps = chain_tolerances(store, eps_m, o);
+                const auto eps = chain_tolerances(store, eps_m, so);
                 double eps_min = 0;
                 for (double e : eps) {
                     eps_min = (eps_min == 0 || e < eps_min) ? e : eps_min;
                 }
                 given = colors_from_json(fs::path(m_colors) / tolerance_dir(eps_m) / sf.level /
                                              (sf.partition + ".colors.json"),
-                                         store, eps_m, o.metric, eps_min * o.color.pixel_fraction);
+                                         store, eps_m, so.metric, eps_min * so.color.pixel_fraction);
                 colors = &given;
             }
-            ToleranceStats st;
             chains::ChainStore result;
             try {
-                result = simplify_store(store, eps_m, o, raster, colors, st);
+                result = simplify_store(store, eps_m, so, raster, colors, stats[ti]);
             } catch (const input_error& e) {
                 throw input_error(sf.path.string() + " at eps " + std::to_string(eps_m) + " m: " + e.what());
             }
             const fs::path dir = out.path() / tolerance_dir(eps_m) / sf.level;
             fs::create_directories(dir);
             chains::write(dir / (sf.partition + ".tlc"), result);
-            totals[ti].add(st);
-            totals[ti].eps_m = eps_m;
         }
-        ctx.log.info("simplify: " + sf.level + "/" + sf.partition + " done");
+        return stats;
+    };
+
+    // Several stores at once, each on one worker with its share of the
+    // threads; the GL context stays on this thread, which runs the workers'
+    // raster batches one at a time (GlQueue). Each store's result depends on
+    // nothing else, and the totals are summed in store order afterwards.
+    const auto workers = static_cast<unsigned>(std::max<size_t>(1, std::min<size_t>(o.threads, stores.size())));
+    SimplifyOptions per_store = o;
+    per_store.threads = std::max(1U, o.threads / workers);
+    GlQueue gl_queue;
+    per_store.gl_thread = [&gl_queue](const std::function<void()>& work) { gl_queue.run(work); };
+    std::vector<std::vector<ToleranceStats>> per_store_stats(stores.size());
+    std::mutex log_mutex;
+    // Items after a failed one are skipped; every earlier one still runs, so
+    // the error reported is the lowest store's, whatever the threads.
+    std::atomic<size_t> first_failed{SIZE_MAX};
+    std::exception_ptr failure;
+    std::thread driver([&] {
+        try {
+            parallel_each(stores.size(), workers, [&](size_t si) {
+                if (si > first_failed.load()) {
+                    return;
+                }
+                try {
+                    per_store_stats[si] = simplify_one(stores[si], per_store);
+                } catch (...) {
+                    for (size_t f = first_failed.load(); si < f && !first_failed.compare_exchange_weak(f, si);) {
+                    }
+                    throw;
+                }
+                std::lock_guard lock(log_mutex);
+                ctx.log.info("simplify: " + stores[si].level + "/" + stores[si].partition + " done");
+            });
+        } catch (...) {
+            failure = std::current_exception();
+        }
+        gl_queue.close();
+    });
+    gl_queue.serve();
+    driver.join();
+    if (failure) {
+        std::rethrow_exception(failure);
+    }
+    for (const auto& list : per_store_stats) {
+        for (size_t ti = 0; ti < list.size(); ++ti) {
+            totals[ti].add(list[ti]);
+            totals[ti].eps_m = m_common.tolerances[ti];
+        }
     }
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
 
