@@ -3,25 +3,23 @@
 #include "core/errors.hpp"
 #include "core/fs.hpp"
 #include "core/parallel.hpp"
+#include "core/serial_queue.hpp"
 #include "gl/context.hpp"
 #include "stages/simplify/color_io.hpp"
 
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
-#include <thread>
-#include <mutex>
-#include <future>
-#include <functional>
-#include <deque>
-#include <condition_variable>
 #include <atomic>
 #include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <functional>
+#include <mutex>
 #include <sstream>
+#include <thread>
 
 namespace fs = std::filesystem;
 using json = nlohmann::ordered_json;
@@ -195,59 +193,6 @@ std::vector<LonLat> read_points(const std::string& path)
     return out;
 }
 
-namespace {
-
-/// GL work handed from worker threads to the thread that owns the context.
-class GlQueue {
-  public:
-    /// From a worker: runs `work` on the serving thread and waits for it;
-    /// its exception is rethrown here.
-    void run(const std::function<void()>& work)
-    {
-        std::packaged_task<void()> task(work);
-        auto done = task.get_future();
-        {
-            std::lock_guard lock(m_mutex);
-            m_jobs.push_back(std::move(task));
-        }
-        m_cv.notify_one();
-        done.get();
-    }
-    /// On the context's thread: runs the jobs until close() and none is left.
-    void serve()
-    {
-        for (;;) {
-            std::packaged_task<void()> task;
-            {
-                std::unique_lock lock(m_mutex);
-                m_cv.wait(lock, [&] { return m_closed || !m_jobs.empty(); });
-                if (m_jobs.empty()) {
-                    return;
-                }
-                task = std::move(m_jobs.front());
-                m_jobs.pop_front();
-            }
-            task();
-        }
-    }
-    void close()
-    {
-        {
-            std::lock_guard lock(m_mutex);
-            m_closed = true;
-        }
-        m_cv.notify_one();
-    }
-
-  private:
-    std::mutex m_mutex;
-    std::condition_variable m_cv;
-    std::deque<std::packaged_task<void()>> m_jobs;
-    bool m_closed = false;
-}; // class GlQueue
-
-} // namespace
-
 int SimplifyStage::run(const StageContext& ctx)
 {
     auto& o = m_common.options;
@@ -314,12 +259,12 @@ int SimplifyStage::run(const StageContext& ctx)
 
     // Several stores at once, each on one worker with its share of the
     // threads; the GL context stays on this thread, which runs the workers'
-    // raster batches one at a time (GlQueue). Each store's result depends on
+    // raster batches one at a time (SerialQueue). Each store's result depends on
     // nothing else, and the totals are summed in store order afterwards.
     const auto workers = static_cast<unsigned>(std::max<size_t>(1, std::min<size_t>(o.threads, stores.size())));
     SimplifyOptions per_store = o;
     per_store.threads = std::max(1U, o.threads / workers);
-    GlQueue gl_queue;
+    SerialQueue gl_queue;
     per_store.gl_thread = [&gl_queue](const std::function<void()>& work) { gl_queue.run(work); };
     std::vector<std::vector<ToleranceStats>> per_store_stats(stores.size());
     std::mutex log_mutex;
