@@ -1,8 +1,8 @@
 #include "stages/simplify/coloring.hpp"
 
-#include "stages/simplify/cell_cover.hpp"
-
 #include "core/errors.hpp"
+#include "core/radix_sort.hpp"
+#include "stages/simplify/cell_cover.hpp"
 
 #include <algorithm>
 #include <bitset>
@@ -88,7 +88,7 @@ std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> cha
                 (static_cast<uint64_t>(x + (1LL << 31)) << 32) | static_cast<uint32_t>(y + (1LL << 31)), i);
         });
     }
-    std::sort(entries.begin(), entries.end());
+    radix_sort_by_key(entries); // stable: each cell's segments stay in index order, as sorting the pairs gives
     std::unordered_set<uint64_t> known;
     std::vector<std::pair<uint32_t, uint32_t>> edges;
     for (size_t b = 0; b < entries.size();) {
@@ -303,7 +303,7 @@ ColorResult color_tiles(std::span<const ChainGeom> chains, const ColorOptions& o
             }
         });
     }
-    std::sort(member_of.begin(), member_of.end());
+    radix_sort_by_key(member_of); // stable: chains were added in increasing order
     member_of.erase(std::unique(member_of.begin(), member_of.end()), member_of.end());
     for (size_t b = 0; b < member_of.size();) {
         size_t e = b;

@@ -2,6 +2,7 @@
 
 #include "core/parallel.hpp"
 #include "core/projection.hpp"
+#include "core/radix_sort.hpp"
 #include "core/segment_grid.hpp"
 #include "stages/simplify/candidates.hpp"
 #include "stages/simplify/cell_cover.hpp"
@@ -363,10 +364,10 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     // the tract ladder's 1 m step). The answer does not depend on the size.
     const double cell = std::max({2 * reach_max, mean_segment_length(store), 1.0});
     struct GridSeg {
-        uint64_t key;
         uint32_t chain, index;
     };
-    std::vector<GridSeg> grid;
+    std::vector<GridSeg> grid_segs;                  // every segment, in (chain, index) order
+    std::vector<std::pair<uint64_t, uint32_t>> grid; // (cell, place in grid_segs)
     auto key_of = [](int64_t x, int64_t y) {
         return (static_cast<uint64_t>(x + (1LL << 31)) << 32) | static_cast<uint32_t>(y + (1LL << 31));
     };
@@ -376,21 +377,20 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     for (uint32_t c = 0; opt.metric == Metric::l2 && c < store.chains.size(); ++c) {
         const auto pts = store.chain_points(store.chains[c]);
         for (uint32_t i = 0; i + 1 < pts.size(); ++i) {
-            cover_cells(pts[i].x, pts[i].y, pts[i + 1].x, pts[i + 1].y, 0.0, cell, 0.0, 0.0, [&](int64_t x, int64_t y) {
-                grid.push_back({key_of(x, y), c, i});
-            });
+            const auto at = static_cast<uint32_t>(grid_segs.size());
+            grid_segs.push_back({c, i});
+            cover_cells(pts[i].x, pts[i].y, pts[i + 1].x, pts[i + 1].y, 0.0, cell, 0.0, 0.0,
+                        [&](int64_t x, int64_t y) { grid.emplace_back(key_of(x, y), at); });
         }
     }
-    std::sort(grid.begin(), grid.end(), [](const GridSeg& a, const GridSeg& b) {
-        return std::tie(a.key, a.chain, a.index) < std::tie(b.key, b.chain, b.index);
-    });
+    radix_sort_by_key(grid); // stable: each cell's segments stay in (chain, index) order
     // Where each cell's run starts: one hash probe per cell, not a binary
     // search over every segment of the store.
     std::unordered_map<uint64_t, uint32_t> cell_start;
     cell_start.reserve(grid.size() / 2 + 1);
     for (uint32_t g = 0; g < grid.size(); ++g) {
-        if (g == 0 || grid[g].key != grid[g - 1].key) {
-            cell_start.emplace(grid[g].key, g);
+        if (g == 0 || grid[g].first != grid[g - 1].first) {
+            cell_start.emplace(grid[g].first, g);
         }
     }
     // Whether a segment of another chain comes within `r` of segment ab.
@@ -409,17 +409,18 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             if (start == cell_start.end()) {
                 return;
             }
-            for (auto it = grid.begin() + start->second; it != grid.end() && it->key == key; ++it) {
-                if (it->chain == chain) {
+            for (auto it = grid.begin() + start->second; it != grid.end() && it->first == key; ++it) {
+                const GridSeg gs = grid_segs[it->second];
+                if (gs.chain == chain) {
                     continue;
                 }
-                const auto p = store.chain_points(store.chains[it->chain]);
-                if (segment_distance(a, b, p[it->index], p[it->index + 1]) > reach) {
+                const auto p = store.chain_points(store.chains[gs.chain]);
+                if (segment_distance(a, b, p[gs.index], p[gs.index + 1]) > reach) {
                     continue;
                 }
                 // Within reach: the part of ab near it; all of ab when ab is a point.
                 const auto iv = a == b ? std::optional{std::pair{0.0, 1.0}}
-                                       : capsule_interval(a, b, p[it->index], p[it->index + 1], reach);
+                                       : capsule_interval(a, b, p[gs.index], p[gs.index + 1], reach);
                 const auto part = iv ? *iv : std::pair{0.0, 1.0}; // rounding: take all of it
                 near = near ? std::pair{std::min(near->first, part.first), std::max(near->second, part.second)} : part;
             }
