@@ -53,6 +53,23 @@ struct Arc {
     }
 };
 
+/// Directions narrowed arc by arc: open (no arc yet), an arc, or empty.
+struct Wedge {
+    enum State { open, set, empty } state = open;
+    Arc arc;
+    /// Intersects with `a`; false once empty.
+    bool narrow(const Arc& a) noexcept
+    {
+        if (state == open) {
+            arc = a;
+            state = set;
+        } else if (state == set && !arc.intersect(a)) {
+            state = empty;
+        }
+        return state != empty;
+    }
+};
+
 /// The arc of directions within half-angle h of direction (ux, uy), given
 /// sin h and cos h times the same positive factor as |u| (h < pi / 2).
 Arc arc_around(double ux, double uy, double sin_h, double cos_h) noexcept
@@ -81,9 +98,7 @@ std::vector<Shortcut> proximate_shortcuts(std::span<const GridPoint> pts, const 
     const double cos_s = std::cos(slack), sin_s = std::sin(slack);
     for (uint32_t j = 0; j + 2 < n; ++j) {
         const GridPoint a = pts[j];
-        enum { open, set, empty };
-        auto wide_state = open, narrow_state = open;
-        Arc wide, narrow;
+        Wedge wide, narrow;
         double far2 = 0; // max squared distance of an intermediate vertex from a
         const auto last = static_cast<uint32_t>(max_reach ? std::min<uint64_t>(n - 1, uint64_t{j} + max_reach) : n - 1);
         for (uint32_t k = j + 2; k <= last; ++k) {
@@ -100,27 +115,15 @@ std::vector<Shortcut> proximate_shortcuts(std::span<const GridPoint> pts, const 
                 // h + slack; a half-angle this close to pi / 2 is left out
                 // of the wide wedge (wider is safe; |q| <= c + r_eps).
                 const double sin_w = r_eps * cos_s + c * sin_s, cos_w = c * cos_s - r_eps * sin_s;
-                if (cos_w > 1e-6 * (c + r_eps)) {
-                    const Arc arc = arc_around(double(qx), double(qy), sin_w, cos_w);
-                    if (wide_state == open) {
-                        wide = arc;
-                        wide_state = set;
-                    } else if (!wide.intersect(arc)) {
-                        break; // no segment from a can pass near every vertex seen
-                    }
+                if (cos_w > 1e-6 * (c + r_eps) && !wide.narrow(arc_around(double(qx), double(qy), sin_w, cos_w))) {
+                    break; // no segment from a can pass near every vertex seen
                 }
                 // h - slack
                 const double sin_n = r_eps * cos_s - c * sin_s, cos_n = c * cos_s + r_eps * sin_s;
                 if (sin_n < 0) {
-                    narrow_state = empty;
-                } else if (narrow_state != empty) {
-                    const Arc arc = arc_around(double(qx), double(qy), sin_n, cos_n);
-                    if (narrow_state == open) {
-                        narrow = arc;
-                        narrow_state = set;
-                    } else if (!narrow.intersect(arc)) {
-                        narrow_state = empty;
-                    }
+                    narrow.state = Wedge::empty;
+                } else {
+                    narrow.narrow(arc_around(double(qx), double(qy), sin_n, cos_n));
                 }
             }
             const GridPoint b = pts[k];
@@ -128,10 +131,11 @@ std::vector<Shortcut> proximate_shortcuts(std::span<const GridPoint> pts, const 
                 continue;
             }
             const double bx = double(b.x) - a.x, by = double(b.y) - a.y;
-            if (wide_state == set && !wide.holds(bx, by)) {
+            if (wide.state == Wedge::set && !wide.arc.holds(bx, by)) {
                 continue; // the ray through b misses a vertex: not proximate
             }
-            const bool inside_clearly = narrow_state == open || (narrow_state == set && narrow.holds(bx, by, true));
+            const bool inside_clearly =
+                narrow.state == Wedge::open || (narrow.state == Wedge::set && narrow.arc.holds(bx, by, true));
             // Clearly inside the wedge and no vertex beyond b: every
             // intermediate vertex projects onto the segment within eps (L2).
             const double len2 = bx * bx + by * by;

@@ -9,6 +9,13 @@
 
 namespace tigerlod::simplify {
 
+/// One 64-bit key for cell (x, y), ordered by x then y; for cell coordinates
+/// within +-2^31.
+inline uint64_t cell_key(int64_t x, int64_t y) noexcept
+{
+    return (static_cast<uint64_t>(x + (int64_t{1} << 31)) << 32) | static_cast<uint32_t>(y + (int64_t{1} << 31));
+}
+
 /// Calls f(x, y) for every cell of a grid (side `cell`, origin ox, oy) that
 /// the r-neighbourhood of segment (ax, ay)-(bx, by) touches, row by row: the
 /// part of the segment within the row's band widened by r, widened by r.

@@ -83,10 +83,8 @@ std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> cha
     std::vector<std::pair<uint64_t, uint32_t>> entries;
     for (uint32_t i = 0; i < segs.size(); ++i) {
         const Seg& s = segs[i];
-        cover_cells(s.ax, s.ay, s.bx, s.by, s.r, cell, 0.0, 0.0, [&](int64_t x, int64_t y) {
-            entries.emplace_back(
-                (static_cast<uint64_t>(x + (1LL << 31)) << 32) | static_cast<uint32_t>(y + (1LL << 31)), i);
-        });
+        cover_cells(s.ax, s.ay, s.bx, s.by, s.r, cell, 0.0, 0.0,
+                    [&](int64_t x, int64_t y) { entries.emplace_back(cell_key(x, y), i); });
     }
     radix_sort_by_key(entries); // stable: each cell's segments stay in index order, as sorting the pairs gives
     std::unordered_set<uint64_t> known;

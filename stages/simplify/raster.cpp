@@ -346,6 +346,11 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         throw std::logic_error("tile larger than the framebuffer");
     }
     ++m_stats.tiles;
+    // Outside a batch, the tile is a batch of its own.
+    const bool own_batch = !I.batching;
+    if (own_batch) {
+        begin_batch(segs.size());
+    }
     const double inv = 1.0 / tile.pixel;
     auto px = [&](GridPoint p, float& x, float& y) {
         x = static_cast<float>((double(p.x) - tile.x0) * inv);
@@ -468,9 +473,9 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         sorder[i] = i;
     }
     std::stable_sort(sorder.begin(), sorder.end(), [&](uint32_t a, uint32_t b) { return segs[a].cls < segs[b].cls; });
-    const bool deferred = I.batching && m_opt.compliance == Compliance::ssbo;
-    const size_t base = deferred ? I.batch_ids.size() : 0;
-    if (deferred && base + segs.size() > I.batch_capacity) {
+    const bool ssbo = m_opt.compliance == Compliance::ssbo;
+    const size_t base = ssbo ? I.batch_ids.size() : 0;
+    if (ssbo && base + segs.size() > I.batch_capacity) {
         throw std::logic_error("more shortcut parts than the batch was begun for");
     }
     std::vector<TestInstance> sorted(segs.size());
@@ -502,7 +507,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     gl.BindVertexArray(I.vao_test);
     gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_test);
     upload_quads(gl, sorted, I.test_vertices);
-    if (!segs.empty() && deferred) {
+    if (!segs.empty() && ssbo) {
         // The flags land in the batch's buffer, read back once by end_batch:
         // no wait per tile.
         for (uint32_t k = 0; k < sorder.size(); ++k) {
@@ -511,22 +516,6 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         for (const auto& [cls, range] : sranges) {
             gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
             gl.DrawArrays(GL_TRIANGLES, quad_first(range.first), quad_count(size_t(range.second)));
-        }
-    } else if (!segs.empty() && m_opt.compliance == Compliance::ssbo) {
-        std::vector<uint32_t> flags(segs.size(), 0);
-        gl.BindBuffer(GL_SHADER_STORAGE_BUFFER, I.ssbo);
-        gl.BufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(flags.size() * 4), flags.data(), GL_STREAM_READ);
-        gl.BindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, I.ssbo);
-        for (const auto& [cls, range] : sranges) {
-            gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
-            gl.DrawArrays(GL_TRIANGLES, quad_first(range.first), quad_count(size_t(range.second)));
-        }
-        gl.MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-        gl.GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, GLsizeiptr(flags.size() * 4), flags.data());
-        for (uint32_t k = 0; k < flags.size(); ++k) {
-            if (flags[k]) {
-                fails[segs[sorder[k]].id] = 1;
-            }
         }
     } else if (!segs.empty()) {
         // Algorithm 5.1: unique colours, read back, drop the colours seen,
@@ -589,6 +578,9 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
                                 m_ctx.describe());
     }
     m_stats.voronoi_seconds += seconds_since(t2);
+    if (own_batch) {
+        end_batch(fails);
+    }
 }
 
 void Raster::begin_batch(size_t parts)

@@ -368,9 +368,6 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     };
     std::vector<GridSeg> grid_segs;                  // every segment, in (chain, index) order
     std::vector<std::pair<uint64_t, uint32_t>> grid; // (cell, place in grid_segs)
-    auto key_of = [](int64_t x, int64_t y) {
-        return (static_cast<uint64_t>(x + (1LL << 31)) << 32) | static_cast<uint32_t>(y + (1LL << 31));
-    };
     // Only the L2 far-shortcut rule below reads the grid.
     // Each segment goes in the cells it passes through (not its bounding box:
     // a 10 km diagonal at 1 m covers 25 M cells of its box, measured at 17 GB).
@@ -380,7 +377,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             const auto at = static_cast<uint32_t>(grid_segs.size());
             grid_segs.push_back({c, i});
             cover_cells(pts[i].x, pts[i].y, pts[i + 1].x, pts[i + 1].y, 0.0, cell, 0.0, 0.0,
-                        [&](int64_t x, int64_t y) { grid.emplace_back(key_of(x, y), at); });
+                        [&](int64_t x, int64_t y) { grid.emplace_back(cell_key(x, y), at); });
         }
     }
     radix_sort_by_key(grid); // stable: each cell's segments stay in (chain, index) order
@@ -393,7 +390,6 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             cell_start.emplace(grid[g].first, g);
         }
     }
-    // Whether a segment of another chain comes within `r` of segment ab.
     // The part of segment ab that another chain's segment comes within r of
     // (the hull of those parts, as parameters along ab), or nothing.
     auto near_other = [&](uint32_t chain, GridPoint a, GridPoint b, double r) {
@@ -404,7 +400,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             if (near && near->first == 0 && near->second == 1) {
                 return; // the whole segment already
             }
-            const uint64_t key = key_of(x, y);
+            const uint64_t key = cell_key(x, y);
             const auto start = cell_start.find(key);
             if (start == cell_start.end()) {
                 return;
@@ -460,17 +456,17 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
 
     st.seconds_far += since(t0);
 
+    // The far rule: no blocked segment between the shortcut's ends.
+    auto proved_far = [&](uint32_t wi, uint32_t ci) {
+        const auto& b = blocked[wi];
+        return !b.empty() && b[work[wi].cand[ci].to] == b[work[wi].cand[ci].from];
+    };
+
     // Raster test of (work, candidate) pairs, tile by tile.
     auto raster_test = [&](const std::vector<std::pair<uint32_t, uint32_t>>& all_tests) {
-        std::vector<uint8_t> far(all_tests.size(), 0);
-        for (size_t t = 0; t < all_tests.size(); ++t) {
-            const auto [wi, ci] = all_tests[t];
-            const auto& b = blocked[wi];
-            far[t] = !b.empty() && b[work[wi].cand[ci].to] == b[work[wi].cand[ci].from];
-        }
         std::vector<std::pair<uint32_t, uint32_t>> tests;
         for (size_t t = 0; t < all_tests.size(); ++t) {
-            if (far[t]) {
+            if (proved_far(all_tests[t].first, all_tests[t].second)) {
                 work[all_tests[t].first].state[all_tests[t].second] = good;
                 ++st.proved_far;
             } else {
@@ -552,10 +548,9 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         // Dakota county map at 64 m, whose 65 M candidates are 98% far).
         std::vector<std::pair<uint32_t, uint32_t>> near;
         for (uint32_t wi = 0; wi < work.size(); ++wi) {
-            const auto& b = blocked[wi];
             auto& w = work[wi];
             for (uint32_t ci = 0; ci < w.cand.size(); ++ci) {
-                if (!b.empty() && b[w.cand[ci].to] == b[w.cand[ci].from]) {
+                if (proved_far(wi, ci)) {
                     w.state[ci] = good;
                     ++st.proved_far;
                 } else {
