@@ -85,6 +85,17 @@ ChainStore run(const ChainStore& in, double eps_m, SimplifyOptions o = plain(), 
     return out;
 }
 
+/// A square render tile: origin and pixel in grid units, side in pixels.
+TileSpec square_tile(double x0, double y0, double pixel, uint32_t side)
+{
+    TileSpec t;
+    t.x0 = x0;
+    t.y0 = y0;
+    t.pixel = pixel;
+    t.width = t.height = side;
+    return t;
+}
+
 Pts points_of(const ChainStore& s, uint64_t id)
 {
     for (const auto& c : s.chains) {
@@ -258,11 +269,7 @@ TEST(Raster, ShortcutThroughANeighboursRegionFailsAndOriginalEdgesPass)
     const Pts a{{0, 0}, {500, 90}, {1000, 0}};
     const Pts b{{300, -50}, {500, 60}, {700, -50}};
     const TentChain tents[] = {{a, 100, 1}, {b, 100, 2}};
-    TileSpec tile;
-    tile.x0 = -200;
-    tile.y0 = -300;
-    tile.pixel = 25;
-    tile.width = tile.height = 64;
+    const TileSpec tile = square_tile(-200, -300, 25, 64);
     const TestSegment segs[] = {{a[0], a[2], 1, 0}, // a's shortcut across b
                                 {a[0], a[1], 1, 1}, // a's own edges
                                 {a[1], a[2], 1, 2},
@@ -283,11 +290,7 @@ TEST(Raster, ShortcutGrazingTheEdgeOfItsOwnBandPasses)
     // only another class's region fails a shortcut.
     const Pts a{{0, 0}, {2000, -100}, {4000, 0}};
     const TentChain tents[] = {{a, 100, 1}};
-    TileSpec tile;
-    tile.x0 = -500;
-    tile.y0 = -1000;
-    tile.pixel = 25;
-    tile.width = tile.height = 256;
+    const TileSpec tile = square_tile(-500, -1000, 25, 256);
     const TestSegment segs[] = {{a[0], a[2], 1, 0},             // a's own
                                 {a[0], a[2], 2, 1},             // the same as another class's: in a's region
                                 {{0, 150}, {4000, 150}, 1, 2}}; // above a's band: no one's region
@@ -305,11 +308,7 @@ TEST(Raster, OnlyTheGivenPartOfAShortcutIsTested)
     const Pts a{{0, 0}, {2000, 50}, {4000, 0}};
     const Pts b{{2000, 400}, {2000, 30}};
     const TentChain tents[] = {{a, 100, 1}, {b, 100, 2}};
-    TileSpec tile;
-    tile.x0 = -500;
-    tile.y0 = -1000;
-    tile.pixel = 25;
-    tile.width = tile.height = 256;
+    const TileSpec tile = square_tile(-500, -1000, 25, 256);
     TestSegment whole{a[0], a[2], 1, 0}, first{a[0], a[2], 1, 1}, last{a[0], a[2], 1, 2}, middle{a[0], a[2], 1, 3};
     first.t1 = 0.25f;
     last.t0 = 0.75f;
