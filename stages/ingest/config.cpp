@@ -112,6 +112,10 @@ IngestConfig load_config(const fs::path& file)
                        {"tolerances_m", "metric", "class_scale", "projection_scale", "max_reach", "point_constraints",
                         "points", "lazy", "compliance", "gl", "pixel_fraction", "tile_pixels", "max_classes",
                         "threads"});
+        // The pipeline turns these into flags, so no stage would see a wrong value.
+        for (const char* key : {"projection_scale", "point_constraints", "lazy"}) {
+            ctx.get<bool>(simp, key, true);
+        }
     }
     if (const YAML::Node pack = root["pack"]) { // read by the pipeline; tigerlod-pack validates the values
         ctx.check_keys(pack, "pack", {"tile_mb", "draco_speed", "threads"});

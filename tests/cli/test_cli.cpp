@@ -391,6 +391,7 @@ TEST_F(Cli, EveryValidatedConfigKeyRejectsBadValues)
         {"ingest: {halo_m: -5}\n", "'ingest.halo_m' must be >= 0"},
         {"projection: {nope: 1}\n", "unknown key 'projection.nope'"},
         {"simplify: {tolerance: [1]}\n", "unknown key 'simplify.tolerance'"},
+        {"simplify: {lazy: sometimes}\n", "'lazy' has the wrong type"},
         {"pack: {tile_size: 4}\n", "unknown key 'pack.tile_size'"},
     };
     for (const auto& [extra, fragment] : cases) {
