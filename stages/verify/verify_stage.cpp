@@ -76,7 +76,10 @@ std::string ids_text(const std::vector<uint64_t>& ids)
 {
     std::string s;
     for (uint64_t id : ids) {
-        s += (s.empty() ? "" : ",") + std::to_string(id);
+        if (!s.empty()) {
+            s += ',';
+        }
+        s += std::to_string(id);
     }
     return s;
 }

@@ -123,7 +123,10 @@ class Cli : public ::testing::Test {
         auto line = [&](std::initializer_list<std::pair<double, double>> pts) {
             std::string s = "LINESTRING (";
             for (auto [x, y] : pts) {
-                s += (s.back() == '(' ? "" : ",") + p(x, y);
+                if (s.back() != '(') {
+                    s += ',';
+                }
+                s += p(x, y);
             }
             return s + ")";
         };

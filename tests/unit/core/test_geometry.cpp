@@ -123,5 +123,6 @@ TEST(Geometry, MatchSubsequence)
     EXPECT_FALSE(match_subsequence(orig, std::vector<GridPoint>{{0, 0}, {3, 0}, {2, 0}, {0, 0}}, at)); // order
     EXPECT_FALSE(match_subsequence(orig, std::vector<GridPoint>{{0, 0}, {5, 0}, {0, 0}}, at));         // foreign
     EXPECT_FALSE(match_subsequence(orig, std::vector<GridPoint>{{1, 0}, {0, 0}}, at));                 // moved end
-    EXPECT_FALSE(match_subsequence(orig, std::vector<GridPoint>{{0, 0}}, at));                         // one point
+    const std::vector<GridPoint> one_point(1, GridPoint{0, 0});
+    EXPECT_FALSE(match_subsequence(orig, one_point, at));
 }
