@@ -17,7 +17,7 @@
 
 namespace tigerlod::datatree {
 
-constexpr uint16_t major_version = 1;
+constexpr uint16_t major_version = 2;
 constexpr uint16_t minor_version = 0;
 constexpr uint32_t no_node = 0xFFFFFFFFU;
 

@@ -78,6 +78,50 @@ TEST(Geometry, RandomChainsRoundTripExactly)
     }
 }
 
+// The paths of the coding (SPEC.md, geometry payload): no low bits (steps of
+// 0 and 1), a few far jumps among short steps (escaped points: beyond the
+// 99th percentile), and differences near the 32-bit limits.
+TEST(Geometry, EscapesLowBitsAndExtremeDifferencesRoundTripExactly)
+{
+    std::mt19937 rng(11);
+    const GridPoint origin{0, 0};
+    auto round_trip = [&](const Geometry& g) {
+        const std::string bytes = encode_geometry(g, origin);
+        EXPECT_EQ(decode_geometry(as_span(bytes), origin, g.chain_count(), g.points.size(), "test"), g);
+        return bytes.size();
+    };
+    auto walk = [&](int step, int jump_every, int32_t jump) {
+        Geometry g;
+        std::vector<GridPoint> pts{{1 << 20, 1 << 20}};
+        for (int i = 1; i < 2000; ++i) {
+            GridPoint p = pts.back();
+            if (jump_every > 0 && i % jump_every == 0) {
+                const int32_t d = i / jump_every % 2 ? jump : -jump; // there and back
+                p.x += d;
+                p.y += d;
+            } else {
+                p.x += static_cast<int32_t>(rng() % (2 * step + 1)) - step;
+                p.y += static_cast<int32_t>(rng() % (2 * step + 1)) - step;
+            }
+            pts.push_back(p);
+        }
+        g.add_chain(pts);
+        return g;
+    };
+    round_trip(walk(1, 0, 0));
+    round_trip(walk(0, 0, 0));
+    // 1 point in 200 jumps a million times farther than the others step:
+    // escaped, so the payload grows by about their varints only.
+    const size_t plain = round_trip(walk(3, 0, 0));
+    const size_t jumps = round_trip(walk(3, 200, 1 << 30));
+    EXPECT_LT(jumps, plain + 10 * 10 + 64);
+    // Differences of 2^31 - 1 either way, the most the node box allows.
+    constexpr int32_t top = 2147483647;
+    Geometry g;
+    g.add_chain(std::vector<GridPoint>{{0, 0}, {top, top}, {0, top}, {top, 0}, {0, 1}, {1, 1}, {top, top}});
+    round_trip(g);
+}
+
 TEST(Geometry, PointBelowTheOriginIsRefused)
 {
     Geometry g;
