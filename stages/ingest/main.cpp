@@ -10,9 +10,9 @@ int main(int argc, char** argv)
     // Ingest builds and drops many large arrays (hundreds of MB in all on
     // the 20-state tract set). By default glibc serves each from a fresh
     // mmap and unmaps it on free, so every one is page-faulted in again:
-    // 1.3-1.6 s of system time there. Served from the heap and kept on
-    // free, they are reused: system time -30%, wall time -8 to -12%, peak
-    // memory +8% (BENCHMARKS.md, "Ingest").
+    // 1.0-1.4 s of system time there. Served from the heap and kept on
+    // free, they are reused: system time -34 to -44%, wall time -11 to
+    // -17%, peak memory +5 to +8% (BENCHMARKS.md, "Ingest").
     mallopt(M_MMAP_MAX, 0);
     mallopt(M_TRIM_THRESHOLD, 1 << 30);
 #endif
