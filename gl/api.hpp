@@ -72,6 +72,7 @@ namespace tigerlod::gl {
     X(PFNGLCOLORMASKPROC, ColorMask)                                                                                   \
     X(PFNGLLINEWIDTHPROC, LineWidth)                                                                                   \
     X(PFNGLDRAWARRAYSPROC, DrawArrays)                                                                                 \
+    X(PFNGLDRAWELEMENTSPROC, DrawElements)                                                                             \
     X(PFNGLDRAWARRAYSINSTANCEDPROC, DrawArraysInstanced)                                                               \
     X(PFNGLDRAWARRAYSINSTANCEDBASEINSTANCEPROC, DrawArraysInstancedBaseInstance)                                       \
     X(PFNGLREADPIXELSPROC, ReadPixels)                                                                                 \

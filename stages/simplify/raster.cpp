@@ -151,10 +151,11 @@ struct TestInstance {
     float t0, t1;
 };
 
-/// A quad is drawn as two triangles whose six vertices carry the item and
-/// their corner: one non-instanced draw, which Mesa's draw module shades in
-/// wide batches (an instanced draw of four-vertex strips costs several
-/// microseconds per instance on llvmpipe).
+/// A quad is four vertices that carry the item and their corner, drawn as
+/// two indexed triangles: one non-instanced draw, which Mesa's draw module
+/// shades in wide batches (an instanced draw of four-vertex strips costs
+/// several microseconds per instance on llvmpipe), and through its vertex
+/// cache each corner is shaded once, not the six times of plain triangles.
 template <class T> struct QuadVertex {
     T item;
     float corner;
@@ -163,23 +164,21 @@ template <class T> struct QuadVertex {
 template <class T>
 void upload_quads(const gl::Api& gl, const std::vector<T>& items, std::vector<QuadVertex<T>>& staging)
 {
-    constexpr float corners[6] = {0, 1, 2, 2, 1, 3};
-    staging.resize(items.size() * 6);
+    staging.resize(items.size() * 4);
     for (size_t i = 0; i < items.size(); ++i) {
-        for (size_t c = 0; c < 6; ++c) {
-            staging[i * 6 + c] = {items[i], corners[c]};
+        for (size_t c = 0; c < 4; ++c) {
+            staging[i * 4 + c] = {items[i], static_cast<float>(c)};
         }
     }
     gl.BufferData(GL_ARRAY_BUFFER, GLsizeiptr(staging.size() * sizeof(QuadVertex<T>)), staging.data(), GL_STREAM_DRAW);
 }
 
-GLint quad_first(size_t item)
+/// Quads [first, first + count) of the bound vertex array, two triangles
+/// each (corners 0 1 2, 2 1 3) through the shared index buffer.
+void draw_quads(const gl::Api& gl, size_t first, size_t count)
 {
-    return static_cast<GLint>(item * 6);
-}
-GLsizei quad_count(size_t items)
-{
-    return static_cast<GLsizei>(items * 6);
+    gl.DrawElements(GL_TRIANGLES, static_cast<GLsizei>(count * 6), GL_UNSIGNED_INT,
+                    reinterpret_cast<const void*>(first * 6 * sizeof(uint32_t)));
 }
 
 } // namespace
@@ -188,6 +187,25 @@ struct Raster::Impl {
     const gl::Api& gl;
     GLuint tent_prog = 0, test_prog = 0;
     GLuint vao_tent = 0, vao_test = 0, vbo_tent = 0, vbo_test = 0, ssbo = 0;
+    GLuint ibo = 0;       ///< quad indices 4q + {0 1 2 2 1 3}, bound to both vertex arrays
+    size_t ibo_quads = 0; ///< quads it holds
+    /// Grow the index buffer to at least `quads` quads.
+    void ensure_indices(size_t quads)
+    {
+        if (quads <= ibo_quads) {
+            return;
+        }
+        const size_t n = std::max(quads, 2 * ibo_quads);
+        std::vector<uint32_t> idx(n * 6);
+        for (size_t q = 0; q < n; ++q) {
+            const auto b = static_cast<uint32_t>(4 * q);
+            const uint32_t tri[6] = {b, b + 1, b + 2, b + 2, b + 1, b + 3};
+            std::copy(tri, tri + 6, idx.begin() + static_cast<std::ptrdiff_t>(6 * q));
+        }
+        gl.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, ibo); // into the bound vertex array, which has it already
+        gl.BufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(idx.size() * sizeof(uint32_t)), idx.data(), GL_STATIC_DRAW);
+        ibo_quads = n;
+    }
     GLuint fbo = 0, rb_depth = 0, rb_color = 0;
     std::vector<uint8_t> near; ///< per cell of a tile: a tested part may have fragments there
     std::vector<QuadVertex<TentInstance>> tent_vertices;
@@ -253,8 +271,10 @@ Raster::Raster(gl::Context& ctx, const RasterOptions& opt)
 
     gl.GenVertexArrays(1, &I.vao_tent);
     gl.GenBuffers(1, &I.vbo_tent);
+    gl.GenBuffers(1, &I.ibo);
     gl.BindVertexArray(I.vao_tent);
     gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_tent);
+    gl.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, I.ibo);
     using TentVertex = QuadVertex<TentInstance>;
     gl.VertexAttribPointer(0, 4, GL_FLOAT, GL_FALSE, sizeof(TentVertex), nullptr);
     gl.VertexAttribPointer(1, 1, GL_FLOAT, GL_FALSE, sizeof(TentVertex),
@@ -269,6 +289,7 @@ Raster::Raster(gl::Context& ctx, const RasterOptions& opt)
     gl.GenBuffers(1, &I.vbo_test);
     gl.BindVertexArray(I.vao_test);
     gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_test);
+    gl.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, I.ibo);
     using TestVertex = QuadVertex<TestInstance>;
     gl.VertexAttribPointer(0, 4, GL_FLOAT, GL_FALSE, sizeof(TestVertex), nullptr);
     gl.VertexAttribIPointer(1, 1, GL_UNSIGNED_INT, sizeof(TestVertex),
@@ -329,6 +350,7 @@ Raster::~Raster()
     gl.DeleteVertexArrays(1, &I.vao_test);
     gl.DeleteBuffers(1, &I.vbo_tent);
     gl.DeleteBuffers(1, &I.vbo_test);
+    gl.DeleteBuffers(1, &I.ibo);
     gl.DeleteBuffers(1, &I.ssbo);
     gl.DeleteFramebuffers(1, &I.fbo);
     gl.DeleteRenderbuffers(1, &I.rb_depth);
@@ -454,6 +476,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     gl.BindVertexArray(I.vao_tent);
     gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_tent);
     upload_quads(gl, inst, I.tent_vertices);
+    I.ensure_indices(inst.size());
     gl.Enable(GL_DEPTH_TEST);
     gl.DepthFunc(GL_LESS);
     gl.DepthMask(GL_TRUE);
@@ -462,7 +485,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     gl.StencilOp(GL_KEEP, GL_KEEP, GL_REPLACE);
     for (const auto& [cls, range] : ranges) {
         gl.StencilFunc(GL_ALWAYS, cls, 0xFF);
-        gl.DrawArrays(GL_TRIANGLES, quad_first(range.first), quad_count(size_t(range.second)));
+        draw_quads(gl, range.first, size_t(range.second));
     }
     m_stats.voronoi_seconds += seconds_since(t0);
 
@@ -507,6 +530,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     gl.BindVertexArray(I.vao_test);
     gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_test);
     upload_quads(gl, sorted, I.test_vertices);
+    I.ensure_indices(sorted.size());
     if (!segs.empty() && ssbo) {
         // The flags land in the batch's buffer, read back once by end_batch:
         // no wait per tile.
@@ -515,7 +539,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         }
         for (const auto& [cls, range] : sranges) {
             gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
-            gl.DrawArrays(GL_TRIANGLES, quad_first(range.first), quad_count(size_t(range.second)));
+            draw_quads(gl, range.first, size_t(range.second));
         }
     } else if (!segs.empty()) {
         // Algorithm 5.1: unique colours, read back, drop the colours seen,
@@ -530,7 +554,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
                 gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
                 for (GLuint k = range.first; k < range.first + GLuint(range.second); ++k) {
                     if (!removed[k]) {
-                        gl.DrawArrays(GL_TRIANGLES, quad_first(k), quad_count(1));
+                        draw_quads(gl, k, 1);
                     }
                 }
             }
@@ -570,7 +594,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     gl.StencilFunc(GL_ALWAYS, 0, 0xFF);
     gl.StencilOp(GL_REPLACE, GL_REPLACE, GL_REPLACE);
     if (!inst.empty()) {
-        gl.DrawArrays(GL_TRIANGLES, 0, quad_count(inst.size()));
+        draw_quads(gl, 0, inst.size());
     }
     const GLenum err = gl.GetError();
     if (err != GL_NO_ERROR) {
