@@ -50,6 +50,7 @@ layout(location = 3) in float a_corner; // 0, 1 at a; 2, 3 at b; even: left
 uniform vec2 u_size;
 uniform float u_reach;
 uniform float u_pad;
+uniform float u_z; // 0 for the tents (their fragments set the depth); 1 to reset
 flat out vec4 v_seg;
 flat out float v_eps;
 void main() {
@@ -60,7 +61,7 @@ void main() {
     float r = a_eps * u_reach + u_pad;
     int c = int(a_corner);
     vec2 p = (c < 2 ? a - u * r : b + u * r) + ((c & 1) == 0 ? n * r : -n * r);
-    gl_Position = vec4(p / u_size * 2.0 - 1.0, 0.0, 1.0);
+    gl_Position = vec4(p / u_size * 2.0 - 1.0, u_z, 1.0);
     v_seg = a_seg;
     v_eps = a_eps;
 }
@@ -70,20 +71,23 @@ constexpr const char* tent_fs_head = R"(#version 450 core
 flat in vec4 v_seg;
 flat in float v_eps;
 uniform float u_depth_scale;
-uniform int u_reset;
 layout(location = 0) out vec4 o_color;
 )";
 
 constexpr const char* tent_fs_main = R"(
 void main() {
     o_color = vec4(0.0);
-    if (u_reset == 1) {
-        gl_FragDepth = 1.0;
-        return;
-    }
     float d = seg_distance(gl_FragCoord.xy, v_seg.xy, v_seg.zw);
     if (d > v_eps) discard;
     gl_FragDepth = d / u_depth_scale;
+}
+)";
+
+/// The reset pass: the tents' quads at depth 1 (z = 1 is depth 1.0
+/// exactly), with a fragment shader that computes nothing, so the
+/// rasterizer writes depth and stencil without running a distance per pixel.
+constexpr const char* reset_fs = R"(#version 450 core
+void main() {
 }
 )";
 
@@ -185,7 +189,7 @@ void draw_quads(const gl::Api& gl, size_t first, size_t count)
 
 struct Raster::Impl {
     const gl::Api& gl;
-    GLuint tent_prog = 0, test_prog = 0;
+    GLuint tent_prog = 0, reset_prog = 0, test_prog = 0;
     GLuint vao_tent = 0, vao_test = 0, vbo_tent = 0, vbo_test = 0, ssbo = 0;
     GLuint ibo = 0;       ///< quad indices 4q + {0 1 2 2 1 3}, bound to both vertex arrays
     size_t ibo_quads = 0; ///< quads it holds
@@ -267,6 +271,7 @@ Raster::Raster(gl::Context& ctx, const RasterOptions& opt)
     const auto& gl = ctx.api();
     const std::string metric_define = "#define METRIC " + std::to_string(int(opt.metric)) + "\n";
     I.tent_prog = I.link(tent_vs, std::string(tent_fs_head) + metric_define + distance_glsl + tent_fs_main);
+    I.reset_prog = I.link(tent_vs, reset_fs);
     I.test_prog = I.link(test_vs, opt.compliance == Compliance::ssbo ? test_fs_ssbo : test_fs_readback);
 
     gl.GenVertexArrays(1, &I.vao_tent);
@@ -345,6 +350,7 @@ Raster::~Raster()
     auto& I = *m_impl;
     const auto& gl = I.gl;
     gl.DeleteProgram(I.tent_prog);
+    gl.DeleteProgram(I.reset_prog);
     gl.DeleteProgram(I.test_prog);
     gl.DeleteVertexArrays(1, &I.vao_tent);
     gl.DeleteVertexArrays(1, &I.vao_test);
@@ -472,7 +478,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     gl.Uniform1f(I.loc(I.tent_prog, "u_reach"), float(l2_reach(m_opt.metric)));
     gl.Uniform1f(I.loc(I.tent_prog, "u_pad"), float(m_opt.margin_px));
     gl.Uniform1f(I.loc(I.tent_prog, "u_depth_scale"), float(eps_max * 1.001 + 1e-6));
-    gl.Uniform1i(I.loc(I.tent_prog, "u_reset"), 0);
+    gl.Uniform1f(I.loc(I.tent_prog, "u_z"), 0.0f);
     gl.BindVertexArray(I.vao_tent);
     gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_tent);
     upload_quads(gl, inst, I.tent_vertices);
@@ -584,8 +590,11 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
 
     // Restore the buffer where the tents were drawn: depth 1, stencil 0.
     const auto t2 = std::chrono::steady_clock::now();
-    gl.UseProgram(I.tent_prog);
-    gl.Uniform1i(I.loc(I.tent_prog, "u_reset"), 1);
+    gl.UseProgram(I.reset_prog);
+    gl.Uniform2f(I.loc(I.reset_prog, "u_size"), float(w), float(h));
+    gl.Uniform1f(I.loc(I.reset_prog, "u_reach"), float(l2_reach(m_opt.metric)));
+    gl.Uniform1f(I.loc(I.reset_prog, "u_pad"), float(m_opt.margin_px));
+    gl.Uniform1f(I.loc(I.reset_prog, "u_z"), 1.0f);
     gl.BindVertexArray(I.vao_tent);
     gl.Enable(GL_DEPTH_TEST);
     gl.DepthFunc(GL_ALWAYS);
