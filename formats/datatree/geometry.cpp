@@ -90,7 +90,7 @@ Split split_for(const std::vector<int64_t>& diffs)
     return s;
 }
 
-/// Draco with the settings of the format, over `npoints` points of `values` (x y interleaved).
+/// Draco with the settings of the format: one symbol per point.
 std::string draco_encode(const int32_t* symbols, uint32_t npoints, int speed)
 {
     draco::PointCloudBuilder builder;
@@ -256,8 +256,8 @@ std::string encode_geometry(const Geometry& g, GridPoint origin, const GeometryO
             put_low(dx);
             put_low(dy);
         } else {
-            escapes.put_varint(zigzag(dx));
-            escapes.put_varint(zigzag(dy));
+            escapes.put_svarint(dx);
+            escapes.put_svarint(dy);
         }
         // Draco zigzags what it is given: give it the value it maps to `symbol`.
         symbols.push_back(static_cast<int32_t>(unzigzag(symbol)));
@@ -407,12 +407,12 @@ Geometry decode_geometry(std::span<const std::byte> bytes, GridPoint origin, uin
             r.fail("symbol " + std::to_string(symbol) + " above 2^" + std::to_string(2 * joint_bits));
         }
         // Modular, as the points: a corrupt payload gives wrong points, never undefined behaviour.
-        const auto dx = static_cast<uint32_t>(static_cast<uint64_t>(unzigzag(er.get_varint("escape stream"))));
-        const auto dy = static_cast<uint32_t>(static_cast<uint64_t>(unzigzag(er.get_varint("escape stream"))));
+        const auto dx = static_cast<uint32_t>(static_cast<uint64_t>(er.get_svarint("escape stream")));
+        const auto dy = static_cast<uint32_t>(static_cast<uint64_t>(er.get_svarint("escape stream")));
         return std::pair{dx, dy};
     };
     auto high = [&](uint32_t z) {
-        return (static_cast<uint32_t>(z >> 1) ^ (0U - (z & 1))) << low_bits; // unzigzag, times 2^low (modular)
+        return static_cast<uint32_t>(unzigzag(z)) << low_bits; // times 2^low, modular
     };
     Geometry g;
     g.offsets.reserve(static_cast<size_t>(nchains) + 1);
@@ -423,7 +423,7 @@ Geometry decode_geometry(std::span<const std::byte> bytes, GridPoint origin, uin
         int32_t v;
         std::memcpy(&v, next_symbol, sizeof v);
         next_symbol += sizeof v;
-        const uint32_t symbol = (static_cast<uint32_t>(v) << 1) ^ static_cast<uint32_t>(v >> 31); // Draco's zigzag
+        const auto symbol = static_cast<uint32_t>(zigzag(v)); // as Draco maps signed values
         uint32_t dx, dy;
         if (uint64_t{symbol - 1U} < symbol_limit) [[likely]] {
             const uint32_t s = symbol - 1;

@@ -165,18 +165,6 @@ template <class T> struct QuadVertex {
     float corner;
 };
 
-template <class T>
-void upload_quads(const gl::Api& gl, const std::vector<T>& items, std::vector<QuadVertex<T>>& staging)
-{
-    staging.resize(items.size() * 4);
-    for (size_t i = 0; i < items.size(); ++i) {
-        for (size_t c = 0; c < 4; ++c) {
-            staging[i * 4 + c] = {items[i], static_cast<float>(c)};
-        }
-    }
-    gl.BufferData(GL_ARRAY_BUFFER, GLsizeiptr(staging.size() * sizeof(QuadVertex<T>)), staging.data(), GL_STREAM_DRAW);
-}
-
 /// Quads [first, first + count) of the bound vertex array, two triangles
 /// each (corners 0 1 2, 2 1 3) through the shared index buffer.
 void draw_quads(const gl::Api& gl, size_t first, size_t count)
@@ -209,6 +197,20 @@ struct Raster::Impl {
         gl.BindBuffer(GL_ELEMENT_ARRAY_BUFFER, ibo); // into the bound vertex array, which has it already
         gl.BufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(idx.size() * sizeof(uint32_t)), idx.data(), GL_STATIC_DRAW);
         ibo_quads = n;
+    }
+    /// The quads of `items` into the bound vertex array's buffer, through
+    /// `staging`, and indices for as many.
+    template <class T> void upload_quads(const std::vector<T>& items, std::vector<QuadVertex<T>>& staging)
+    {
+        staging.resize(items.size() * 4);
+        for (size_t i = 0; i < items.size(); ++i) {
+            for (size_t c = 0; c < 4; ++c) {
+                staging[i * 4 + c] = {items[i], static_cast<float>(c)};
+            }
+        }
+        gl.BufferData(GL_ARRAY_BUFFER, GLsizeiptr(staging.size() * sizeof(QuadVertex<T>)), staging.data(),
+                      GL_STREAM_DRAW);
+        ensure_indices(items.size());
     }
     GLuint fbo = 0, rb_depth = 0, rb_color = 0;
     std::vector<uint8_t> near; ///< per cell of a tile: a tested part may have fragments there
@@ -481,8 +483,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     gl.Uniform1f(I.loc(I.tent_prog, "u_z"), 0.0f);
     gl.BindVertexArray(I.vao_tent);
     gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_tent);
-    upload_quads(gl, inst, I.tent_vertices);
-    I.ensure_indices(inst.size());
+    I.upload_quads(inst, I.tent_vertices);
     gl.Enable(GL_DEPTH_TEST);
     gl.DepthFunc(GL_LESS);
     gl.DepthMask(GL_TRUE);
@@ -535,8 +536,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     gl.Uniform1f(I.loc(I.test_prog, "u_end_margin"), float(m_opt.endpoint_margin_px));
     gl.BindVertexArray(I.vao_test);
     gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_test);
-    upload_quads(gl, sorted, I.test_vertices);
-    I.ensure_indices(sorted.size());
+    I.upload_quads(sorted, I.test_vertices);
     if (!segs.empty() && ssbo) {
         // The flags land in the batch's buffer, read back once by end_batch:
         // no wait per tile.
