@@ -122,6 +122,48 @@ TEST(Geometry, EscapesLowBitsAndExtremeDifferencesRoundTripExactly)
     round_trip(g);
 }
 
+// The coding's two widths are checked against what follows them: one more
+// low bit than written leaves the low-bit stream short; one joint bit fewer
+// puts symbols above 2^(2J). Both are refused, naming the payload.
+TEST(Geometry, WrongLowOrJointBitsAreRefused)
+{
+    Geometry g;
+    std::vector<GridPoint> pts;
+    for (int i = 0; i < 400; ++i) {
+        pts.push_back({1000 + 37 * i + (i * i) % 23, 5000 + 11 * i + (i * 7) % 19});
+    }
+    g.add_chain(pts);
+    const std::string good = encode_geometry(g, {0, 0});
+    // The offset of the low-bits varint: kind, chain count, new points, and the
+    // chain's three side-table varints (all written by the encoder above).
+    size_t at = 1;
+    auto skip_varint = [&] {
+        while (static_cast<uint8_t>(good[at]) & 0x80) {
+            ++at;
+        }
+        ++at;
+    };
+    for (int k = 0; k < 5; ++k) {
+        skip_varint();
+    }
+    const int low = good[at], joint = good[at + 1];
+    ASSERT_GT(low, 0);
+    ASSERT_LT(low, 30);
+    ASSERT_GT(joint, 1);
+    auto fault = [&](const std::string& bytes) {
+        return error_of([&] { decode_geometry(as_span(bytes), {0, 0}, 1, pts.size(), "n7 LOD 2"); });
+    };
+    EXPECT_EQ(fault(good), "");
+    std::string bad = good;
+    bad[at] = static_cast<char>(low + 1);
+    EXPECT_NE(fault(bad).find("n7 LOD 2"), std::string::npos) << fault(bad);
+    EXPECT_NE(fault(bad).find("low-bit stream"), std::string::npos) << fault(bad);
+    bad = good;
+    bad[at + 1] = static_cast<char>(joint - 1);
+    EXPECT_NE(fault(bad).find("n7 LOD 2"), std::string::npos) << fault(bad);
+    EXPECT_NE(fault(bad).find("symbol"), std::string::npos) << fault(bad);
+}
+
 TEST(Geometry, PointBelowTheOriginIsRefused)
 {
     Geometry g;
