@@ -2,10 +2,20 @@
 
 #include "core/errors.hpp"
 
+#include <algorithm>
 #include <bit>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <vector>
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#include <cpuid.h>
+#include <immintrin.h>
+#define TIGERLOD_SHA_NI 1
+#else
+#define TIGERLOD_SHA_NI 0
+#endif
 
 namespace tigerlod {
 
@@ -64,59 +74,152 @@ uint32_t crc32(std::span<const std::byte> data, uint32_t crc) noexcept
     return ~crc;
 }
 
-Sha256::Sha256() noexcept
-    : m_h{0x6a09e667, 0xbb67ae85, 0x3c6ef372, 0xa54ff53a, 0x510e527f, 0x9b05688c, 0x1f83d9ab, 0x5be0cd19}
+namespace {
+
+/// SHA-256 compression of `count` 64-byte blocks, portable C++.
+void blocks_portable(uint32_t* state, const uint8_t* p, size_t count) noexcept
 {
+    for (; count > 0; --count, p += 64) {
+        std::array<uint32_t, 64> w;
+        for (size_t i = 0; i < 16; ++i) {
+            w[i] = (uint32_t{p[4 * i]} << 24) | (uint32_t{p[4 * i + 1]} << 16) | (uint32_t{p[4 * i + 2]} << 8) |
+                   uint32_t{p[4 * i + 3]};
+        }
+        for (size_t i = 16; i < 64; ++i) {
+            const uint32_t s0 = std::rotr(w[i - 15], 7) ^ std::rotr(w[i - 15], 18) ^ (w[i - 15] >> 3);
+            const uint32_t s1 = std::rotr(w[i - 2], 17) ^ std::rotr(w[i - 2], 19) ^ (w[i - 2] >> 10);
+            w[i] = w[i - 16] + s0 + w[i - 7] + s1;
+        }
+        uint32_t a = state[0], b = state[1], c = state[2], d = state[3];
+        uint32_t e = state[4], f = state[5], g = state[6], h = state[7];
+        for (size_t i = 0; i < 64; ++i) {
+            const uint32_t s1 = std::rotr(e, 6) ^ std::rotr(e, 11) ^ std::rotr(e, 25);
+            const uint32_t ch = (e & f) ^ (~e & g);
+            const uint32_t t1 = h + s1 + ch + sha_k[i] + w[i];
+            const uint32_t s0 = std::rotr(a, 2) ^ std::rotr(a, 13) ^ std::rotr(a, 22);
+            const uint32_t maj = (a & b) ^ (a & c) ^ (b & c);
+            const uint32_t t2 = s0 + maj;
+            h = g;
+            g = f;
+            f = e;
+            e = d + t1;
+            d = c;
+            c = b;
+            b = a;
+            a = t1 + t2;
+        }
+        state[0] += a;
+        state[1] += b;
+        state[2] += c;
+        state[3] += d;
+        state[4] += e;
+        state[5] += f;
+        state[6] += g;
+        state[7] += h;
+    }
 }
 
-void Sha256::block(const uint8_t* p) noexcept
+#if TIGERLOD_SHA_NI
+/// SHA-256 compression with the x86 SHA extensions. The instructions keep the
+/// state as two vectors, "ABEF" and "CDGH" (A in the highest lane), and do two
+/// rounds at a time; the message schedule is four words a step.
+__attribute__((target("sha,sse4.1,ssse3"))) void blocks_sha_ni(uint32_t* state, const uint8_t* p, size_t count) noexcept
 {
-    std::array<uint32_t, 64> w{};
-    for (size_t i = 0; i < 16; ++i) {
-        w[i] = (uint32_t{p[4 * i]} << 24) | (uint32_t{p[4 * i + 1]} << 16) | (uint32_t{p[4 * i + 2]} << 8) |
-               uint32_t{p[4 * i + 3]};
+    const __m128i byte_swap = _mm_set_epi64x(0x0c0d0e0f08090a0bLL, 0x0405060700010203LL);
+    auto* st = reinterpret_cast<__m128i*>(state);
+    const __m128i dcba = _mm_shuffle_epi32(_mm_loadu_si128(st), 0xB1);     // lanes B A D C
+    const __m128i hgfe = _mm_shuffle_epi32(_mm_loadu_si128(st + 1), 0x1B); // lanes H G F E
+    __m128i abef = _mm_alignr_epi8(dcba, hgfe, 8);                         // lanes F E B A
+    __m128i cdgh = _mm_blend_epi16(hgfe, dcba, 0xF0);                      // lanes H G D C
+    for (; count > 0; --count, p += 64) {
+        const __m128i abef0 = abef, cdgh0 = cdgh;
+        __m128i w[4]; // NOLINT: words 4g..4g+3 of the schedule, at g mod 4
+        for (size_t i = 0; i < 4; ++i) {
+            w[i] = _mm_shuffle_epi8(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p + 16 * i)), byte_swap);
+        }
+        for (size_t g = 0; g < 16; ++g) {
+            if (g >= 4) {
+                const __m128i w4 = w[g & 3U], w3 = w[(g + 1) & 3U], w2 = w[(g + 2) & 3U], w1 = w[(g + 3) & 3U];
+                w[g & 3U] =
+                    _mm_sha256msg2_epu32(_mm_add_epi32(_mm_sha256msg1_epu32(w4, w3), _mm_alignr_epi8(w1, w2, 4)), w1);
+            }
+            __m128i wk = _mm_add_epi32(w[g & 3U], _mm_loadu_si128(reinterpret_cast<const __m128i*>(&sha_k[4 * g])));
+            cdgh = _mm_sha256rnds2_epu32(cdgh, abef, wk); // two rounds: the new ABEF; the old is now CDGH
+            wk = _mm_shuffle_epi32(wk, 0x0E);
+            abef = _mm_sha256rnds2_epu32(abef, cdgh, wk);
+        }
+        abef = _mm_add_epi32(abef, abef0);
+        cdgh = _mm_add_epi32(cdgh, cdgh0);
     }
-    for (size_t i = 16; i < 64; ++i) {
-        const uint32_t s0 = std::rotr(w[i - 15], 7) ^ std::rotr(w[i - 15], 18) ^ (w[i - 15] >> 3);
-        const uint32_t s1 = std::rotr(w[i - 2], 17) ^ std::rotr(w[i - 2], 19) ^ (w[i - 2] >> 10);
-        w[i] = w[i - 16] + s0 + w[i - 7] + s1;
+    const __m128i abef_r = _mm_shuffle_epi32(abef, 0x1B); // lanes A B E F
+    const __m128i cdgh_r = _mm_shuffle_epi32(cdgh, 0xB1); // lanes G H C D
+    _mm_storeu_si128(st, _mm_blend_epi16(abef_r, cdgh_r, 0xF0));
+    _mm_storeu_si128(st + 1, _mm_alignr_epi8(cdgh_r, abef_r, 8));
+}
+
+bool cpu_has_sha_ni() noexcept
+{
+    unsigned a = 0, b = 0, c = 0, d = 0;
+    if (__get_cpuid(1, &a, &b, &c, &d) == 0 || (c & bit_SSE4_1) == 0 || (c & bit_SSSE3) == 0) {
+        return false;
     }
-    uint32_t a = m_h[0], b = m_h[1], c = m_h[2], d = m_h[3], e = m_h[4], f = m_h[5], g = m_h[6], h = m_h[7];
-    for (size_t i = 0; i < 64; ++i) {
-        const uint32_t s1 = std::rotr(e, 6) ^ std::rotr(e, 11) ^ std::rotr(e, 25);
-        const uint32_t ch = (e & f) ^ (~e & g);
-        const uint32_t t1 = h + s1 + ch + sha_k[i] + w[i];
-        const uint32_t s0 = std::rotr(a, 2) ^ std::rotr(a, 13) ^ std::rotr(a, 22);
-        const uint32_t maj = (a & b) ^ (a & c) ^ (b & c);
-        const uint32_t t2 = s0 + maj;
-        h = g;
-        g = f;
-        f = e;
-        e = d + t1;
-        d = c;
-        c = b;
-        b = a;
-        a = t1 + t2;
+    if (__get_cpuid_count(7, 0, &a, &b, &c, &d) == 0) {
+        return false;
     }
-    m_h[0] += a;
-    m_h[1] += b;
-    m_h[2] += c;
-    m_h[3] += d;
-    m_h[4] += e;
-    m_h[5] += f;
-    m_h[6] += g;
-    m_h[7] += h;
+    return (b & (1U << 29)) != 0; // SHA
+}
+#endif
+
+} // namespace
+
+bool Sha256::hardware_accelerated() noexcept
+{
+#if TIGERLOD_SHA_NI
+    static const bool has = cpu_has_sha_ni();
+    return has;
+#else
+    return false;
+#endif
+}
+
+Sha256::Sha256(Engine engine) noexcept
+    : m_blocks(blocks_portable), m_h{0x6a09e667, 0xbb67ae85, 0x3c6ef372, 0xa54ff53a,
+                                     0x510e527f, 0x9b05688c, 0x1f83d9ab, 0x5be0cd19}
+{
+#if TIGERLOD_SHA_NI
+    if (engine == Engine::automatic && hardware_accelerated()) {
+        m_blocks = blocks_sha_ni;
+    }
+#else
+    (void)engine;
+#endif
 }
 
 void Sha256::update(std::span<const std::byte> data) noexcept
 {
     m_total += data.size();
-    for (std::byte byte : data) {
-        m_buf[m_buf_len++] = static_cast<uint8_t>(byte);
-        if (m_buf_len == 64) {
-            block(m_buf.data());
-            m_buf_len = 0;
+    const auto* p = reinterpret_cast<const uint8_t*>(data.data());
+    size_t n = data.size();
+    if (m_buf_len > 0) {
+        const size_t take = std::min(n, m_buf.size() - m_buf_len);
+        std::memcpy(m_buf.data() + m_buf_len, p, take);
+        m_buf_len += take;
+        p += take;
+        n -= take;
+        if (m_buf_len < m_buf.size()) {
+            return;
         }
+        m_blocks(m_h.data(), m_buf.data(), 1);
+        m_buf_len = 0;
+    }
+    if (n >= 64) {
+        m_blocks(m_h.data(), p, n / 64);
+        p += n / 64 * 64;
+        n %= 64;
+    }
+    if (n > 0) {
+        std::memcpy(m_buf.data(), p, n);
+        m_buf_len = n;
     }
 }
 
@@ -132,7 +235,7 @@ std::string Sha256::hex_digest()
     for (int i = 7; i >= 0; --i) {
         m_buf[m_buf_len++] = static_cast<uint8_t>(bits >> (8 * i));
     }
-    block(m_buf.data());
+    m_blocks(m_h.data(), m_buf.data(), 1);
     m_buf_len = 0;
     std::string out;
     char hex[9];
