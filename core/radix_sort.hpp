@@ -2,45 +2,91 @@
 /// @file radix_sort.hpp
 /// Stable LSD radix sort of (64-bit key, 32-bit value) pairs by key, 16 bits a
 /// pass, skipping the passes whose digit is the same in every key. Equal keys
-/// keep their input order, so the result is deterministic.
+/// keep their input order, so the result is deterministic, and the same for
+/// any thread count: each thread counts and scatters a contiguous part, and
+/// the parts' places in every bucket follow their order.
 
+#include <algorithm>
 #include <array>
+#include <cstddef>
 #include <cstdint>
+#include <thread>
 #include <utility>
 #include <vector>
 
 namespace tigerlod {
 
-inline void radix_sort_by_key(std::vector<std::pair<uint64_t, uint32_t>>& v)
+namespace detail {
+
+/// f(t) for t in [0, n) on n threads, this one running t = 0.
+template <class F> void on_threads(unsigned n, F&& f)
 {
-    if (v.size() < 2) {
+    std::vector<std::jthread> pool;
+    for (unsigned t = 1; t < n; ++t) {
+        pool.emplace_back([&f, t] { f(t); });
+    }
+    f(0U);
+}
+
+} // namespace detail
+
+inline void radix_sort_by_key(std::vector<std::pair<uint64_t, uint32_t>>& v, unsigned threads = 1)
+{
+    using Item = std::pair<uint64_t, uint32_t>;
+    constexpr size_t digits = size_t{1} << 16;
+    constexpr size_t min_part = size_t{1} << 17; // below this a thread costs more than it saves
+    const size_t n = v.size();
+    if (n < 2) {
         return;
     }
+    const auto parts = static_cast<unsigned>(std::clamp<size_t>(n / min_part, 1, std::max(1U, threads)));
+    const size_t chunk = (n + parts - 1) / parts;
+    auto begin = [&](unsigned t) { return std::min(n, t * chunk); };
+    auto end = [&](unsigned t) { return std::min(n, (t + 1) * chunk); };
+
+    std::vector<uint64_t> ors(parts, 0), ands(parts, ~uint64_t{0});
+    detail::on_threads(parts, [&](unsigned t) {
+        uint64_t o = 0, a = ~uint64_t{0};
+        for (size_t i = begin(t); i < end(t); ++i) {
+            o |= v[i].first;
+            a &= v[i].first;
+        }
+        ors[t] = o;
+        ands[t] = a;
+    });
     uint64_t all_or = 0, all_and = ~uint64_t{0};
-    for (const auto& e : v) {
-        all_or |= e.first;
-        all_and &= e.first;
+    for (unsigned t = 0; t < parts; ++t) {
+        all_or |= ors[t];
+        all_and &= ands[t];
     }
     const uint64_t varying = all_or ^ all_and;
-    std::vector<std::pair<uint64_t, uint32_t>> tmp(v.size());
-    std::vector<uint32_t> count(1U << 16);
+    std::vector<Item> tmp(n);
+    std::vector<std::vector<size_t>> count(parts, std::vector<size_t>(digits));
     for (unsigned shift = 0; shift < 64; shift += 16) {
         if (((varying >> shift) & 0xFFFFU) == 0) {
             continue;
         }
-        std::fill(count.begin(), count.end(), 0U);
-        for (const auto& e : v) {
-            ++count[(e.first >> shift) & 0xFFFFU];
+        detail::on_threads(parts, [&](unsigned t) {
+            auto& c = count[t];
+            std::fill(c.begin(), c.end(), size_t{0});
+            for (size_t i = begin(t); i < end(t); ++i) {
+                ++c[(v[i].first >> shift) & 0xFFFFU];
+            }
+        });
+        size_t sum = 0;
+        for (size_t d = 0; d < digits; ++d) {
+            for (unsigned t = 0; t < parts; ++t) {
+                const size_t k = count[t][d];
+                count[t][d] = sum;
+                sum += k;
+            }
         }
-        uint32_t sum = 0;
-        for (auto& c : count) {
-            const uint32_t n = c;
-            c = sum;
-            sum += n;
-        }
-        for (const auto& e : v) {
-            tmp[count[(e.first >> shift) & 0xFFFFU]++] = e;
-        }
+        detail::on_threads(parts, [&](unsigned t) {
+            auto& c = count[t];
+            for (size_t i = begin(t); i < end(t); ++i) {
+                tmp[c[(v[i].first >> shift) & 0xFFFFU]++] = v[i];
+            }
+        });
         v.swap(tmp);
     }
 }

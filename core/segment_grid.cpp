@@ -83,7 +83,7 @@ std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, u
     }
     // Entries come in segment order, and the sort is stable: each cell lists its
     // segments in order. A segment enters a cell once, as the cover never repeats one.
-    radix_sort_by_key(entries);
+    radix_sort_by_key(entries, threads);
     std::vector<size_t> group_start;
     for (size_t i = 0; i < entries.size(); ++i) {
         if (i == 0 || entries[i].first != entries[i - 1].first) {
@@ -165,7 +165,8 @@ std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, u
     return all;
 }
 
-std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRef>& segs, double distance)
+std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRef>& segs, double distance,
+                                                     unsigned threads)
 {
     if (segs.empty()) {
         return {};
@@ -216,7 +217,7 @@ std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRe
             }
         }
     }
-    radix_sort_by_key(reach);
+    radix_sort_by_key(reach, threads);
     std::vector<std::pair<uint32_t, uint32_t>> result; // (chain, part)
     std::vector<uint32_t> parts;
     for (size_t gi = 0; gi < groups; ++gi) {

@@ -41,7 +41,8 @@ struct SegmentRef {
 /// comes within `distance` grid units of a segment that bounds `part` (owned
 /// by it, or a border of it). A conservative superset: pairs up to about two
 /// cells apart may be included. Segments of one chain must be consecutive.
-/// Sorted by (chain, part).
-std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRef>& segs, double distance);
+/// Sorted by (chain, part). The result does not depend on `threads`.
+std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRef>& segs, double distance,
+                                                     unsigned threads);
 
 } // namespace tigerlod

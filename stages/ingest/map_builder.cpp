@@ -6,6 +6,7 @@
 #include "core/segment_grid.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numeric>
 #include <thread>
@@ -102,7 +103,7 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
     for (size_t i = 0; i < occ.size(); ++i) {
         occ[i] = {pack_key(raw.coords[i]), static_cast<uint32_t>(i)};
     }
-    radix_sort_by_key(occ);
+    radix_sort_by_key(occ, threads);
     std::vector<uint32_t> id(occ.size());
     for (size_t i = 0; i < occ.size(); ++i) {
         if (i == 0 || occ[i].first != occ[i - 1].first) {
@@ -153,7 +154,7 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
                               (static_cast<uint32_t>(g.grid[v].y) ^ 0x80000000U),
                           v};
         }
-        radix_sort_by_key(by_grid); // stable: the smallest id comes first among equals
+        radix_sort_by_key(by_grid, threads); // stable: the smallest id comes first among equals
         for (size_t i = 1; i < by_grid.size(); ++i) {
             if (by_grid[i].first == by_grid[i - 1].first) {
                 const uint32_t v = by_grid[i].second;
@@ -205,7 +206,7 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
 /// polygons share into one edge with a unit on each side. For a line layer,
 /// split the lines and keep one of each set of identical segments (a river
 /// stored twice becomes one chain), counted as `duplicate_segments`.
-void merge_segments(Graph& g, const RawMap& raw, Problems& problems)
+void merge_segments(Graph& g, const RawMap& raw, unsigned threads, Problems& problems)
 {
     const bool lines = raw.kind == RawMap::Kind::lines;
     struct Rec {
@@ -231,7 +232,7 @@ void merge_segments(Graph& g, const RawMap& raw, Problems& problems)
         for (uint32_t i = 0; i < recs.size(); ++i) {
             keys[i] = {(uint64_t{recs[i].a} << 32) | recs[i].b, i};
         }
-        radix_sort_by_key(keys);
+        radix_sort_by_key(keys, threads);
         std::vector<Rec> sorted(recs.size());
         for (size_t i = 0; i < keys.size(); ++i) {
             sorted[i] = recs[keys[i].second];
@@ -286,6 +287,106 @@ void merge_segments(Graph& g, const RawMap& raw, Problems& problems)
             out.src.push_back(g.src[first.edge]);
         }
         i = j;
+    }
+    g = std::move(out);
+}
+
+/// Join edges end to end where exactly two edge ends meet at a vertex and the
+/// units on each side, the feature class and the source id carry through it.
+/// After merge_segments every boundary is one edge per segment; joined, the
+/// planarity check and every level walk the finest chains instead. The chains
+/// a level builds are the same either way. Edges are taken in index order, so
+/// the result does not depend on anything but the input.
+void join_pass_through(Graph& g)
+{
+    const size_t nv = g.keys.size();
+    const auto ne = static_cast<uint32_t>(g.edge_count());
+    // The first two edge ends at each vertex (edge * 2 + 1 if the edge ends there),
+    // and how many there are, saturating at 3.
+    std::vector<std::array<uint32_t, 2>> at(nv);
+    std::vector<uint8_t> count(nv, 0);
+    for (uint32_t e = 0; e < ne; ++e) {
+        const auto ev = g.edge(e);
+        for (uint32_t side = 0; side < 2; ++side) {
+            const uint32_t v = side ? ev.back() : ev.front();
+            if (count[v] < 2) {
+                at[v][count[v]] = e * 2 + side;
+            }
+            count[v] = static_cast<uint8_t>(std::min(3, count[v] + 1));
+        }
+    }
+    // (left, right) of an edge walked away from the end `end`.
+    auto sides_out = [&](uint32_t end) {
+        const uint32_t e = end / 2;
+        return (end & 1U) ? std::pair{g.right[e], g.left[e]} : std::pair{g.left[e], g.right[e]};
+    };
+    // A joint: two ends of different edges, walking in along one and out along
+    // the other keeps the units on each side, the class and the source id.
+    std::vector<uint8_t> joint(nv, 0);
+    for (size_t v = 0; v < nv; ++v) {
+        if (count[v] != 2) {
+            continue;
+        }
+        const uint32_t a = at[v][0], b = at[v][1];
+        const uint32_t ea = a / 2, eb = b / 2;
+        if (ea == eb || g.cls[ea] != g.cls[eb] || g.sid[ea] != g.sid[eb]) {
+            continue;
+        }
+        const auto out_a = sides_out(a), out_b = sides_out(b);
+        joint[v] = out_a.first == out_b.second && out_a.second == out_b.first;
+    }
+    Graph out;
+    out.keys = std::move(g.keys);
+    out.grid = std::move(g.grid);
+    std::vector<uint8_t> visited(ne, 0);
+    // Walk from the end `end` of its edge through joints; appends one edge to `out`.
+    auto walk = [&](uint32_t end) {
+        const uint32_t first = end / 2;
+        const auto [left, right] = sides_out(end);
+        out.verts.push_back(g.edge(first)[(end & 1U) ? g.edge(first).size() - 1 : 0]);
+        for (;;) {
+            const uint32_t e = end / 2;
+            visited[e] = 1;
+            const auto ev = g.edge(e);
+            if (end & 1U) {
+                out.verts.insert(out.verts.end(), ev.rbegin() + 1, ev.rend());
+            } else {
+                out.verts.insert(out.verts.end(), ev.begin() + 1, ev.end());
+            }
+            const uint32_t v = out.verts.back();
+            if (!joint[v]) {
+                break;
+            }
+            const uint32_t arrived = end ^ 1U;
+            const uint32_t next = at[v][0] == arrived ? at[v][1] : at[v][0];
+            if (visited[next / 2]) {
+                break; // around a ring of joints
+            }
+            end = next;
+        }
+        out.off.push_back(out.verts.size());
+        out.left.push_back(left);
+        out.right.push_back(right);
+        out.cls.push_back(g.cls[first]);
+        out.sid.push_back(g.sid[first]);
+        out.src.push_back(g.src[first]);
+    };
+    // Runs that end somewhere, from an end that is not a joint; then rings of joints.
+    for (uint32_t e = 0; e < ne; ++e) {
+        if (visited[e]) {
+            continue;
+        }
+        const auto ev = g.edge(e);
+        if (!joint[ev.front()]) {
+            walk(e * 2);
+        } else if (!joint[ev.back()]) {
+            walk(e * 2 + 1);
+        }
+    }
+    for (uint32_t e = 0; e < ne; ++e) {
+        if (!visited[e]) {
+            walk(e * 2);
+        }
     }
     g = std::move(out);
 }
@@ -761,8 +862,10 @@ std::vector<Intersection> repair_snap_crossings(Graph& g, const RawMap& raw, con
             pts.assign(ev.begin(), ev.end());
             uint32_t left = g.left[e], right = g.right[e];
             uint64_t sid = g.sid[e];
+            size_t new_segment = 0; // where the repair put a new segment: pts[new_segment, +1]
             if (drop_at[e] >= 0) {
                 pts.erase(pts.begin() + drop_at[e]);
+                new_segment = static_cast<size_t>(drop_at[e]) - 1;
             } else if (joined_with[e] >= 0) {
                 const auto code = static_cast<uint64_t>(joined_with[e]);
                 const bool first_ends_at_v = (code & 1U) != 0;
@@ -773,6 +876,7 @@ std::vector<Intersection> repair_snap_crossings(Graph& g, const RawMap& raw, con
                 }
                 const auto sv = g.edge(second_end / 2);
                 pts.pop_back(); // v
+                new_segment = pts.size() - 1;
                 if (second_end & 1U) {
                     pts.insert(pts.end(), sv.rbegin() + 1, sv.rend());
                 } else {
@@ -782,12 +886,12 @@ std::vector<Intersection> repair_snap_crossings(Graph& g, const RawMap& raw, con
                 sid = sid == 0 ? other : (other == 0 ? sid : std::min(sid, other));
             }
             if (repaired) {
-                for (size_t k = 0; k + 1 < pts.size(); ++k) {
-                    GridBox box;
-                    box.extend(out.grid[pts[k]]);
-                    box.extend(out.grid[pts[k + 1]]);
-                    hot.push_back(box);
-                }
+                // Only the new segment can meet segments it did not meet before;
+                // the rest of the edge is in scope anyway.
+                GridBox box;
+                box.extend(out.grid[pts[new_segment]]);
+                box.extend(out.grid[pts[new_segment + 1]]);
+                hot.push_back(box);
             }
             out.verts.insert(out.verts.end(), pts.begin(), pts.end());
             out.off.push_back(out.verts.size());
@@ -922,7 +1026,7 @@ LevelStats process_level(const Graph& g, const RawMap& raw, const std::vector<Le
                 refs.push_back({g.grid[cv[k]], g.grid[cv[k + 1]], ci, c.owner, also});
             }
         }
-        for (const auto& [chain, part] : find_near(refs, halo_grid)) {
+        for (const auto& [chain, part] : find_near(refs, halo_grid, options.threads)) {
             halo[part].push_back(chain);
         }
     }
@@ -1114,7 +1218,8 @@ BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptio
     Graph g = make_graph(raw, projection, options.threads, problems);
     note("interned and projected " + std::to_string(g.keys.size()) + " vertices");
     if (raw.kind != RawMap::Kind::edges) {
-        merge_segments(g, raw, problems);
+        merge_segments(g, raw, options.threads, problems);
+        join_pass_through(g);
     }
     note("merged shared segments: " + std::to_string(g.edge_count()) + " edges");
     result.unique_vertices = g.keys.size();

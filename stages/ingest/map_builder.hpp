@@ -60,7 +60,10 @@ struct BuildResult {
     std::vector<LevelStats> levels;
     std::map<std::string, uint64_t> problems; ///< counts by kind, every kind listed
     std::vector<ProblemSample> samples;
-    uint64_t input_vertices = 0, unique_vertices = 0, edges = 0;
+    uint64_t input_vertices = 0, unique_vertices = 0;
+    /// Edges of the cleaned graph: the TIGER edges, or for polygons and lines
+    /// the runs between vertices where the sides change or other than two meet.
+    uint64_t edges = 0;
 };
 
 /// Called once per finished chain store. Levels come coarsest first, but within

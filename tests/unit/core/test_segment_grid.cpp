@@ -77,7 +77,7 @@ TEST(SegmentGrid, NearFindsChainsWithinTheDistanceOnly)
     // Part 0 owns a chain along y=0; part 1 owns one 50 units above and one 5000 above.
     std::vector<SegmentRef> segs = {
         {{0, 0}, {1000, 0}, 0, 0}, {{0, 50}, {1000, 50}, 1, 1}, {{0, 5000}, {1000, 5000}, 2, 1}};
-    const auto near = find_near(segs, 100.0);
+    const auto near = find_near(segs, 100.0, 1);
     EXPECT_EQ(near, (std::vector<std::pair<uint32_t, uint32_t>>{{0, 1}, {1, 0}}));
 }
 
@@ -85,6 +85,6 @@ TEST(SegmentGrid, BordersReachBothParts)
 {
     // Part 2 owns nothing near chain 0, but chain 0 (owned by part 0) bounds part 2: it is in part 2's halo.
     std::vector<SegmentRef> segs = {{{0, 0}, {1000, 0}, 0, 0, 2}, {{0, 90000}, {1000, 90000}, 1, 2}};
-    const auto near = find_near(segs, 100.0);
+    const auto near = find_near(segs, 100.0, 1);
     EXPECT_EQ(near, (std::vector<std::pair<uint32_t, uint32_t>>{{0, 2}}));
 }

@@ -219,6 +219,36 @@ TEST(MapBuilder, SharedPolygonEdgesMergeAndRingsCloseOnTheirSmallestVertex)
     }
 }
 
+TEST(MapBuilder, PolygonSegmentsJoinIntoOneEdgePerRunBetweenJunctions)
+{
+    // A and B share a boundary of three segments, and each ring starts at a
+    // different vertex; an island D lies inside B. After merging, the edges are
+    // the runs: A|B, A's outer side, B's outer side, and the island's ring.
+    //  (0,4)---(2,4)-----------(6,4)
+    //    |  A    \      B        |
+    //    |        (3,2)  (4,2)-(5,2)
+    //    |       /         | D  |
+    //    |  (2,1)        (4,1)-(5,1)
+    //  (0,0)---(2,0)-----------(6,0)
+    RawMap m;
+    m.kind = RawMap::Kind::polygon_rings;
+    m.level_names = {"l"};
+    m.files = {"hand"};
+    m.units = {{{"A"}, std::nullopt, 4, {}}, {{"B"}, std::nullopt, 4, {}}, {{"D"}, std::nullopt, 1, {}}};
+    auto ring = [&](std::vector<LonLatE6> r, uint32_t unit, bool unit_left) {
+        m.add_polyline(r, unit_left ? unit : no_unit, unit_left ? no_unit : unit, 0, 0, {0, unit});
+    };
+    ring({ll(0, 4), ll(0, 0), ll(2, 0), ll(2, 1), ll(3, 2), ll(2, 4), ll(0, 4)}, 0, true); // A, ccw
+    ring({ll(3, 2), ll(2, 1), ll(2, 0), ll(6, 0), ll(6, 4), ll(2, 4), ll(3, 2)}, 1, true); // B, ccw
+    ring({ll(5, 2), ll(5, 1), ll(4, 1), ll(4, 2), ll(5, 2)}, 1, true);                     // B's hole, cw
+    ring({ll(4, 2), ll(5, 2), ll(5, 1), ll(4, 1), ll(4, 2)}, 2, false);                    // D, cw
+    const Built b = build(std::move(m));
+    EXPECT_EQ(b.result.edges, 4U);
+    EXPECT_EQ(b.result.problems.at("overlapping_polygons"), 0U);
+    EXPECT_EQ(describe(b.store("l")), (std::vector<std::string>{"A|B 2,0 2,1 3,2 2,4", "B| 2,0 6,0 6,4 2,4",
+                                                                "B|D 4,1 4,2 5,2 5,1 4,1", "|A 2,0 0,0 0,4 2,4"}));
+}
+
 TEST(MapBuilder, SnappingMergesNearPointsAndSpikesAreRepaired)
 {
     RawMap m;
