@@ -202,66 +202,70 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
     return g;
 }
 
+/// One segment after merge_segments: its vertices (a < b), the units on each
+/// side (left of a->b), and the input polyline it came from.
+struct Piece {
+    std::array<uint32_t, 2> ab;
+    uint32_t left, right;
+    uint32_t edge;
+};
+
 /// Split polygon rings into segments and merge the segments that neighbouring
-/// polygons share into one edge with a unit on each side. For a line layer,
+/// polygons share into one piece with a unit on each side. For a line layer,
 /// split the lines and keep one of each set of identical segments (a river
 /// stored twice becomes one chain), counted as `duplicate_segments`.
-void merge_segments(Graph& g, const RawMap& raw, unsigned threads, Problems& problems)
+std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned threads, Problems& problems)
 {
     const bool lines = raw.kind == RawMap::Kind::lines;
+    // Segment k of edge i is record off[i] - i + k; the unit given is on the
+    // left of the segment as stored (a < b) when `unit_left`.
+    const size_t nrec = g.verts.size() - g.edge_count();
     struct Rec {
-        uint32_t a, b; // a < b
         uint32_t unit;
-        bool unit_left; // the unit lies left of a->b
         uint32_t edge;
+        bool unit_left;
     };
-    std::vector<Rec> recs;
-    recs.reserve(g.verts.size());
-    for (uint32_t i = 0; i < g.edge_count(); ++i) {
-        const auto e = g.edge(i);
-        const uint32_t u = g.left[i] != no_unit ? g.left[i] : g.right[i];
-        const bool on_left_of_given = g.left[i] != no_unit;
-        for (size_t k = 0; k + 1 < e.size(); ++k) {
-            const bool forward = e[k] < e[k + 1];
-            recs.push_back({std::min(e[k], e[k + 1]), std::max(e[k], e[k + 1]), u, forward == on_left_of_given, i});
+    std::vector<Rec> recs(nrec);
+    std::vector<std::pair<uint64_t, uint32_t>> keys(nrec);
+    parallel_for(g.edge_count(), threads, [&](size_t eb, size_t ee) {
+        for (size_t i = eb; i < ee; ++i) {
+            const auto e = g.edge(i);
+            const uint32_t u = g.left[i] != no_unit ? g.left[i] : g.right[i];
+            const bool on_left_of_given = g.left[i] != no_unit;
+            const size_t r0 = g.off[i] - i;
+            for (size_t k = 0; k + 1 < e.size(); ++k) {
+                const bool forward = e[k] < e[k + 1];
+                const auto r = static_cast<uint32_t>(r0 + k);
+                recs[r] = {u, static_cast<uint32_t>(i), forward == on_left_of_given};
+                keys[r] = {(uint64_t{std::min(e[k], e[k + 1])} << 32) | std::max(e[k], e[k + 1]), r};
+            }
         }
-    }
-    {
-        // Records come in edge order and the sort is stable: (a, b, edge) order.
-        std::vector<std::pair<uint64_t, uint32_t>> keys(recs.size());
-        for (uint32_t i = 0; i < recs.size(); ++i) {
-            keys[i] = {(uint64_t{recs[i].a} << 32) | recs[i].b, i};
-        }
-        radix_sort_by_key(keys, threads);
-        std::vector<Rec> sorted(recs.size());
-        for (size_t i = 0; i < keys.size(); ++i) {
-            sorted[i] = recs[keys[i].second];
-        }
-        recs = std::move(sorted);
-    }
-    Graph out;
-    out.keys = std::move(g.keys);
-    out.grid = std::move(g.grid);
-    for (size_t i = 0; i < recs.size();) {
+    });
+    // Records come in edge order and the sort is stable: (a, b, edge) order.
+    radix_sort_by_key(keys, threads);
+    std::vector<Piece> out;
+    out.reserve(nrec / 2 + 1);
+    for (size_t i = 0; i < keys.size();) {
         size_t j = i;
         uint32_t l = no_unit, r = no_unit;
         bool conflict = false;
-        while (j < recs.size() && recs[j].a == recs[i].a && recs[j].b == recs[i].b) {
-            uint32_t& slot = recs[j].unit_left ? l : r;
+        for (; j < keys.size() && keys[j].first == keys[i].first; ++j) {
+            const Rec& rec = recs[keys[j].second];
+            uint32_t& slot = rec.unit_left ? l : r;
             if (slot == no_unit) {
-                slot = recs[j].unit;
+                slot = rec.unit;
             } else {
                 conflict = true;
             }
-            ++j;
         }
-        const Rec& first = recs[i];
-        const GridPoint pa = out.grid[first.a], pb = out.grid[first.b];
+        const auto a = static_cast<uint32_t>(keys[i].first >> 32), b = static_cast<uint32_t>(keys[i].first);
+        const uint32_t first_edge = recs[keys[i].second].edge;
+        const GridPoint pa = g.grid[a], pb = g.grid[b];
         if (lines) {
             l = r = no_unit;
             if (j - i > 1) {
                 problems.add("duplicate_segments", (pa.x + 0.5 * (pb.x - pa.x)), (pa.y + 0.5 * (pb.y - pa.y)),
-                             raw.where(g.src[first.edge]) + " " + raw.where(g.src[recs[i + 1].edge]));
+                             raw.where(g.src[first_edge]) + " " + raw.where(g.src[recs[keys[i + 1].second].edge]));
             }
         } else if (conflict) {
             std::string where;
@@ -269,67 +273,59 @@ void merge_segments(Graph& g, const RawMap& raw, unsigned threads, Problems& pro
                 if (!where.empty()) {
                     where += ' ';
                 }
-                where += raw.where(g.src[recs[k].edge]);
+                where += raw.where(g.src[recs[keys[k].second].edge]);
             }
             problems.add("overlapping_polygons", (pa.x + 0.5 * (pb.x - pa.x)), (pa.y + 0.5 * (pb.y - pa.y)), where);
         }
         if (l != no_unit && l == r) {
             // The same polygon on both sides: a slit or spike in its ring, never a boundary.
-            problems.add("spikes", pa.x, pa.y, raw.where(g.src[first.edge]));
+            problems.add("spikes", pa.x, pa.y, raw.where(g.src[first_edge]));
         } else {
-            out.verts.push_back(first.a);
-            out.verts.push_back(first.b);
-            out.off.push_back(out.verts.size());
-            out.left.push_back(l);
-            out.right.push_back(r);
-            out.cls.push_back(g.cls[first.edge]);
-            out.sid.push_back(0);
-            out.src.push_back(g.src[first.edge]);
+            out.push_back({{a, b}, l, r, first_edge});
         }
         i = j;
     }
-    g = std::move(out);
+    return out;
 }
 
-/// Join edges end to end where exactly two edge ends meet at a vertex and the
-/// units on each side, the feature class and the source id carry through it.
-/// After merge_segments every boundary is one edge per segment; joined, the
-/// planarity check and every level walk the finest chains instead. The chains
-/// a level builds are the same either way. Edges are taken in index order, so
-/// the result does not depend on anything but the input.
-void join_pass_through(Graph& g)
+/// Join the pieces end to end where exactly two piece ends meet at a vertex
+/// and the units on each side and the feature class carry through it: the
+/// edges become the runs between junctions (the finest level's chains), which
+/// the planarity check and every level then walk instead of single segments.
+/// The chains a level builds are the same either way. Pieces are taken in
+/// order, so the result depends on nothing but the input.
+void join_pieces(Graph& g, const std::vector<Piece>& pieces)
 {
     const size_t nv = g.keys.size();
-    const auto ne = static_cast<uint32_t>(g.edge_count());
-    // The first two edge ends at each vertex (edge * 2 + 1 if the edge ends there),
+    const auto np = static_cast<uint32_t>(pieces.size());
+    // The first two piece ends at each vertex (piece * 2 + 1 if it is b there),
     // and how many there are, saturating at 3.
     std::vector<std::array<uint32_t, 2>> at(nv);
     std::vector<uint8_t> count(nv, 0);
-    for (uint32_t e = 0; e < ne; ++e) {
-        const auto ev = g.edge(e);
+    for (uint32_t p = 0; p < np; ++p) {
         for (uint32_t side = 0; side < 2; ++side) {
-            const uint32_t v = side ? ev.back() : ev.front();
+            const uint32_t v = pieces[p].ab[side];
             if (count[v] < 2) {
-                at[v][count[v]] = e * 2 + side;
+                at[v][count[v]] = p * 2 + side;
             }
             count[v] = static_cast<uint8_t>(std::min(3, count[v] + 1));
         }
     }
-    // (left, right) of an edge walked away from the end `end`.
+    // (left, right) of a piece walked away from its end `end`.
     auto sides_out = [&](uint32_t end) {
-        const uint32_t e = end / 2;
-        return (end & 1U) ? std::pair{g.right[e], g.left[e]} : std::pair{g.left[e], g.right[e]};
+        const Piece& p = pieces[end / 2];
+        return (end & 1U) ? std::pair{p.right, p.left} : std::pair{p.left, p.right};
     };
-    // A joint: two ends of different edges, walking in along one and out along
-    // the other keeps the units on each side, the class and the source id.
+    auto cls = [&](uint32_t p) { return g.cls[pieces[p].edge]; };
+    // A joint: the ends of two different pieces, walking in along one and out
+    // along the other keeps the units on each side, and the class.
     std::vector<uint8_t> joint(nv, 0);
     for (size_t v = 0; v < nv; ++v) {
         if (count[v] != 2) {
             continue;
         }
         const uint32_t a = at[v][0], b = at[v][1];
-        const uint32_t ea = a / 2, eb = b / 2;
-        if (ea == eb || g.cls[ea] != g.cls[eb] || g.sid[ea] != g.sid[eb]) {
+        if (a / 2 == b / 2 || cls(a / 2) != cls(b / 2)) {
             continue;
         }
         const auto out_a = sides_out(a), out_b = sides_out(b);
@@ -338,22 +334,17 @@ void join_pass_through(Graph& g)
     Graph out;
     out.keys = std::move(g.keys);
     out.grid = std::move(g.grid);
-    std::vector<uint8_t> visited(ne, 0);
-    // Walk from the end `end` of its edge through joints; appends one edge to `out`.
+    out.verts.reserve(pieces.size() + pieces.size() / 8);
+    std::vector<uint8_t> visited(np, 0);
+    // Walk from the end `end` of its piece through joints; appends one edge.
     auto walk = [&](uint32_t end) {
         const uint32_t first = end / 2;
         const auto [left, right] = sides_out(end);
-        out.verts.push_back(g.edge(first)[(end & 1U) ? g.edge(first).size() - 1 : 0]);
+        out.verts.push_back(pieces[first].ab[end & 1U]);
         for (;;) {
-            const uint32_t e = end / 2;
-            visited[e] = 1;
-            const auto ev = g.edge(e);
-            if (end & 1U) {
-                out.verts.insert(out.verts.end(), ev.rbegin() + 1, ev.rend());
-            } else {
-                out.verts.insert(out.verts.end(), ev.begin() + 1, ev.end());
-            }
-            const uint32_t v = out.verts.back();
+            visited[end / 2] = 1;
+            const uint32_t v = pieces[end / 2].ab[(end & 1U) ^ 1U];
+            out.verts.push_back(v);
             if (!joint[v]) {
                 break;
             }
@@ -367,25 +358,24 @@ void join_pass_through(Graph& g)
         out.off.push_back(out.verts.size());
         out.left.push_back(left);
         out.right.push_back(right);
-        out.cls.push_back(g.cls[first]);
-        out.sid.push_back(g.sid[first]);
-        out.src.push_back(g.src[first]);
+        out.cls.push_back(cls(first));
+        out.sid.push_back(0);
+        out.src.push_back(g.src[pieces[first].edge]);
     };
     // Runs that end somewhere, from an end that is not a joint; then rings of joints.
-    for (uint32_t e = 0; e < ne; ++e) {
-        if (visited[e]) {
+    for (uint32_t p = 0; p < np; ++p) {
+        if (visited[p]) {
             continue;
         }
-        const auto ev = g.edge(e);
-        if (!joint[ev.front()]) {
-            walk(e * 2);
-        } else if (!joint[ev.back()]) {
-            walk(e * 2 + 1);
+        if (!joint[pieces[p].ab[0]]) {
+            walk(p * 2);
+        } else if (!joint[pieces[p].ab[1]]) {
+            walk(p * 2 + 1);
         }
     }
-    for (uint32_t e = 0; e < ne; ++e) {
-        if (!visited[e]) {
-            walk(e * 2);
+    for (uint32_t p = 0; p < np; ++p) {
+        if (!visited[p]) {
+            walk(p * 2);
         }
     }
     g = std::move(out);
@@ -1218,8 +1208,7 @@ BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptio
     Graph g = make_graph(raw, projection, options.threads, problems);
     note("interned and projected " + std::to_string(g.keys.size()) + " vertices");
     if (raw.kind != RawMap::Kind::edges) {
-        merge_segments(g, raw, options.threads, problems);
-        join_pass_through(g);
+        join_pieces(g, merge_segments(g, raw, options.threads, problems));
     }
     note("merged shared segments: " + std::to_string(g.edge_count()) + " edges");
     result.unique_vertices = g.keys.size();
