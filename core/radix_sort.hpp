@@ -39,6 +39,10 @@ inline void radix_sort_by_key(std::vector<std::pair<uint64_t, uint32_t>>& v, uns
     if (n < 2) {
         return;
     }
+    if (n < 4096) { // the same order, without clearing 64 K counters a pass
+        std::stable_sort(v.begin(), v.end(), [](const Item& a, const Item& b) { return a.first < b.first; });
+        return;
+    }
     const auto parts = static_cast<unsigned>(std::clamp<size_t>(n / min_part, 1, std::max(1U, threads)));
     const size_t chunk = (n + parts - 1) / parts;
     auto begin = [&](unsigned t) { return std::min(n, t * chunk); };

@@ -24,6 +24,13 @@ TEST(RadixSort, StableAndTheSameForEveryThreadCount)
         tigerlod::radix_sort_by_key(v, threads);
         EXPECT_EQ(v, expect) << threads << " threads";
     }
+    for (size_t n : {size_t{5000}, size_t{4095}}) { // on each side of the switch to std::stable_sort
+        Items v(in.begin(), in.begin() + static_cast<std::ptrdiff_t>(n));
+        Items want = v;
+        std::stable_sort(want.begin(), want.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+        tigerlod::radix_sort_by_key(v, 2);
+        EXPECT_EQ(v, want) << n;
+    }
     Items small{{3, 0}, {1, 1}, {3, 2}, {0, 3}};
     tigerlod::radix_sort_by_key(small, 4);
     EXPECT_EQ(small, (Items{{0, 3}, {1, 1}, {3, 0}, {3, 2}}));
