@@ -1056,8 +1056,12 @@ LevelStats process_level(const Graph& g, const RawMap& raw, const std::vector<Le
     };
     const size_t npoints = raw.kind == RawMap::Kind::lines ? 0 : lc.codes.size();
     std::vector<UnitPoint> unit_points(npoints);
-    parallel_for(npoints, options.threads, [&](size_t b, size_t e) {
+    // Blocks of units taken by the next free thread: a unit's cost varies with
+    // its boundary, and parallel_for would keep a few thousand units on one.
+    constexpr size_t units_per_block = 64;
+    parallel_each((npoints + units_per_block - 1) / units_per_block, options.threads, [&](size_t block) {
         std::vector<std::pair<GridPoint, GridPoint>> useg;
+        const size_t b = block * units_per_block, e = std::min(npoints, b + units_per_block);
         for (size_t code = b; code < e; ++code) {
             useg.clear();
             for (uint32_t ci : unit_chains[code]) {
@@ -1103,7 +1107,7 @@ LevelStats process_level(const Graph& g, const RawMap& raw, const std::vector<Le
         part_points[parent(code)].push_back({code, chains::constraint_internal, *up.pt});
     }
     // One store per partition, built, encoded and handed to the sink on the
-    // worker threads.
+    // worker threads, each taking the next partition as it finishes one.
     std::vector<std::vector<uint32_t>> own(npart);
     for (uint32_t ci = 0; ci < lev.chains.size(); ++ci) {
         own[lev.chains[ci].owner].push_back(ci);
@@ -1116,78 +1120,76 @@ LevelStats process_level(const Graph& g, const RawMap& raw, const std::vector<Le
         st.halo_chains += halo[part].size();
         st.constraint_points += part_points[part].size();
     }
-    parallel_for(npart, options.threads, [&](size_t pb, size_t pe) {
+    parallel_each(npart, options.threads, [&](size_t part) {
         std::vector<GridPoint> pts;
-        for (size_t part = pb; part < pe; ++part) {
-            if (own[part].empty() && part_points[part].empty()) {
-                continue;
-            }
-            chains::ChainStore s;
-            s.level_index = static_cast<uint32_t>(L);
-            s.level_count = static_cast<uint32_t>(nlev);
-            s.level_name = st.name;
-            s.partition = part_names[part];
-            s.projection = projection.params();
-            s.halo_m = options.halo_m;
-            std::unordered_map<uint32_t, uint32_t> sidx;
-            auto str = [&](uint32_t code) {
-                if (code == none) {
-                    return 0U;
-                }
-                auto [it, added] = sidx.try_emplace(code, 0U);
-                if (added) {
-                    it->second = s.intern(lc.codes[code]);
-                }
-                return it->second;
-            };
-            std::vector<uint32_t> cls_idx(raw.classes.size(), none);
-            auto add = [&](uint32_t ci, bool is_halo) {
-                const auto& c = lev.chains[ci];
-                const auto cv = lev.chain(c);
-                pts.clear();
-                for (uint32_t v : cv) {
-                    pts.push_back(g.grid[v]);
-                }
-                if (cls_idx[c.cls] == none) {
-                    cls_idx[c.cls] = s.intern(raw.classes[c.cls]);
-                }
-                chains::ChainInfo info;
-                info.id = c.id;
-                info.left = str(c.left);
-                info.right = str(c.right);
-                info.feature_class = cls_idx[c.cls];
-                info.flags = (cv.front() == cv.back() ? chains::chain_closed : 0U) |
-                             (is_halo ? chains::chain_halo : 0U) | (c.problem ? chains::chain_problem : 0U);
-                s.add_chain(info, pts);
-            };
-            for (uint32_t ci : own[part]) {
-                add(ci, false);
-            }
-            for (uint32_t ci : halo[part]) {
-                add(ci, true);
-            }
-            // Junctions at the ends of the partition's own chains.
-            std::vector<uint32_t> ends;
-            for (uint32_t ci : own[part]) {
-                const auto cv = lev.chain(lev.chains[ci]);
-                ends.push_back(cv.front());
-                ends.push_back(cv.back());
-            }
-            std::sort(ends.begin(), ends.end());
-            ends.erase(std::unique(ends.begin(), ends.end()), ends.end());
-            for (uint32_t v : ends) {
-                auto it = std::lower_bound(lev.junctions.begin(), lev.junctions.end(), v);
-                if (it != lev.junctions.end() && *it == v) {
-                    const auto k = static_cast<size_t>(it - lev.junctions.begin());
-                    s.junctions.push_back({g.keys[v], g.grid[v], lev.junction_degree[k]});
-                }
-            }
-            for (const auto& cp : part_points[part]) {
-                s.constraints.push_back({str(cp.unit), cp.kind, cp.p});
-            }
-            s.canonicalize();
-            sink(s);
+        if (own[part].empty() && part_points[part].empty()) {
+            return;
         }
+        chains::ChainStore s;
+        s.level_index = static_cast<uint32_t>(L);
+        s.level_count = static_cast<uint32_t>(nlev);
+        s.level_name = st.name;
+        s.partition = part_names[part];
+        s.projection = projection.params();
+        s.halo_m = options.halo_m;
+        std::unordered_map<uint32_t, uint32_t> sidx;
+        auto str = [&](uint32_t code) {
+            if (code == none) {
+                return 0U;
+            }
+            auto [it, added] = sidx.try_emplace(code, 0U);
+            if (added) {
+                it->second = s.intern(lc.codes[code]);
+            }
+            return it->second;
+        };
+        std::vector<uint32_t> cls_idx(raw.classes.size(), none);
+        auto add = [&](uint32_t ci, bool is_halo) {
+            const auto& c = lev.chains[ci];
+            const auto cv = lev.chain(c);
+            pts.clear();
+            for (uint32_t v : cv) {
+                pts.push_back(g.grid[v]);
+            }
+            if (cls_idx[c.cls] == none) {
+                cls_idx[c.cls] = s.intern(raw.classes[c.cls]);
+            }
+            chains::ChainInfo info;
+            info.id = c.id;
+            info.left = str(c.left);
+            info.right = str(c.right);
+            info.feature_class = cls_idx[c.cls];
+            info.flags = (cv.front() == cv.back() ? chains::chain_closed : 0U) | (is_halo ? chains::chain_halo : 0U) |
+                         (c.problem ? chains::chain_problem : 0U);
+            s.add_chain(info, pts);
+        };
+        for (uint32_t ci : own[part]) {
+            add(ci, false);
+        }
+        for (uint32_t ci : halo[part]) {
+            add(ci, true);
+        }
+        // Junctions at the ends of the partition's own chains.
+        std::vector<uint32_t> ends;
+        for (uint32_t ci : own[part]) {
+            const auto cv = lev.chain(lev.chains[ci]);
+            ends.push_back(cv.front());
+            ends.push_back(cv.back());
+        }
+        std::sort(ends.begin(), ends.end());
+        ends.erase(std::unique(ends.begin(), ends.end()), ends.end());
+        for (uint32_t v : ends) {
+            auto it = std::lower_bound(lev.junctions.begin(), lev.junctions.end(), v);
+            if (it != lev.junctions.end() && *it == v) {
+                const auto k = static_cast<size_t>(it - lev.junctions.begin());
+                s.junctions.push_back({g.keys[v], g.grid[v], lev.junction_degree[k]});
+            }
+        }
+        for (const auto& cp : part_points[part]) {
+            s.constraints.push_back({str(cp.unit), cp.kind, cp.p});
+        }
+        s.canonicalize();
+        sink(s);
     });
     st.junctions = lev.junctions.size();
     note("level " + st.name + ": " + std::to_string(st.chains) + " chains in " + std::to_string(st.partitions) +
