@@ -227,7 +227,11 @@ std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned th
     };
     std::vector<Rec> recs(nrec);
     std::vector<std::pair<uint64_t, uint32_t>> keys(nrec);
-    parallel_for(g.edge_count(), threads, [&](size_t eb, size_t ee) {
+    // Blocks of 16 polylines to the next free thread: a few thousand rings of
+    // very unequal length are too few for parallel_for's ranges.
+    constexpr size_t per_block = 16;
+    parallel_each((g.edge_count() + per_block - 1) / per_block, threads, [&](size_t block) {
+        const size_t eb = block * per_block, ee = std::min(g.edge_count(), eb + per_block);
         for (size_t i = eb; i < ee; ++i) {
             const auto e = g.edge(i);
             const uint32_t u = g.left[i] != no_unit ? g.left[i] : g.right[i];
