@@ -474,13 +474,19 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     const auto w = static_cast<GLsizei>(tile.width), h = static_cast<GLsizei>(tile.height);
     gl.Viewport(0, 0, w, h);
 
+    // The tents' quads, as tent_vs places them: the tent pass and the reset
+    // pass share it, so both cover the same pixels.
+    auto use_tent_quads = [&](GLuint prog, float z) {
+        gl.UseProgram(prog);
+        gl.Uniform2f(I.loc(prog, "u_size"), float(w), float(h));
+        gl.Uniform1f(I.loc(prog, "u_reach"), float(l2_reach(m_opt.metric)));
+        gl.Uniform1f(I.loc(prog, "u_pad"), float(m_opt.margin_px));
+        gl.Uniform1f(I.loc(prog, "u_z"), z);
+    };
+
     // Step 1: lower envelope of the distance tents; the stencil gets the class.
-    gl.UseProgram(I.tent_prog);
-    gl.Uniform2f(I.loc(I.tent_prog, "u_size"), float(w), float(h));
-    gl.Uniform1f(I.loc(I.tent_prog, "u_reach"), float(l2_reach(m_opt.metric)));
-    gl.Uniform1f(I.loc(I.tent_prog, "u_pad"), float(m_opt.margin_px));
+    use_tent_quads(I.tent_prog, 0.0f);
     gl.Uniform1f(I.loc(I.tent_prog, "u_depth_scale"), float(eps_max * 1.001 + 1e-6));
-    gl.Uniform1f(I.loc(I.tent_prog, "u_z"), 0.0f);
     gl.BindVertexArray(I.vao_tent);
     gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_tent);
     I.upload_quads(inst, I.tent_vertices);
@@ -590,11 +596,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
 
     // Restore the buffer where the tents were drawn: depth 1, stencil 0.
     const auto t2 = std::chrono::steady_clock::now();
-    gl.UseProgram(I.reset_prog);
-    gl.Uniform2f(I.loc(I.reset_prog, "u_size"), float(w), float(h));
-    gl.Uniform1f(I.loc(I.reset_prog, "u_reach"), float(l2_reach(m_opt.metric)));
-    gl.Uniform1f(I.loc(I.reset_prog, "u_pad"), float(m_opt.margin_px));
-    gl.Uniform1f(I.loc(I.reset_prog, "u_z"), 1.0f);
+    use_tent_quads(I.reset_prog, 1.0f);
     gl.BindVertexArray(I.vao_tent);
     gl.Enable(GL_DEPTH_TEST);
     gl.DepthFunc(GL_ALWAYS);
