@@ -108,6 +108,23 @@ void edge(RawMap& m, std::vector<LonLatE6> pts, uint32_t l, uint32_t r, uint64_t
     m.add_polyline(pts, l, r, 0, tlid, {0, static_cast<int64_t>(tlid)});
 }
 
+/// A one-level polygon map (level "l") of `units`, to be filled by ring().
+RawMap polygon_map(std::vector<RawUnit> units)
+{
+    RawMap m;
+    m.kind = RawMap::Kind::polygon_rings;
+    m.level_names = {"l"};
+    m.files = {"hand"};
+    m.units = std::move(units);
+    return m;
+}
+
+/// A ring of `unit`, on its left or right as walked.
+void ring(RawMap& m, std::vector<LonLatE6> r, uint32_t unit, bool unit_left)
+{
+    m.add_polyline(r, unit_left ? unit : no_unit, unit_left ? no_unit : unit, 0, 0, {0, unit});
+}
+
 /// Two coarse units A, B; B splits into B1 (north) and B2 (south) at the fine level:
 ///
 ///  (0,2)------(1,2)------(2,2)
@@ -191,18 +208,11 @@ TEST(MapBuilder, SharedPolygonEdgesMergeAndRingsCloseOnTheirSmallestVertex)
 {
     // Two squares A | B sharing an edge, and an island C inside B (a hole in B).
     //  (0,0)-(2,0)-(4,0); B has a hole (2.., as ring (3,1)(3,2)... scaled below.
-    RawMap m;
-    m.kind = RawMap::Kind::polygon_rings;
-    m.level_names = {"l"};
-    m.files = {"hand"};
-    m.units = {{{"A"}, std::nullopt, 4, {}}, {{"B"}, std::nullopt, 4, {}}, {{"C"}, std::nullopt, 1, {}}};
-    auto ring = [&](std::vector<LonLatE6> r, uint32_t unit, bool unit_left) {
-        m.add_polyline(r, unit_left ? unit : no_unit, unit_left ? no_unit : unit, 0, 0, {0, unit});
-    };
-    ring({ll(0, 0), ll(2, 0), ll(2, 4), ll(0, 4), ll(0, 0)}, 0, true);  // A, counter-clockwise
-    ring({ll(2, 0), ll(2, 4), ll(6, 4), ll(6, 0), ll(2, 0)}, 1, false); // B, clockwise
-    ring({ll(3, 1), ll(3, 3), ll(5, 3), ll(5, 1), ll(3, 1)}, 1, true);  // B's hole, clockwise
-    ring({ll(3, 1), ll(5, 1), ll(5, 3), ll(3, 3), ll(3, 1)}, 2, true);  // C
+    RawMap m = polygon_map({{{"A"}, std::nullopt, 4, {}}, {{"B"}, std::nullopt, 4, {}}, {{"C"}, std::nullopt, 1, {}}});
+    ring(m, {ll(0, 0), ll(2, 0), ll(2, 4), ll(0, 4), ll(0, 0)}, 0, true);  // A, counter-clockwise
+    ring(m, {ll(2, 0), ll(2, 4), ll(6, 4), ll(6, 0), ll(2, 0)}, 1, false); // B, clockwise
+    ring(m, {ll(3, 1), ll(3, 3), ll(5, 3), ll(5, 1), ll(3, 1)}, 1, true);  // B's hole, clockwise
+    ring(m, {ll(3, 1), ll(5, 1), ll(5, 3), ll(3, 3), ll(3, 1)}, 2, true);  // C
     const Built b = build(std::move(m));
     const auto& s = b.store("l");
     // The island's ring starts at its smallest vertex (3,1) and heads to the smaller neighbour (3,3).
@@ -230,18 +240,11 @@ TEST(MapBuilder, PolygonSegmentsJoinIntoOneEdgePerRunBetweenJunctions)
     //    |       /         | D  |
     //    |  (2,1)        (4,1)-(5,1)
     //  (0,0)---(2,0)-----------(6,0)
-    RawMap m;
-    m.kind = RawMap::Kind::polygon_rings;
-    m.level_names = {"l"};
-    m.files = {"hand"};
-    m.units = {{{"A"}, std::nullopt, 4, {}}, {{"B"}, std::nullopt, 4, {}}, {{"D"}, std::nullopt, 1, {}}};
-    auto ring = [&](std::vector<LonLatE6> r, uint32_t unit, bool unit_left) {
-        m.add_polyline(r, unit_left ? unit : no_unit, unit_left ? no_unit : unit, 0, 0, {0, unit});
-    };
-    ring({ll(0, 4), ll(0, 0), ll(2, 0), ll(2, 1), ll(3, 2), ll(2, 4), ll(0, 4)}, 0, true); // A, ccw
-    ring({ll(3, 2), ll(2, 1), ll(2, 0), ll(6, 0), ll(6, 4), ll(2, 4), ll(3, 2)}, 1, true); // B, ccw
-    ring({ll(5, 2), ll(5, 1), ll(4, 1), ll(4, 2), ll(5, 2)}, 1, true);                     // B's hole, cw
-    ring({ll(4, 2), ll(5, 2), ll(5, 1), ll(4, 1), ll(4, 2)}, 2, false);                    // D, cw
+    RawMap m = polygon_map({{{"A"}, std::nullopt, 4, {}}, {{"B"}, std::nullopt, 4, {}}, {{"D"}, std::nullopt, 1, {}}});
+    ring(m, {ll(0, 4), ll(0, 0), ll(2, 0), ll(2, 1), ll(3, 2), ll(2, 4), ll(0, 4)}, 0, true); // A, ccw
+    ring(m, {ll(3, 2), ll(2, 1), ll(2, 0), ll(6, 0), ll(6, 4), ll(2, 4), ll(3, 2)}, 1, true); // B, ccw
+    ring(m, {ll(5, 2), ll(5, 1), ll(4, 1), ll(4, 2), ll(5, 2)}, 1, true);                     // B's hole, cw
+    ring(m, {ll(4, 2), ll(5, 2), ll(5, 1), ll(4, 1), ll(4, 2)}, 2, false);                    // D, cw
     const Built b = build(std::move(m));
     EXPECT_EQ(b.result.edges, 4U);
     EXPECT_EQ(b.result.problems.at("overlapping_polygons"), 0U);
