@@ -1,6 +1,6 @@
 #pragma once
 /// @file parallel.hpp
-/// The two ways tigerlod splits work over threads. Results must not depend
+/// The ways tigerlod splits work over threads. Results must not depend
 /// on the split: callers write to per-index or per-range slots only.
 
 #include <algorithm>
@@ -72,6 +72,14 @@ template <class F> void parallel_each(size_t n, unsigned threads, F&& f)
     if (error) {
         std::rethrow_exception(error);
     }
+}
+
+/// Run f(begin, end) over [0, n) in blocks of `block` items, each block taken
+/// by the next free thread: for a few thousand items of unequal cost, too few
+/// for parallel_ranges' minimum chunk.
+template <class F> void parallel_blocks(size_t n, unsigned threads, size_t block, F&& f)
+{
+    parallel_each((n + block - 1) / block, threads, [&](size_t i) { f(i * block, std::min(n, (i + 1) * block)); });
 }
 
 } // namespace tigerlod

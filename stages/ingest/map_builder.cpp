@@ -227,11 +227,8 @@ std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned th
     };
     std::vector<Rec> recs(nrec);
     std::vector<std::pair<uint64_t, uint32_t>> keys(nrec);
-    // Blocks of 16 polylines to the next free thread: a few thousand rings of
-    // very unequal length are too few for parallel_for's ranges.
-    constexpr size_t per_block = 16;
-    parallel_each((g.edge_count() + per_block - 1) / per_block, threads, [&](size_t block) {
-        const size_t eb = block * per_block, ee = std::min(g.edge_count(), eb + per_block);
+    // A few thousand rings of very unequal length: 16 at a time.
+    parallel_blocks(g.edge_count(), threads, 16, [&](size_t eb, size_t ee) {
         for (size_t i = eb; i < ee; ++i) {
             const auto e = g.edge(i);
             const uint32_t u = g.left[i] != no_unit ? g.left[i] : g.right[i];
@@ -1060,12 +1057,9 @@ LevelStats process_level(const Graph& g, const RawMap& raw, const std::vector<Le
     };
     const size_t npoints = raw.kind == RawMap::Kind::lines ? 0 : lc.codes.size();
     std::vector<UnitPoint> unit_points(npoints);
-    // Blocks of units taken by the next free thread: a unit's cost varies with
-    // its boundary, and parallel_for would keep a few thousand units on one.
-    constexpr size_t units_per_block = 64;
-    parallel_each((npoints + units_per_block - 1) / units_per_block, options.threads, [&](size_t block) {
+    // A few thousand units whose cost varies with their boundary: 64 at a time.
+    parallel_blocks(npoints, options.threads, 64, [&](size_t b, size_t e) {
         std::vector<std::pair<GridPoint, GridPoint>> useg;
-        const size_t b = block * units_per_block, e = std::min(npoints, b + units_per_block);
         for (size_t code = b; code < e; ++code) {
             useg.clear();
             for (uint32_t ci : unit_chains[code]) {
