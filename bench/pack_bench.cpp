@@ -7,6 +7,7 @@
 //   zstd-3/19  that, compressed with zstd per payload (random access, as ours)
 // and decoded again on one thread, REPEAT rounds (default 5), the fastest kept.
 // Output: one JSON object on stdout.
+#include "core/bytes.hpp"
 #include "reader/reader.hpp"
 
 #include <zstd.h>
@@ -50,7 +51,7 @@ std::string varint_encode(const datatree::Geometry& g)
         put_varint(out, pts.size());
         for (const auto& p : pts) {
             for (const int64_t d : {int64_t{p.x} - prev.x, int64_t{p.y} - prev.y}) {
-                put_varint(out, (static_cast<uint64_t>(d) << 1) ^ static_cast<uint64_t>(d >> 63));
+                put_varint(out, zigzag(d));
             }
             prev = p;
         }
@@ -69,8 +70,8 @@ datatree::Geometry varint_decode(const std::string& in, size_t chains, size_t ve
         const uint64_t n = get_varint(p);
         for (uint64_t k = 0; k < n; ++k) {
             const uint64_t zx = get_varint(p), zy = get_varint(p);
-            prev.x = static_cast<int32_t>(prev.x + static_cast<int64_t>((zx >> 1) ^ (~(zx & 1) + 1)));
-            prev.y = static_cast<int32_t>(prev.y + static_cast<int64_t>((zy >> 1) ^ (~(zy & 1) + 1)));
+            prev.x = static_cast<int32_t>(prev.x + unzigzag(zx));
+            prev.y = static_cast<int32_t>(prev.y + unzigzag(zy));
             g.points.push_back(prev);
         }
         g.offsets.push_back(static_cast<uint32_t>(g.points.size()));

@@ -20,6 +20,17 @@
 
 namespace tigerlod {
 
+/// Signed to unsigned, small magnitudes to small values: 0, -1, 1, -2 ... ->
+/// 0, 1, 2, 3 ...
+constexpr uint64_t zigzag(int64_t v) noexcept
+{
+    return (static_cast<uint64_t>(v) << 1) ^ static_cast<uint64_t>(v >> 63);
+}
+constexpr int64_t unzigzag(uint64_t u) noexcept
+{
+    return static_cast<int64_t>((u >> 1) ^ (~(u & 1) + 1));
+}
+
 static_assert(std::endian::native == std::endian::little, "the formats are little-endian, as every target of ours");
 
 /// Appends values to a byte string.
@@ -54,7 +65,7 @@ class ByteWriter {
         m_out.push_back(static_cast<char>(v));
     }
     /// Signed values as zigzag LEB128.
-    void put_svarint(int64_t v) { put_varint((static_cast<uint64_t>(v) << 1) ^ static_cast<uint64_t>(v >> 63)); }
+    void put_svarint(int64_t v) { put_varint(zigzag(v)); }
     /// A varint byte length, then the bytes.
     void put_vstr(std::string_view s)
     {
@@ -123,11 +134,7 @@ class ByteReader {
         }
         return v;
     }
-    int64_t get_svarint(const char* what)
-    {
-        const uint64_t u = get_varint(what);
-        return static_cast<int64_t>((u >> 1) ^ (~(u & 1) + 1));
-    }
+    int64_t get_svarint(const char* what) { return unzigzag(get_varint(what)); }
     std::string get_vstr(const char* what)
     {
         const uint64_t n = get_varint(what);

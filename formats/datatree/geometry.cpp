@@ -22,16 +22,6 @@ namespace {
 
 constexpr uint8_t kind_geometry = 2;
 
-uint64_t zigzag(int64_t v) noexcept
-{
-    return (static_cast<uint64_t>(v) << 1) ^ static_cast<uint64_t>(v >> 63);
-}
-
-int64_t unzigzag(uint64_t u) noexcept
-{
-    return static_cast<int64_t>((u >> 1) ^ (~(u & 1) + 1));
-}
-
 /// How a payload's differences are coded (see SPEC.md). Each new point's
 /// difference (dx, dy) loses its `low` lowest bits to a packed bit stream;
 /// what is left, zigzagged, is zx and zy; when both are below 2^joint the
