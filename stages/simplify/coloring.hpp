@@ -19,6 +19,9 @@ struct ChainGeom {
     std::span<const GridPoint> points;
     double eps = 0;     ///< tolerance in grid units
     bool owned = false; ///< simplified here (not halo)
+    /// Segment i (points i, i + 1) is seen only if `keep` is empty or
+    /// keep[i] != 0: the parts of a halo chain out of every owned chain's reach are left out.
+    std::span<const uint8_t> keep = {};
 };
 
 /// A render tile: pixel (i, j) covers [x0 + i p, x0 + (i+1) p) x [y0 + j p, ...).

@@ -450,6 +450,10 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         // The tent's quad reaches eps (times the metric's L2 reach) plus the margin.
         const double reach = double(eps_px) * l2_reach(m_opt.metric) + m_opt.margin_px + 1.0;
         for (size_t k = 0; k + 1 < t.points.size(); ++k) {
+            if (!t.keep.empty() && !t.keep[k]) {
+                ++m_stats.tent_segments_skipped;
+                continue;
+            }
             TentInstance ti{};
             px(t.points[k], ti.ax, ti.ay);
             px(t.points[k + 1], ti.bx, ti.by);

@@ -34,6 +34,7 @@ struct TentChain {
     std::span<const GridPoint> points;
     double eps = 0; ///< grid units
     uint8_t cls = 0;
+    std::span<const uint8_t> keep = {}; ///< as ChainGeom::keep: segment i is drawn only if empty or keep[i]
 };
 
 /// A shortcut to test; `id` indexes the caller's result vector. Only the

@@ -73,6 +73,28 @@ double mean_segment_length(const ChainStore& store)
     return n ? sum / double(n) : 0.0;
 }
 
+/// How far from an owned chain a halo segment can matter at these
+/// tolerances, in grid units: the conflict graph looks 2 reaches away (eps
+/// in the metric plus the colouring margin), the far rule eps + a reach, the
+/// tents a reach plus a pixel beyond a tested shortcut, which stays within
+/// eps of its chain. The pixel is at most pixel_fraction x the largest eps.
+double halo_reach(std::span<const double> eps, const SimplifyOptions& opt)
+{
+    double eps_max = 0;
+    for (const double e : eps) {
+        eps_max = std::max(eps_max, e);
+    }
+    const double pixel = eps_max * opt.color.pixel_fraction;
+    const double reach = eps_max * l2_reach(opt.metric) + opt.color.margin_px * pixel;
+    return 2 * reach + eps_max * l2_reach(opt.metric) + 2 * pixel + 4;
+}
+
+/// The part of `keep` (from segments_in_reach) for chain `c`: empty if all of it takes part.
+std::span<const uint8_t> keep_of(const std::vector<uint8_t>& keep, const chains::ChainInfo& c)
+{
+    return keep.empty() ? std::span<const uint8_t>{} : std::span<const uint8_t>(keep).subspan(c.first, c.count);
+}
+
 /// Lazy rounds per chain before its remaining shortcuts are tested at once.
 constexpr uint32_t lazy_rounds = 3;
 
@@ -217,16 +239,91 @@ std::vector<double> chain_tolerances(const ChainStore& store, double eps_m, cons
     return eps;
 }
 
-ColorResult color_store(const ChainStore& store, double eps_m, const SimplifyOptions& opt)
+std::vector<uint8_t> segments_in_reach(const ChainStore& store, double reach)
 {
-    const auto eps = chain_tolerances(store, eps_m, opt);
+    GridBox box;
+    size_t owned_segments = 0;
+    bool halo = false;
+    for (const auto& c : store.chains) {
+        if (c.flags & chains::chain_halo) {
+            halo = true;
+            continue;
+        }
+        for (const GridPoint p : store.chain_points(c)) {
+            box.extend(p);
+        }
+        owned_segments += c.count > 0 ? c.count - 1 : 0;
+    }
+    if (!halo) {
+        return {};
+    }
+    std::vector<uint8_t> keep(store.points.size(), 0);
+    if (box.empty()) {
+        return keep;
+    }
+    // Cells at least `reach` wide, and few enough that marking them costs
+    // about as much as the owned segments (16 cells a segment).
+    const double w = double(box.max_x - box.min_x) + 2 * reach, h = double(box.max_y - box.min_y) + 2 * reach;
+    const double cell = std::max({reach, std::sqrt(w * h / (16.0 * double(std::max<size_t>(owned_segments, 1)))), 1.0});
+    const double ox = double(box.min_x) - reach - cell, oy = double(box.min_y) - reach - cell;
+    const auto nx = static_cast<int64_t>(std::ceil(w / cell)) + 3, ny = static_cast<int64_t>(std::ceil(h / cell)) + 3;
+    std::vector<uint8_t> near(size_t(nx * ny), 0);
+    auto at = [&](int64_t x, int64_t y) -> uint8_t* {
+        return x >= 0 && y >= 0 && x < nx && y < ny ? &near[size_t(y * nx + x)] : nullptr;
+    };
+    for (const auto& c : store.chains) {
+        if (c.flags & chains::chain_halo) {
+            continue;
+        }
+        const auto pts = store.chain_points(c);
+        for (size_t i = 0; i + 1 < pts.size(); ++i) {
+            keep[c.first + i] = 1;
+            cover_cells(pts[i].x, pts[i].y, pts[i + 1].x, pts[i + 1].y, reach, cell, ox, oy, [&](int64_t x, int64_t y) {
+                if (uint8_t* n = at(x, y)) {
+                    *n = 1;
+                }
+            });
+        }
+    }
+    for (const auto& c : store.chains) {
+        if (!(c.flags & chains::chain_halo)) {
+            continue;
+        }
+        const auto pts = store.chain_points(c);
+        for (size_t i = 0; i + 1 < pts.size(); ++i) {
+            bool hit = false;
+            cover_cells(pts[i].x, pts[i].y, pts[i + 1].x, pts[i + 1].y, 0.0, cell, ox, oy, [&](int64_t x, int64_t y) {
+                const uint8_t* n = at(x, y);
+                hit = hit || (n && *n);
+            });
+            keep[c.first + i] = hit ? 1 : 0;
+        }
+    }
+    return keep;
+}
+
+namespace {
+
+/// color_store with the tolerances and the segments in reach already known.
+ColorResult color_chains(const ChainStore& store, std::span<const double> eps, const std::vector<uint8_t>& keep,
+                         const SimplifyOptions& opt)
+{
     std::vector<ChainGeom> geoms(store.chains.size());
     for (size_t i = 0; i < store.chains.size(); ++i) {
-        geoms[i] = {store.chain_points(store.chains[i]), eps[i], !(store.chains[i].flags & chains::chain_halo)};
+        const auto& c = store.chains[i];
+        geoms[i] = {store.chain_points(c), eps[i], !(c.flags & chains::chain_halo), keep_of(keep, c)};
     }
     ColorOptions copt = opt.color;
     copt.metric = opt.metric;
     return color_tiles(geoms, copt, opt.threads);
+}
+
+} // namespace
+
+ColorResult color_store(const ChainStore& store, double eps_m, const SimplifyOptions& opt)
+{
+    const auto eps = chain_tolerances(store, eps_m, opt);
+    return color_chains(store, eps, segments_in_reach(store, halo_reach(eps, opt)), opt);
 }
 
 ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyOptions& opt, Raster& raster,
@@ -235,9 +332,10 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     st.eps_m = eps_m;
     const auto eps = chain_tolerances(store, eps_m, opt);
     auto t0 = Clock::now();
+    const auto keep = segments_in_reach(store, halo_reach(eps, opt));
     ColorResult own_colors;
     if (!colors) {
-        own_colors = color_store(store, eps_m, opt);
+        own_colors = color_chains(store, eps, keep, opt);
         colors = &own_colors;
     }
     st.seconds_color += since(t0);
@@ -373,7 +471,11 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     // a 10 km diagonal at 1 m covers 25 M cells of its box, measured at 17 GB).
     for (uint32_t c = 0; opt.metric == Metric::l2 && c < store.chains.size(); ++c) {
         const auto pts = store.chain_points(store.chains[c]);
+        const auto use = keep_of(keep, store.chains[c]);
         for (uint32_t i = 0; i + 1 < pts.size(); ++i) {
+            if (!use.empty() && !use[i]) {
+                continue;
+            }
             const auto at = static_cast<uint32_t>(grid_segs.size());
             grid_segs.push_back({c, i});
             cover_cells(pts[i].x, pts[i].y, pts[i + 1].x, pts[i + 1].y, 0.0, cell, 0.0, 0.0,
@@ -516,7 +618,8 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
                 const auto& tile = colors->tiles[t];
                 std::vector<TentChain> tents(tile.chains.size());
                 for (size_t m = 0; m < tile.chains.size(); ++m) {
-                    tents[m] = {store.chain_points(store.chains[tile.chains[m]]), eps[tile.chains[m]], tile.classes[m]};
+                    const auto& c = store.chains[tile.chains[m]];
+                    tents[m] = {store.chain_points(c), eps[tile.chains[m]], tile.classes[m], keep_of(keep, c)};
                 }
                 raster.run_tile(tile.spec, tents, per_tile[t], fails);
             }
@@ -670,7 +773,11 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
                 continue;
             }
             const auto pts = store.chain_points(store.chains[i]);
+            const auto use = keep_of(keep, store.chains[i]);
             for (size_t e = 0; e + 1 < pts.size(); ++e) {
+                if (!use.empty() && !use[e]) {
+                    continue;
+                }
                 segs.push_back({pts[e], pts[e + 1], static_cast<uint32_t>(tags.size())});
                 tags.push_back({UINT32_MAX, UINT32_MAX, i});
             }

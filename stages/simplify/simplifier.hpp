@@ -69,6 +69,16 @@ struct ToleranceStats {
 /// The tolerance of each chain of `store` in grid units for `eps_m` ground metres.
 std::vector<double> chain_tolerances(const chains::ChainStore& store, double eps_m, const SimplifyOptions& opt);
 
+/// Per point of `store`, whether the segment starting there takes part:
+/// every owned segment, and the halo segments within `reach` grid units of
+/// an owned one. The halo holds whole chains with any part near the
+/// partition (a kilometre, say), most of whose length is out of reach at
+/// any tolerance of the ladder; colouring, gridding and drawing it cost as
+/// much as the owned chains did. Decided by cells, so some farther segments
+/// stay in and none within reach is left out. Empty when the store has no
+/// halo: every segment takes part.
+std::vector<uint8_t> segments_in_reach(const chains::ChainStore& store, double reach);
+
 /// Colour `store` at `eps_m` (what tigerlod-color writes).
 ColorResult color_store(const chains::ChainStore& store, double eps_m, const SimplifyOptions& opt);
 

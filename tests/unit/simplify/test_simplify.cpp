@@ -397,6 +397,37 @@ TEST(Simplify, IslandInABayIsNotJumped)
     EXPECT_EQ(count_intersections({&out}), 0U);
 }
 
+TEST(Simplify, HaloChainConstrainsWhereItComesNearAndOnlyThere)
+{
+    // An owned chain dipping 800 below the line between its ends, and a
+    // neighbour's (halo) chain coming down from 9 km away to 300 below that
+    // line: the owned chain's shortcut along the line would cross it.
+    const Pts owned{{0, 0}, {5000, -800}, {10000, 0}};
+    const Pts halo{{900000, 900000}, {5000, 100000}, {5000, -300}};
+    MapBuilder m;
+    m.chain(1, owned).chain(2, halo, "N", "M", "", chains::chain_halo);
+
+    // Only the halo's last segment is within reach of the owned chain.
+    const auto keep = segments_in_reach(m.s, 2000);
+    ASSERT_EQ(keep.size(), m.s.points.size());
+    const auto& c1 = m.s.chains[0];
+    const auto& c2 = m.s.chains[1];
+    ASSERT_FALSE(c1.flags & chains::chain_halo);
+    EXPECT_EQ(keep[c1.first], 1);
+    EXPECT_EQ(keep[c1.first + 1], 1);
+    EXPECT_EQ(keep[c2.first], 0);
+    EXPECT_EQ(keep[c2.first + 1], 1);
+    EXPECT_TRUE(segments_in_reach(MapBuilder().chain(1, owned).s, 2000).empty()) << "no halo: everything takes part";
+
+    // At 10 m (1000 units) the dip is within eps of the line, but the halo
+    // keeps the owned chain from taking the shortcut; without it, it does.
+    const auto out = run(m.s, 10.0);
+    EXPECT_EQ(points_of(out, 1), owned);
+    ASSERT_EQ(out.chains.size(), 1U) << "the halo is not written";
+    const auto alone = run(MapBuilder().chain(1, owned).s, 10.0);
+    EXPECT_EQ(points_of(alone, 1), (Pts{{0, 0}, {10000, 0}}));
+}
+
 TEST(Simplify, PointConstraintKeepsItsSideAndIsLostWithoutConstraints)
 {
     const Pts a{{0, 0}, {500, 80}, {1000, 0}};
