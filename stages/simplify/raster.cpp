@@ -337,11 +337,13 @@ Raster::Raster(gl::Context& ctx, const RasterOptions& opt)
                                 " depth-stencil framebuffer is not supported by " + ctx.describe());
     }
     gl.Viewport(0, 0, s, s);
+    gl.Disable(GL_SCISSOR_TEST); // the whole buffer; tiles clip to their box
     gl.ClearDepth(1.0);
     gl.ClearStencil(0);
     gl.ClearColor(0, 0, 0, 0);
     gl.Clear(GL_DEPTH_BUFFER_BIT | GL_STENCIL_BUFFER_BIT | GL_COLOR_BUFFER_BIT);
     gl.Enable(GL_STENCIL_TEST);
+
     if (gl.GetError() != GL_NO_ERROR) {
         throw environment_error("OpenGL: setting up the raster engine failed on " + ctx.describe());
     }
@@ -477,6 +479,19 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     m_stats.tent_segments += inst.size();
     const auto w = static_cast<GLsizei>(tile.width), h = static_cast<GLsizei>(tile.height);
     gl.Viewport(0, 0, w, h);
+    // Every pass is clipped to the box of the marked cells: no tested
+    // fragment falls outside it, so what is drawn there cannot change a
+    // result. llvmpipe's work per tile grows with the area it rasterizes,
+    // not with what is drawn: at 1 m on the tract set (178 k tiles of 4096
+    // pixels, most with a few short shortcuts) the compliance step took 9.1 s
+    // of CPU without the box and 4.3 s with it.
+    const auto clip = [](int64_t v, GLsizei hi) { return static_cast<GLsizei>(std::clamp<int64_t>(v, 0, hi)); };
+    const GLsizei sx0 = clip(near_x0 * static_cast<int64_t>(kCell), w),
+                  sy0 = clip(near_y0 * static_cast<int64_t>(kCell), h);
+    const GLsizei sx1 = std::max(sx0, clip((near_x1 + 1) * static_cast<int64_t>(kCell), w));
+    const GLsizei sy1 = std::max(sy0, clip((near_y1 + 1) * static_cast<int64_t>(kCell), h));
+    gl.Enable(GL_SCISSOR_TEST); // off again at the end: the context may serve other engines
+    gl.Scissor(sx0, sy0, sx1 - sx0, sy1 - sy0);
 
     // The tents' quads, as tent_vs places them: the tent pass and the reset
     // pass share it, so both cover the same pixels.
@@ -562,7 +577,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         // repeat until nothing changes (a segment may hide another).
         gl.ColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
         std::vector<uint8_t> removed(segs.size(), 0);
-        std::vector<uint8_t> pixels(size_t(w) * size_t(h) * 4);
+        std::vector<uint8_t> pixels(size_t(sx1 - sx0) * size_t(sy1 - sy0) * 4);
         for (;;) {
             ++m_stats.readback_rounds;
             gl.Clear(GL_COLOR_BUFFER_BIT);
@@ -575,7 +590,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
                 }
             }
             gl.PixelStorei(GL_PACK_ALIGNMENT, 1);
-            gl.ReadPixels(0, 0, w, h, GL_RGBA, GL_UNSIGNED_BYTE, pixels.data());
+            gl.ReadPixels(sx0, sy0, sx1 - sx0, sy1 - sy0, GL_RGBA, GL_UNSIGNED_BYTE, pixels.data());
             bool changed = false;
             for (size_t i = 0; i < pixels.size(); i += 4) {
                 const uint32_t c =
@@ -611,6 +626,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     if (!inst.empty()) {
         draw_quads(gl, 0, inst.size());
     }
+    gl.Disable(GL_SCISSOR_TEST);
     const GLenum err = gl.GetError();
     if (err != GL_NO_ERROR) {
         throw environment_error("OpenGL error " + std::to_string(err) + " while rendering a tile on " +
