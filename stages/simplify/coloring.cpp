@@ -59,7 +59,7 @@ std::vector<Seg> make_segments(std::span<const ChainGeom> chains, double pixel, 
         const auto& pts = chains[c].points;
         const double r = reach_radius(chains[c].eps, pixel, opt);
         for (size_t i = 0; i + 1 < pts.size(); ++i) {
-            if (!chains[c].keep.empty() && !chains[c].keep[i]) {
+            if (!takes_part(chains[c].keep, i)) {
                 continue;
             }
             segs.push_back({double(pts[i].x), double(pts[i].y), double(pts[i + 1].x), double(pts[i + 1].y), c, r});

@@ -24,6 +24,12 @@ struct ChainGeom {
     std::span<const uint8_t> keep = {};
 };
 
+/// Whether segment i takes part under a `keep` mask as in ChainGeom (empty: all do).
+inline bool takes_part(std::span<const uint8_t> keep, size_t i) noexcept
+{
+    return keep.empty() || keep[i] != 0;
+}
+
 /// A render tile: pixel (i, j) covers [x0 + i p, x0 + (i+1) p) x [y0 + j p, ...).
 struct TileSpec {
     double x0 = 0, y0 = 0, pixel = 1;

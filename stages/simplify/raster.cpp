@@ -343,7 +343,6 @@ Raster::Raster(gl::Context& ctx, const RasterOptions& opt)
     gl.ClearColor(0, 0, 0, 0);
     gl.Clear(GL_DEPTH_BUFFER_BIT | GL_STENCIL_BUFFER_BIT | GL_COLOR_BUFFER_BIT);
     gl.Enable(GL_STENCIL_TEST);
-
     if (gl.GetError() != GL_NO_ERROR) {
         throw environment_error("OpenGL: setting up the raster engine failed on " + ctx.describe());
     }
@@ -452,7 +451,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         // The tent's quad reaches eps (times the metric's L2 reach) plus the margin.
         const double reach = double(eps_px) * l2_reach(m_opt.metric) + m_opt.margin_px + 1.0;
         for (size_t k = 0; k + 1 < t.points.size(); ++k) {
-            if (!t.keep.empty() && !t.keep[k]) {
+            if (!takes_part(t.keep, k)) {
                 ++m_stats.tent_segments_skipped;
                 continue;
             }

@@ -85,7 +85,9 @@ double halo_reach(std::span<const double> eps, const SimplifyOptions& opt)
         eps_max = std::max(eps_max, e);
     }
     const double pixel = eps_max * opt.color.pixel_fraction;
-    const double reach = eps_max * l2_reach(opt.metric) + opt.color.margin_px * pixel;
+    ColorOptions copt = opt.color;
+    copt.metric = opt.metric;
+    const double reach = reach_radius(eps_max, pixel, copt);
     return 2 * reach + eps_max * l2_reach(opt.metric) + 2 * pixel + 4;
 }
 
@@ -473,7 +475,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         const auto pts = store.chain_points(store.chains[c]);
         const auto use = keep_of(keep, store.chains[c]);
         for (uint32_t i = 0; i + 1 < pts.size(); ++i) {
-            if (!use.empty() && !use[i]) {
+            if (!takes_part(use, i)) {
                 continue;
             }
             const auto at = static_cast<uint32_t>(grid_segs.size());
@@ -775,7 +777,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             const auto pts = store.chain_points(store.chains[i]);
             const auto use = keep_of(keep, store.chains[i]);
             for (size_t e = 0; e + 1 < pts.size(); ++e) {
-                if (!use.empty() && !use[e]) {
+                if (!takes_part(use, e)) {
                     continue;
                 }
                 segs.push_back({pts[e], pts[e + 1], static_cast<uint32_t>(tags.size())});
