@@ -8,7 +8,10 @@
 #include <GeographicLib/TransverseMercator.hpp>
 
 #include <cmath>
+#include <algorithm>
 #include <cstdio>
+#include <numbers>
+#include <type_traits>
 #include <variant>
 
 namespace tigerlod {
@@ -155,6 +158,43 @@ double Projection::scale(double lon_deg, double lat_deg) const noexcept
     double x = 0, y = 0, gamma = 0, k = 0;
     std::visit([&](const auto& pr) { pr.Forward(m_impl->lon0, lat_deg, lon_deg, x, y, gamma, k); }, m_impl->proj);
     return k;
+}
+
+double Projection::lattice_separation_m(double step_deg, double lat_lo_deg, double lat_hi_deg) const noexcept
+{
+    const auto& p = m_impl->p;
+    // Widened a little, so the bound also holds on the short projected segment
+    // between two points near the band's edge.
+    const double lo = std::max(-90.0, lat_lo_deg - 0.01), hi = std::min(90.0, lat_hi_deg + 0.01);
+    const double cos_min = std::cos(std::max(std::fabs(lo), std::fabs(hi)) * std::numbers::pi / 180);
+    if (!(lo <= hi) || !(cos_min > 1e-6)) {
+        return 0.0;
+    }
+    // Two distinct lattice points differ by whole steps north-south or
+    // east-west; a step is at least a(1 - e^2) times its angle north-south (the
+    // meridian's radius of curvature) and a cos(lat) east-west.
+    const double e2 = p.f * (2 - p.f);
+    const double step = step_deg * std::numbers::pi / 180 * p.a_m;
+    // The smallest scales over the band east-west (k) and north-south (h).
+    // Transverse Mercator is conformal with k >= k0 everywhere. The conics' k
+    // depends on latitude alone, with its minimum on the latitude of origin;
+    // LCC is conformal, Albers scales north-south by 1/k.
+    double k_min = 0.0, h_min = 0.0;
+    std::visit(
+        [&](const auto& pr) {
+            using T = std::decay_t<decltype(pr)>;
+            if constexpr (std::is_same_v<T, GeographicLib::TransverseMercator>) {
+                k_min = h_min = pr.CentralScale();
+            } else {
+                const double k_lo = scale(m_impl->lon0, lo), k_hi = scale(m_impl->lon0, hi);
+                const double origin = pr.OriginLatitude();
+                k_min = origin > lo && origin < hi ? pr.CentralScale() : std::min(k_lo, k_hi);
+                h_min = std::is_same_v<T, GeographicLib::AlbersEqualArea> ? 1 / std::max(k_lo, k_hi) : k_min;
+            }
+        },
+        m_impl->proj);
+    const double d = 0.99 * std::min(step * (1 - e2) * h_min, step * cos_min * k_min);
+    return std::isfinite(d) && d > 0 ? d : 0.0;
 }
 
 std::string Projection::describe() const

@@ -66,6 +66,14 @@ class Projection {
     /// along the parallel for the conics).
     double scale(double lon_deg, double lat_deg) const noexcept;
 
+    /// A lower bound on the projected distance, in metres, between any two
+    /// distinct points of a lon/lat lattice of step `step_deg` that lie in the
+    /// band of latitudes [lat_lo_deg, lat_hi_deg]: the smaller of the lattice's
+    /// north-south and east-west ground steps there, each times the smallest
+    /// scale of the projection in that direction over the band (slightly
+    /// widened), with a 1% margin. 0 where the band reaches a pole.
+    double lattice_separation_m(double step_deg, double lat_lo_deg, double lat_hi_deg) const noexcept;
+
     /// A one-line description, e.g. "albers lon0=-96 lat0=23 stdlat=29.5,45.5 grid=0.01m".
     std::string describe() const;
 

@@ -236,8 +236,13 @@ int IngestStage::run(const StageContext& ctx)
     write_file_atomic(out.path() / "manifest.json", manifest.dump(2) + "\n");
 
     const double seconds = t_build - t0;
+    json phases = json::object();
+    for (const auto& [phase, s] : result.seconds) {
+        phases[phase] = s;
+    }
     json timings = {{"read_s", t_read - t0},
                     {"build_s", t_build - t_read},
+                    {"build_phases_s", phases},
                     {"total_s", seconds},
                     {"threads", threads},
                     {"vertices_per_s", seconds > 0 ? static_cast<double>(points_read) / seconds : 0.0},

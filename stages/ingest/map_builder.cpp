@@ -7,7 +7,10 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
+#include <mutex>
+#include <numbers>
 #include <numeric>
 #include <thread>
 #include <unordered_map>
@@ -114,9 +117,14 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
     occ = {};
     g.grid.resize(g.keys.size());
     std::vector<uint8_t> bad(g.keys.size(), 0);
+    std::mutex lat_mutex;
+    int32_t lat_lo = INT32_MAX, lat_hi = INT32_MIN;
     parallel_for(g.keys.size(), threads, [&](size_t b, size_t e) {
+        int32_t lo = INT32_MAX, hi = INT32_MIN;
         for (size_t v = b; v < e; ++v) {
             const LonLatE6 ll = unpack_key(g.keys[v]);
+            lo = std::min(lo, ll.lat);
+            hi = std::max(hi, ll.lat);
             auto gp = proj.to_grid(ll.lon * 1e-6, ll.lat * 1e-6);
             if (gp) {
                 g.grid[v] = *gp;
@@ -124,6 +132,9 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
                 bad[v] = 1;
             }
         }
+        const std::lock_guard lock(lat_mutex);
+        lat_lo = std::min(lat_lo, lo);
+        lat_hi = std::max(lat_hi, hi);
     });
     if (auto it = std::find(bad.begin(), bad.end(), 1); it != bad.end()) {
         const auto v = static_cast<uint32_t>(it - bad.begin());
@@ -145,9 +156,14 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
         throw input_error(where + ": " + buf + proj.describe());
     }
     // Distinct snapped points that round onto one grid point become one vertex.
+    // That needs points closer than a grid cell's diagonal, which the 1e-6
+    // degree lattice cannot have where its projected spacing is wider (a 1 cm
+    // grid anywhere short of the polar caps): then the search is skipped.
     std::vector<uint32_t> remap(g.keys.size());
     std::iota(remap.begin(), remap.end(), 0U);
-    {
+    const double spacing =
+        g.keys.empty() ? 0.0 : proj.lattice_separation_m(1e-6, lat_lo * 1e-6, lat_hi * 1e-6) / proj.params().grid_m;
+    if (!(spacing > std::numbers::sqrt2)) {
         std::vector<std::pair<uint64_t, uint32_t>> by_grid(g.keys.size());
         for (uint32_t v = 0; v < g.keys.size(); ++v) {
             by_grid[v] = {(uint64_t{static_cast<uint32_t>(g.grid[v].x) ^ 0x80000000U} << 32) |
@@ -1205,11 +1221,19 @@ BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptio
     result.input_vertices = raw.points_read;
     problems.count("empty_geometries", raw.empty_geometries);
     auto note = [&](const std::string& what) { log_progress(options, what); };
+    auto last = std::chrono::steady_clock::now();
+    auto phase = [&](std::string name) {
+        const auto now = std::chrono::steady_clock::now();
+        result.seconds.emplace_back(std::move(name), std::chrono::duration<double>(now - last).count());
+        last = now;
+    };
     Graph g = make_graph(raw, projection, options.threads, problems);
+    phase("intern_project");
     note("interned and projected " + std::to_string(g.keys.size()) + " vertices");
     if (raw.kind != RawMap::Kind::edges) {
         join_pieces(g, merge_segments(g, raw, options.threads, problems));
     }
+    phase("merge_join");
     note("merged shared segments: " + std::to_string(g.edge_count()) + " edges");
     result.unique_vertices = g.keys.size();
     result.edges = g.edge_count();
@@ -1242,12 +1266,14 @@ BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptio
         bad_edges.push_back(f.first);
         bad_edges.push_back(f.second);
     }
+    phase("planarity");
     note("checked planarity");
     std::sort(bad_edges.begin(), bad_edges.end());
     bad_edges.erase(std::unique(bad_edges.begin(), bad_edges.end()), bad_edges.end());
 
     for (size_t L = 0; L < nlev; ++L) {
         result.levels.push_back(process_level(g, raw, lcs, L, bad_edges, projection, options, problems, sink));
+        phase("level_" + raw.level_names[L]);
     }
     return result;
 }

@@ -27,6 +27,7 @@
 #include <functional>
 #include <map>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace tigerlod::ingest {
@@ -64,6 +65,8 @@ struct BuildResult {
     /// Edges of the cleaned graph: the TIGER edges, or for polygons and lines
     /// the runs between vertices where the sides change or other than two meet.
     uint64_t edges = 0;
+    /// Wall seconds of each phase, in order (for ingest-timings.json; varies by run).
+    std::vector<std::pair<std::string, double>> seconds;
 };
 
 /// Called once per finished chain store. Levels come coarsest first, but within

@@ -46,11 +46,11 @@ struct Built {
 };
 
 /// Build, collecting the stores (the sink runs on several threads) in (level, partition) order.
-Built build(RawMap raw, BuildOptions o)
+Built build(RawMap raw, BuildOptions o, const Projection& projection = proj())
 {
     Built b;
     std::mutex m;
-    b.result = build_map(std::move(raw), proj(), o, [&](const chains::ChainStore& s) {
+    b.result = build_map(std::move(raw), projection, o, [&](const chains::ChainStore& s) {
         std::lock_guard lock(m);
         b.stores.push_back(s);
     });
@@ -266,6 +266,35 @@ TEST(MapBuilder, SnappingMergesNearPointsAndSpikesAreRepaired)
     EXPECT_EQ(b.result.problems.at("duplicate_points"), 1U);
     EXPECT_EQ(b.result.problems.at("spikes"), 1U);
     EXPECT_EQ(describe(b.store("lines")), (std::vector<std::string>{"| 0,0 1,0 2,0 3,0"}));
+}
+
+TEST(MapBuilder, DistinctPointsThatRoundOntoOneGridPointBecomeOneVertexOnACoarseGrid)
+{
+    // Line b ends one micro-degree (11 cm) north of a vertex of line a.
+    const LonLatE6 end{ll(1, 0).lon, ll(1, 0).lat + 1};
+    auto map = [&] {
+        RawMap m;
+        m.kind = RawMap::Kind::lines;
+        m.level_names = {"lines"};
+        m.files = {"hand"};
+        m.add_polyline(std::vector<LonLatE6>{ll(0, 0), ll(1, 0), ll(2, 0)}, no_unit, no_unit, 0, 0, {0, 0});
+        m.add_polyline(std::vector<LonLatE6>{ll(1, 1), end}, no_unit, no_unit, 0, 0, {0, 1});
+        return m;
+    };
+    BuildOptions o;
+    o.threads = 2;
+    // On the 1 cm grid they stay apart: two chains, nothing merged.
+    const Built fine = build(map(), o);
+    EXPECT_EQ(fine.result.problems.at("merged_vertices"), 0U);
+    EXPECT_EQ(fine.store("lines").chains.size(), 2U);
+    // On a 1 m grid both round onto one grid point: b ends on a, which splits there.
+    ProjectionParams coarse;
+    coarse.grid_m = 1.0;
+    const Projection metre(coarse);
+    ASSERT_EQ(metre.to_grid(end.lon * 1e-6, end.lat * 1e-6), metre.to_grid(ll(1, 0).lon * 1e-6, ll(1, 0).lat * 1e-6));
+    const Built merged = build(map(), o, metre);
+    EXPECT_EQ(merged.result.problems.at("merged_vertices"), 1U);
+    EXPECT_EQ(merged.store("lines").chains.size(), 3U);
 }
 
 TEST(MapBuilder, CrossingsTouchesAndOverlapsAreFoundAndMarked)
