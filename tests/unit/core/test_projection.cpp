@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <limits>
+#include <random>
 #include <numbers>
 
 using namespace tigerlod;
@@ -77,4 +78,52 @@ TEST(Projection, LatticeSeparationIsALowerBoundAndNearlyTight)
     // degree, times k at 39.99 (k grows away from the origin at 37.9).
     const double ew = 6378137.0 * std::cos(40.01 * std::numbers::pi / 180) * 1e-6 * std::numbers::pi / 180;
     EXPECT_NEAR(proj.lattice_separation_m(1e-6, 40.0, 40.0), 0.99 * ew * proj.scale(-96, 39.99), 1e-12);
+}
+
+TEST(Projection, FastAlbersRoundsAsGeographicLibDoes)
+{
+    const Projection conus{ProjectionParams{}};
+    ASSERT_TRUE(conus.fast_albers());
+    ProjectionParams scaled;
+    scaled.k0 = 0.9996; // GeographicLib's k0 is not Snyder's: no fast path
+    EXPECT_FALSE(Projection(scaled).fast_albers());
+    ProjectionParams lcc;
+    lcc.kind = ProjectionParams::Kind::lcc;
+    EXPECT_FALSE(Projection(lcc).fast_albers());
+    ProjectionParams one = lcc; // one standard parallel: not taken
+    one.kind = ProjectionParams::Kind::albers;
+    one.stdlat1_deg = one.stdlat2_deg = 40;
+    EXPECT_FALSE(Projection(one).fast_albers());
+    ProjectionParams south; // Australian Albers: a cone opening south, not taken
+    south.stdlat1_deg = -18;
+    south.stdlat2_deg = -36;
+    south.lat0_deg = 0;
+    south.lon0_deg = 132;
+    EXPECT_FALSE(Projection(south).fast_albers());
+    ProjectionParams north; // Alaska Albers on a 1 mm grid
+    north.stdlat1_deg = 55;
+    north.stdlat2_deg = 65;
+    north.lat0_deg = 50;
+    north.lon0_deg = -154;
+    north.grid_m = 0.001;
+    const Projection alaska(north);
+    ASSERT_TRUE(alaska.fast_albers());
+
+    // Micro-degree points as ingest projects them, over the globe and densely
+    // over CONUS, where a 1 cm grid has about 2e-3 of them within the guard.
+    std::mt19937_64 rng(11);
+    size_t differ = 0, points = 0;
+    for (const Projection* p : {&conus, &alaska}) {
+        for (int i = 0; i < 400000; ++i) {
+            const bool world = i % 4 == 0;
+            const double lon = (world ? -180e6 + double(rng() % 360000001) : -125e6 + double(rng() % 58000001)) * 1e-6;
+            const double lat = (world ? -89e6 + double(rng() % 178000001) : 24e6 + double(rng() % 26000001)) * 1e-6;
+            differ += p->to_grid(lon, lat) != p->to_grid_reference(lon, lat);
+            ++points;
+        }
+    }
+    EXPECT_EQ(differ, 0U) << "of " << points;
+    // Outside the domain both say so.
+    EXPECT_FALSE(conus.to_grid(181, 0));
+    EXPECT_FALSE(conus.to_grid(0, std::nan("")));
 }
