@@ -181,12 +181,35 @@ std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRe
         seg_start.push_back(i);
         cell_start.push_back(cells.size());
         const auto first = static_cast<std::ptrdiff_t>(cells.size());
+        // Cells are at least `distance` wide and segments mostly far shorter:
+        // a segment inside the cell that the last one covered alone adds
+        // nothing, which two comparisons tell without covering it.
+        int64_t in_x0 = 1, in_x1 = 0, in_y0 = 1, in_y1 = 0; // empty
+        auto inside = [&](GridPoint p) { return p.x >= in_x0 && p.x <= in_x1 && p.y >= in_y0 && p.y <= in_y1; };
         for (; i < segs.size() && segs[i].chain == segs[seg_start.back()].chain; ++i) {
+            if (inside(segs[i].a) && inside(segs[i].b)) {
+                continue;
+            }
+            uint64_t only = 0;
+            int emitted = 0;
             grid.cover(segs[i].a, segs[i].b, 0, [&](uint64_t k) {
+                only = k;
+                ++emitted;
                 if (cells.size() == static_cast<size_t>(first) || cells.back() != k) {
                     cells.push_back(k);
                 }
             });
+            if (emitted == 1) {
+                const int64_t cx = static_cast<int64_t>(only >> 32) - 1,
+                              cy = static_cast<int64_t>(only & 0xFFFFFFFFU) - 1;
+                in_x0 = grid.ox + cx * grid.c;
+                in_x1 = in_x0 + grid.c - 1;
+                in_y0 = grid.oy + cy * grid.c;
+                in_y1 = in_y0 + grid.c - 1;
+            } else {
+                in_x0 = in_y0 = 1;
+                in_x1 = in_y1 = 0;
+            }
         }
         std::sort(cells.begin() + first, cells.end());
         cells.erase(std::unique(cells.begin() + first, cells.end()), cells.end());

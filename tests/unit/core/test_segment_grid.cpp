@@ -81,6 +81,21 @@ TEST(SegmentGrid, NearFindsChainsWithinTheDistanceOnly)
     EXPECT_EQ(near, (std::vector<std::pair<uint32_t, uint32_t>>{{0, 1}, {1, 0}}));
 }
 
+TEST(SegmentGrid, NearFollowsALongChainOfShortSegmentsThroughEveryCell)
+{
+    // Part 0 owns a chain of 100 segments, 30 units each, along y=0 to x=3000
+    // (cells are 100 wide); part 1 owns a segment 60 above its far end and one
+    // 5000 above its start.
+    std::vector<SegmentRef> segs;
+    for (int32_t k = 0; k < 100; ++k) {
+        segs.push_back({{30 * k, 0}, {30 * (k + 1), 0}, 0, 0});
+    }
+    segs.push_back({{2950, 60}, {3050, 60}, 1, 1});
+    segs.push_back({{0, 5000}, {100, 5000}, 2, 1});
+    const auto near = find_near(segs, 100.0, 1);
+    EXPECT_EQ(near, (std::vector<std::pair<uint32_t, uint32_t>>{{0, 1}, {1, 0}}));
+}
+
 TEST(SegmentGrid, BordersReachBothParts)
 {
     // Part 2 owns nothing near chain 0, but chain 0 (owned by part 0) bounds part 2: it is in part 2's halo.
