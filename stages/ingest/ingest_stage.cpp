@@ -13,10 +13,14 @@
 #include <yaml-cpp/yaml.h>
 
 #include <atomic>
+#include <cstdlib>
 #include <cstdio>
 #include <future>
 #include <sys/resource.h>
 #include <thread>
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
 
 namespace fs = std::filesystem;
 using json = nlohmann::ordered_json;
@@ -113,6 +117,14 @@ std::string IngestStage::help_notes() const
 
 int IngestStage::run(const StageContext& ctx)
 {
+#ifdef __GLIBC__
+    // One malloc arena for every thread: the levels' threads then reuse what
+    // the interning and the merge freed (measured: peak RSS 430-460 MB with
+    // an arena per thread, 386-390 MB with one, the time within the noise).
+    if (std::getenv("MALLOC_ARENA_MAX") == nullptr) {
+        mallopt(M_ARENA_MAX, 1);
+    }
+#endif
     IngestConfig cfg = load_config(m_config);
     if (m_halo_m >= 0) {
         cfg.halo_m = m_halo_m;

@@ -9,6 +9,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <exception>
 #include <mutex>
 #include <numbers>
 #include <numeric>
@@ -461,35 +462,57 @@ struct Level {
     std::span<const uint32_t> chain(const LevelChain& c) const noexcept { return {verts.data() + c.first, c.count}; }
 };
 
-Level build_level(const Graph& g, const RawMap& raw, const std::vector<LevelCodes>& lcs, size_t L)
+/// The vertices where edges end, in increasing order, and the index of each
+/// vertex among them (`none` for the others): what the levels' walks need,
+/// so that their tables go by edge ends, not by vertices.
+struct EdgeEnds {
+    std::vector<uint32_t> vertex;
+    std::vector<uint32_t> of_vertex;
+
+    explicit EdgeEnds(const Graph& g) : of_vertex(g.keys.size(), none)
+    {
+        for (size_t e = 0; e < g.edge_count(); ++e) {
+            const auto ev = g.edge(e);
+            of_vertex[ev.front()] = of_vertex[ev.back()] = 0;
+        }
+        for (uint32_t v = 0; v < of_vertex.size(); ++v) {
+            if (of_vertex[v] == 0) {
+                of_vertex[v] = static_cast<uint32_t>(vertex.size());
+                vertex.push_back(v);
+            }
+        }
+    }
+};
+
+Level build_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw, const std::vector<LevelCodes>& lcs, size_t L)
 {
     const auto& lc = lcs[L];
     const bool lines = raw.kind == RawMap::Kind::lines;
     auto is_boundary = [&](size_t e) { return lines || lc.side(g.left[e]) != lc.side(g.right[e]); };
-    const size_t nv = g.keys.size();
-    // Incidences of edge ends at vertices (CSR).
-    std::vector<uint32_t> deg(nv, 0);
+    const size_t nends = ends.vertex.size();
+    // Incidences of boundary edge ends at the edge ends' vertices (CSR, by end index).
+    std::vector<uint32_t> deg(nends, 0);
     std::vector<uint8_t> boundary(g.edge_count(), 0);
     for (size_t e = 0; e < g.edge_count(); ++e) {
         if (is_boundary(e)) {
             boundary[e] = 1;
             const auto ev = g.edge(e);
-            ++deg[ev.front()];
-            ++deg[ev.back()];
+            ++deg[ends.of_vertex[ev.front()]];
+            ++deg[ends.of_vertex[ev.back()]];
         }
     }
-    std::vector<uint64_t> start(nv + 1, 0);
-    for (size_t v = 0; v < nv; ++v) {
-        start[v + 1] = start[v] + deg[v];
+    std::vector<uint64_t> start(nends + 1, 0);
+    for (size_t k = 0; k < nends; ++k) {
+        start[k + 1] = start[k] + deg[k];
     }
-    std::vector<uint32_t> inc(start[nv]); // edge * 2 + (0: starts here, 1: ends here)
+    std::vector<uint32_t> inc(start[nends]); // edge * 2 + (0: starts here, 1: ends here)
     {
         std::vector<uint64_t> fill(start.begin(), start.end() - 1);
         for (size_t e = 0; e < g.edge_count(); ++e) {
             if (boundary[e]) {
                 const auto ev = g.edge(e);
-                inc[fill[ev.front()]++] = static_cast<uint32_t>(e * 2);
-                inc[fill[ev.back()]++] = static_cast<uint32_t>(e * 2 + 1);
+                inc[fill[ends.of_vertex[ev.front()]]++] = static_cast<uint32_t>(e * 2);
+                inc[fill[ends.of_vertex[ev.back()]]++] = static_cast<uint32_t>(e * 2 + 1);
             }
         }
     }
@@ -500,10 +523,11 @@ Level build_level(const Graph& g, const RawMap& raw, const std::vector<LevelCode
         return (in & 1U) ? std::pair{r, l} : std::pair{l, r};
     };
     auto is_junction = [&](uint32_t v) {
-        if (deg[v] != 2) {
+        const uint32_t k = ends.of_vertex[v];
+        if (deg[k] != 2) {
             return true;
         }
-        const uint32_t a = inc[start[v]], b = inc[start[v] + 1];
+        const uint32_t a = inc[start[k]], b = inc[start[k] + 1];
         if (a / 2 == b / 2) {
             return false; // a closed edge alone
         }
@@ -538,7 +562,7 @@ Level build_level(const Graph& g, const RawMap& raw, const std::vector<LevelCode
                 break;
             }
             const uint32_t arrived = in ^ 1U; // the incidence of e at u
-            const uint32_t a = inc[start[u]], b = inc[start[u] + 1];
+            const uint32_t a = inc[start[ends.of_vertex[u]]], b = inc[start[ends.of_vertex[u]] + 1];
             const uint32_t next = a == arrived ? b : a;
             if (visited[next / 2]) {
                 break; // back at the start of a ring
@@ -602,15 +626,16 @@ Level build_level(const Graph& g, const RawMap& raw, const std::vector<LevelCode
         lev.chains.push_back(c);
     };
 
-    for (uint32_t v = 0; v < nv; ++v) {
-        if (deg[v] == 0 || !is_junction(v)) {
+    for (uint32_t k = 0; k < nends; ++k) {
+        const uint32_t v = ends.vertex[k];
+        if (deg[k] == 0 || !is_junction(v)) {
             continue;
         }
         lev.junctions.push_back(v);
-        lev.junction_degree.push_back(deg[v]);
-        for (uint64_t k = start[v]; k < start[v + 1]; ++k) {
-            if (!visited[inc[k] / 2]) {
-                walk(v, inc[k]);
+        lev.junction_degree.push_back(deg[k]);
+        for (uint64_t i = start[k]; i < start[k + 1]; ++i) {
+            if (!visited[inc[i] / 2]) {
+                walk(v, inc[i]);
             }
         }
     }
@@ -980,15 +1005,22 @@ void log_progress(const BuildOptions& options, const std::string& what)
     }
 }
 
+/// A problem found by a level, recorded in level order once all levels are done.
+struct LevelProblem {
+    const char* kind;
+    GridPoint at;
+    std::string where;
+};
+
 /// One level: its chains, partitions, halos, internal points and stores.
-LevelStats process_level(const Graph& g, const RawMap& raw, const std::vector<LevelCodes>& lcs, size_t L,
-                         const std::vector<uint32_t>& bad_edges, const Projection& projection,
-                         const BuildOptions& options, Problems& problems, const StoreSink& sink)
+LevelStats process_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw, const std::vector<LevelCodes>& lcs,
+                         size_t L, const std::vector<uint32_t>& bad_edges, const Projection& projection,
+                         const BuildOptions& options, std::vector<LevelProblem>& problems, const StoreSink& sink)
 {
     const size_t nlev = lcs.size();
     const double halo_grid = options.halo_m / projection.params().grid_m;
     auto note = [&](const std::string& what) { log_progress(options, what); };
-    Level lev = build_level(g, raw, lcs, L);
+    Level lev = build_level(g, ends, raw, lcs, L);
     note("level " + raw.level_names[L] + ": built chains");
     for (uint32_t e : bad_edges) {
         if (lev.chain_of_edge[e] != none) {
@@ -1110,12 +1142,12 @@ LevelStats process_level(const Graph& g, const RawMap& raw, const std::vector<Le
     for (uint32_t code = 0; code < npoints; ++code) {
         const UnitPoint& up = unit_points[code];
         if (up.rejected) {
-            problems.add("internal_points_replaced", up.rejected->x, up.rejected->y,
-                         raw.where(raw.units[rep[code]].source) + " (" + st.name + " " + lc.codes[code] + ")");
+            problems.push_back({"internal_points_replaced", *up.rejected,
+                                raw.where(raw.units[rep[code]].source) + " (" + st.name + " " + lc.codes[code] + ")"});
         }
         st.computed_internal_points += up.computed;
         if (!up.pt) {
-            problems.add("missing_internal_points", up.near.x, up.near.y, st.name + " " + lc.codes[code]);
+            problems.push_back({"missing_internal_points", up.near, st.name + " " + lc.codes[code]});
             continue;
         }
         part_points[parent(code)].push_back({code, chains::constraint_internal, *up.pt});
@@ -1184,15 +1216,15 @@ LevelStats process_level(const Graph& g, const RawMap& raw, const std::vector<Le
             add(ci, true);
         }
         // Junctions at the ends of the partition's own chains.
-        std::vector<uint32_t> ends;
+        std::vector<uint32_t> chain_ends;
         for (uint32_t ci : own[part]) {
             const auto cv = lev.chain(lev.chains[ci]);
-            ends.push_back(cv.front());
-            ends.push_back(cv.back());
+            chain_ends.push_back(cv.front());
+            chain_ends.push_back(cv.back());
         }
-        std::sort(ends.begin(), ends.end());
-        ends.erase(std::unique(ends.begin(), ends.end()), ends.end());
-        for (uint32_t v : ends) {
+        std::sort(chain_ends.begin(), chain_ends.end());
+        chain_ends.erase(std::unique(chain_ends.begin(), chain_ends.end()), chain_ends.end());
+        for (uint32_t v : chain_ends) {
             auto it = std::lower_bound(lev.junctions.begin(), lev.junctions.end(), v);
             if (it != lev.junctions.end() && *it == v) {
                 const auto k = static_cast<size_t>(it - lev.junctions.begin());
@@ -1271,9 +1303,44 @@ BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptio
     std::sort(bad_edges.begin(), bad_edges.end());
     bad_edges.erase(std::unique(bad_edges.begin(), bad_edges.end()), bad_edges.end());
 
-    for (size_t L = 0; L < nlev; ++L) {
-        result.levels.push_back(process_level(g, raw, lcs, L, bad_edges, projection, options, problems, sink));
-        phase("level_" + raw.level_names[L]);
+    // The coarser levels one after another on a thread of their own, beside the
+    // finest (as a rule the largest, and not busy on every thread throughout).
+    // Their problems are recorded in level order afterwards.
+    result.levels.resize(nlev);
+    std::vector<std::vector<LevelProblem>> found(nlev);
+    const EdgeEnds ends(g);
+    auto level = [&](size_t L) {
+        result.levels[L] = process_level(g, ends, raw, lcs, L, bad_edges, projection, options, found[L], sink);
+    };
+    {
+        std::exception_ptr coarse_error;
+        std::jthread coarse;
+        if (nlev > 1) {
+            coarse = std::jthread([&] {
+                try {
+                    for (size_t L = 0; L + 1 < nlev; ++L) {
+                        level(L);
+                    }
+                } catch (...) {
+                    coarse_error = std::current_exception();
+                }
+            });
+        }
+        if (nlev > 0) {
+            level(nlev - 1);
+        }
+        if (coarse.joinable()) {
+            coarse.join();
+        }
+        if (coarse_error) {
+            std::rethrow_exception(coarse_error);
+        }
+    }
+    phase("levels");
+    for (const auto& level_found : found) {
+        for (const auto& f : level_found) {
+            problems.add(f.kind, f.at.x, f.at.y, f.where);
+        }
     }
     return result;
 }
