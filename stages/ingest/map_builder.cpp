@@ -234,74 +234,113 @@ struct Piece {
 std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned threads, Problems& problems)
 {
     const bool lines = raw.kind == RawMap::Kind::lines;
-    // Segment k of edge i is record off[i] - i + k; the unit given is on the
-    // left of the segment as stored (a < b) when `unit_left`.
+    if (g.edge_count() >= (size_t{1} << 31)) {
+        throw input_error("more than 2^31 polylines in one map");
+    }
+    // Segment k of edge i is record off[i] - i + k: its key (a < b), with the
+    // edge and whether the edge's unit is on the left of a->b as its value.
     const size_t nrec = g.verts.size() - g.edge_count();
-    struct Rec {
-        uint32_t unit;
-        uint32_t edge;
-        bool unit_left;
-    };
-    std::vector<Rec> recs(nrec);
     std::vector<std::pair<uint64_t, uint32_t>> keys(nrec);
     // A few thousand rings of very unequal length: 16 at a time.
     parallel_blocks(g.edge_count(), threads, 16, [&](size_t eb, size_t ee) {
         for (size_t i = eb; i < ee; ++i) {
             const auto e = g.edge(i);
-            const uint32_t u = g.left[i] != no_unit ? g.left[i] : g.right[i];
             const bool on_left_of_given = g.left[i] != no_unit;
             const size_t r0 = g.off[i] - i;
             for (size_t k = 0; k + 1 < e.size(); ++k) {
                 const bool forward = e[k] < e[k + 1];
-                const auto r = static_cast<uint32_t>(r0 + k);
-                recs[r] = {u, static_cast<uint32_t>(i), forward == on_left_of_given};
-                keys[r] = {(uint64_t{std::min(e[k], e[k + 1])} << 32) | std::max(e[k], e[k + 1]), r};
+                keys[r0 + k] = {(uint64_t{std::min(e[k], e[k + 1])} << 32) | std::max(e[k], e[k + 1]),
+                                static_cast<uint32_t>(i * 2 + (forward == on_left_of_given ? 1 : 0))};
             }
         }
     });
     // Records come in edge order and the sort is stable: (a, b, edge) order.
     radix_sort_by_key(keys, threads);
-    std::vector<Piece> out;
-    out.reserve(nrec / 2 + 1);
-    for (size_t i = 0; i < keys.size();) {
-        size_t j = i;
-        uint32_t l = no_unit, r = no_unit;
-        bool conflict = false;
-        for (; j < keys.size() && keys[j].first == keys[i].first; ++j) {
-            const Rec& rec = recs[keys[j].second];
-            uint32_t& slot = rec.unit_left ? l : r;
-            if (slot == no_unit) {
-                slot = rec.unit;
-            } else {
-                conflict = true;
-            }
+    auto edge_of = [&](size_t j) { return keys[j].second / 2; };
+    auto unit_of = [&](size_t j) {
+        const uint32_t e = edge_of(j);
+        return g.left[e] != no_unit ? g.left[e] : g.right[e];
+    };
+    // The scan on contiguous parts that start where a key does; each part's
+    // pieces and problems are put together in order afterwards.
+    struct Found {
+        const char* kind;
+        double x, y;
+        std::string where;
+    };
+    struct Part {
+        std::vector<Piece> pieces;
+        std::vector<Found> found;
+    };
+    const unsigned nparts = std::max(1U, std::min<unsigned>(threads, static_cast<unsigned>(nrec / 65536 + 1)));
+    std::vector<size_t> bounds(nparts + 1, nrec);
+    bounds[0] = 0;
+    for (unsigned t = 1; t < nparts; ++t) {
+        size_t b = std::max(bounds[t - 1], nrec / nparts * t);
+        while (b > 0 && b < nrec && keys[b].first == keys[b - 1].first) {
+            ++b;
         }
-        const auto a = static_cast<uint32_t>(keys[i].first >> 32), b = static_cast<uint32_t>(keys[i].first);
-        const uint32_t first_edge = recs[keys[i].second].edge;
-        const GridPoint pa = g.grid[a], pb = g.grid[b];
-        if (lines) {
-            l = r = no_unit;
-            if (j - i > 1) {
-                problems.add("duplicate_segments", (pa.x + 0.5 * (pb.x - pa.x)), (pa.y + 0.5 * (pb.y - pa.y)),
-                             raw.where(g.src[first_edge]) + " " + raw.where(g.src[recs[keys[i + 1].second].edge]));
-            }
-        } else if (conflict) {
-            std::string where;
-            for (size_t k = i; k < j; ++k) {
-                if (!where.empty()) {
-                    where += ' ';
+        bounds[t] = b;
+    }
+    std::vector<Part> parts(nparts);
+    parallel_each(nparts, threads, [&](size_t t) {
+        Part& out = parts[t];
+        out.pieces.reserve((bounds[t + 1] - bounds[t]) / 2 + 1);
+        for (size_t i = bounds[t]; i < bounds[t + 1];) {
+            size_t j = i;
+            uint32_t l = no_unit, r = no_unit;
+            bool conflict = false;
+            for (; j < nrec && keys[j].first == keys[i].first; ++j) {
+                uint32_t& slot = (keys[j].second & 1U) ? l : r;
+                if (slot == no_unit) {
+                    slot = unit_of(j);
+                } else {
+                    conflict = true;
                 }
-                where += raw.where(g.src[recs[keys[k].second].edge]);
             }
-            problems.add("overlapping_polygons", (pa.x + 0.5 * (pb.x - pa.x)), (pa.y + 0.5 * (pb.y - pa.y)), where);
+            const auto a = static_cast<uint32_t>(keys[i].first >> 32), b = static_cast<uint32_t>(keys[i].first);
+            const uint32_t first_edge = edge_of(i);
+            const GridPoint pa = g.grid[a], pb = g.grid[b];
+            const double mx = pa.x + 0.5 * (pb.x - pa.x), my = pa.y + 0.5 * (pb.y - pa.y);
+            if (lines) {
+                l = r = no_unit;
+                if (j - i > 1) {
+                    out.found.push_back({"duplicate_segments", mx, my,
+                                         raw.where(g.src[first_edge]) + " " + raw.where(g.src[edge_of(i + 1)])});
+                }
+            } else if (conflict) {
+                std::string where;
+                for (size_t k = i; k < j; ++k) {
+                    if (!where.empty()) {
+                        where += ' ';
+                    }
+                    where += raw.where(g.src[edge_of(k)]);
+                }
+                out.found.push_back({"overlapping_polygons", mx, my, std::move(where)});
+            }
+            if (l != no_unit && l == r) {
+                // The same polygon on both sides: a slit or spike in its ring, never a boundary.
+                out.found.push_back(
+                    {"spikes", static_cast<double>(pa.x), static_cast<double>(pa.y), raw.where(g.src[first_edge])});
+            } else {
+                out.pieces.push_back({{a, b}, l, r, first_edge});
+            }
+            i = j;
         }
-        if (l != no_unit && l == r) {
-            // The same polygon on both sides: a slit or spike in its ring, never a boundary.
-            problems.add("spikes", pa.x, pa.y, raw.where(g.src[first_edge]));
-        } else {
-            out.push_back({{a, b}, l, r, first_edge});
+    });
+    keys = {};
+    std::vector<Piece> out;
+    size_t total = 0;
+    for (const auto& part : parts) {
+        total += part.pieces.size();
+    }
+    out.reserve(total);
+    for (auto& part : parts) {
+        out.insert(out.end(), part.pieces.begin(), part.pieces.end());
+        part.pieces = {};
+        for (auto& f : part.found) {
+            problems.add(f.kind, f.x, f.y, std::move(f.where));
         }
-        i = j;
     }
     return out;
 }

@@ -204,6 +204,60 @@ TEST(MapBuilder, InternalPointsAreInsideTheirUnits)
     EXPECT_EQ(b.result.problems.at("internal_points_replaced"), 2U);
 }
 
+TEST(MapBuilder, ALargePolygonMapIsTheSameOnOneThreadAndOnSeveral)
+{
+    // 80 x 80 square units, each side in three segments: 76,800 segment
+    // records, enough for the merge to scan them in two parts. Two units
+    // repeat a ring, one at each end of the records: overlapping polygons.
+    const int n = 80;
+    std::vector<RawUnit> units;
+    for (int k = 0; k < n * n + 2; ++k) {
+        units.push_back({{"u" + std::to_string(k)}, std::nullopt, 1, {0, k}});
+    }
+    RawMap m = polygon_map(units);
+    auto square = [&](int cx, int cy, uint32_t unit) {
+        std::vector<LonLatE6> r;
+        auto at = [&](int i, int j) { return LonLatE6{-96000000 + 100 * (3 * cx + i), 40000000 + 100 * (3 * cy + j)}; };
+        for (int i = 0; i < 3; ++i) {
+            r.push_back(at(i, 0));
+        }
+        for (int j = 0; j < 3; ++j) {
+            r.push_back(at(3, j));
+        }
+        for (int i = 3; i > 0; --i) {
+            r.push_back(at(i, 3));
+        }
+        for (int j = 3; j >= 0; --j) {
+            r.push_back(at(0, j));
+        }
+        ring(m, r, unit, true);
+    };
+    for (int cy = 0; cy < n; ++cy) {
+        for (int cx = 0; cx < n; ++cx) {
+            square(cx, cy, static_cast<uint32_t>(cy * n + cx));
+        }
+    }
+    square(0, 0, n * n);
+    square(n - 1, n - 1, n * n + 1);
+    auto run = [&](unsigned threads) {
+        BuildOptions o;
+        o.threads = threads;
+        o.halo_m = 0;
+        const Built b = build(m, o);
+        std::string all;
+        for (const auto& s : b.stores) {
+            all += chains::encode(s);
+        }
+        for (const auto& p : b.result.samples) {
+            all += p.kind + " " + p.where + "\n";
+        }
+        EXPECT_EQ(b.result.problems.at("overlapping_polygons"), 24U);
+        EXPECT_EQ(b.result.levels.at(0).units, size_t{n * n + 2});
+        return all;
+    };
+    EXPECT_EQ(run(1), run(2));
+}
+
 TEST(MapBuilder, SharedPolygonEdgesMergeAndRingsCloseOnTheirSmallestVertex)
 {
     // Two squares A | B sharing an edge, and an island C inside B (a hole in B).
