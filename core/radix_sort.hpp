@@ -10,6 +10,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <thread>
 #include <utility>
 #include <vector>
@@ -64,7 +65,15 @@ inline void radix_sort_by_key(std::vector<std::pair<uint64_t, uint32_t>>& v, uns
         all_and &= ands[t];
     }
     const uint64_t varying = all_or ^ all_and;
-    std::vector<Item> tmp(n);
+    // The other buffer is left uninitialised (pairs of integers need no
+    // construction): its pages are first touched by the scatter, on every
+    // thread, instead of being zeroed here on one.
+    struct Release {
+        void operator()(Item* p) const noexcept { ::operator delete(p); }
+    };
+    const std::unique_ptr<Item, Release> other(static_cast<Item*>(::operator new(n * sizeof(Item))));
+    Item* src = v.data();
+    Item* dst = other.get();
     std::vector<std::vector<size_t>> count(parts, std::vector<size_t>(digits));
     for (unsigned shift = 0; shift < 64; shift += 16) {
         if (((varying >> shift) & 0xFFFFU) == 0) {
@@ -74,7 +83,7 @@ inline void radix_sort_by_key(std::vector<std::pair<uint64_t, uint32_t>>& v, uns
             auto& c = count[t];
             std::fill(c.begin(), c.end(), size_t{0});
             for (size_t i = begin(t); i < end(t); ++i) {
-                ++c[(v[i].first >> shift) & 0xFFFFU];
+                ++c[(src[i].first >> shift) & 0xFFFFU];
             }
         });
         size_t sum = 0;
@@ -88,10 +97,13 @@ inline void radix_sort_by_key(std::vector<std::pair<uint64_t, uint32_t>>& v, uns
         detail::on_threads(parts, [&](unsigned t) {
             auto& c = count[t];
             for (size_t i = begin(t); i < end(t); ++i) {
-                tmp[c[(v[i].first >> shift) & 0xFFFFU]++] = v[i];
+                dst[c[(src[i].first >> shift) & 0xFFFFU]++] = src[i];
             }
         });
-        v.swap(tmp);
+        std::swap(src, dst);
+    }
+    if (src != v.data()) { // an odd number of passes
+        detail::on_threads(parts, [&](unsigned t) { std::copy(src + begin(t), src + end(t), v.data() + begin(t)); });
     }
 }
 
