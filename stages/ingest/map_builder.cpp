@@ -734,6 +734,14 @@ SegmentSet segments_of(const Graph& g, const std::vector<uint8_t>& checked, cons
                        const std::vector<GridBox>& hot)
 {
     SegmentSet s;
+    if (scope.empty()) { // all of them: sized once, not grown
+        size_t n = 0;
+        for (uint32_t e = 0; e < g.edge_count(); ++e) {
+            n += checked[e] ? g.off[e + 1] - g.off[e] - 1 : 0;
+        }
+        s.segs.reserve(n);
+        s.at.reserve(n);
+    }
     for (uint32_t e = 0; e < g.edge_count(); ++e) {
         if (!checked[e]) {
             continue;
@@ -1090,6 +1098,11 @@ LevelStats process_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw
     std::vector<std::vector<uint32_t>> halo(npart);
     if (npart > 1) {
         std::vector<SegmentRef> refs;
+        size_t nrefs = 0;
+        for (const auto& c : lev.chains) {
+            nrefs += c.count - 1;
+        }
+        refs.reserve(nrefs);
         for (uint32_t ci = 0; ci < lev.chains.size(); ++ci) {
             const auto& c = lev.chains[ci];
             // A border between two parts bounds both: the other part's units need it.

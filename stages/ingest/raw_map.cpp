@@ -60,6 +60,17 @@ void RawMap::append(RawMap&& part)
     part = RawMap();
 }
 
+void RawMap::reserve(size_t points, size_t polylines)
+{
+    coords.reserve(points);
+    offsets.reserve(polylines + 1);
+    left.reserve(polylines);
+    right.reserve(polylines);
+    feature_class.reserve(polylines);
+    source_id.reserve(polylines);
+    source.reserve(polylines);
+}
+
 std::string RawMap::where(SourceRef src) const
 {
     std::string s = src.file < files.size() ? files[src.file] : std::string("?");

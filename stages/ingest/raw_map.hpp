@@ -80,6 +80,8 @@ struct RawMap {
     /// Append another map read from other files (same kind and levels): its
     /// files, units, classes and polylines follow this map's. `part` is left empty.
     void append(RawMap&& part);
+    /// Room for this many points and polylines in all, so appends do not regrow.
+    void reserve(size_t points, size_t polylines);
     /// "file:feature" for messages.
     std::string where(SourceRef src) const;
 };

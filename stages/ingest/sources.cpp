@@ -483,6 +483,12 @@ void read_files(const std::vector<fs::path>& files, unsigned threads, RawMap& ra
     for (auto& t : pool) {
         t.join();
     }
+    size_t points = raw.coords.size(), lines = raw.polyline_count();
+    for (const auto& part : parts) {
+        points += part.coords.size();
+        lines += part.polyline_count();
+    }
+    raw.reserve(points, lines);
     for (size_t i = 0; i < files.size(); ++i) {
         if (errors[i]) {
             std::rethrow_exception(errors[i]);

@@ -212,7 +212,9 @@ TEST(MapBuilder, ALargePolygonMapIsTheSameOnOneThreadAndOnSeveral)
     const int n = 80;
     std::vector<RawUnit> units;
     for (int k = 0; k < n * n + 2; ++k) {
-        units.push_back({{"u" + std::to_string(k)}, std::nullopt, 1, {0, k}});
+        std::string code = std::to_string(k);
+        code.insert(0, 1, 'u');
+        units.push_back({{code}, std::nullopt, 1, {0, k}});
     }
     RawMap m = polygon_map(units);
     auto square = [&](int cx, int cy, uint32_t unit) {
