@@ -43,6 +43,19 @@ void write_file_atomic(const fs::path& path, std::string_view data)
     }
 }
 
+void write_file(const fs::path& path, std::string_view data)
+{
+    std::FILE* f = std::fopen(path.c_str(), "wb");
+    if (f == nullptr) {
+        throw environment_error(path.string() + ": cannot create: " + std::strerror(errno));
+    }
+    const bool ok = std::fwrite(data.data(), 1, data.size(), f) == data.size();
+    const bool closed = std::fclose(f) == 0;
+    if (!ok || !closed) {
+        throw environment_error(path.string() + ": write failed (disk full?)");
+    }
+}
+
 OutputDir::OutputDir(fs::path final_path, bool overwrite) : m_final(std::move(final_path))
 {
     if (m_final.filename().empty()) {

@@ -13,6 +13,11 @@ namespace tigerlod {
 /// environment_error on any I/O failure; the temporary is removed then.
 void write_file_atomic(const std::filesystem::path& path, std::string_view data);
 
+/// Write `data` to `path` directly, for files inside an OutputDir: the
+/// folder, renamed into place whole, is what keeps them from being seen
+/// half-written. Throws environment_error on any I/O failure.
+void write_file(const std::filesystem::path& path, std::string_view data);
+
 /// An output folder built under a temporary name and renamed into place by
 /// commit(). Destroyed without commit(), it removes what it wrote.
 class OutputDir {

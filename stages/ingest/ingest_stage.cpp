@@ -183,7 +183,8 @@ int IngestStage::run(const StageContext& ctx)
     options.max_problem_samples = static_cast<size_t>(m_max_problem_samples);
     options.log = &ctx.log;
     const BuildResult result = build_map(std::move(raw), projection, options, [&](const chains::ChainStore& s) {
-        chains::write(out.path() / s.level_name / (file_name(s.partition) + ".tlc"), s);
+        // Inside the output folder, renamed into place whole at the end.
+        write_file(out.path() / s.level_name / (file_name(s.partition) + ".tlc"), chains::encode(s));
         ++stores;
     });
     const double t_build = ctx.log.elapsed_s();

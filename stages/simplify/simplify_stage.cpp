@@ -268,7 +268,7 @@ int SimplifyStage::run(const StageContext& ctx)
             }
             const fs::path dir = out.path() / tolerance_dir(eps_m) / sf.level;
             fs::create_directories(dir);
-            chains::write(dir / (sf.partition + ".tlc"), result);
+            write_file(dir / (sf.partition + ".tlc"), chains::encode(result)); // inside the output folder
         }
         return stats;
     };
