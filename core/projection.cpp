@@ -7,8 +7,8 @@
 #include <GeographicLib/Math.hpp>
 #include <GeographicLib/TransverseMercator.hpp>
 
-#include <cmath>
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <mutex>
 #include <numbers>
@@ -211,7 +211,7 @@ std::optional<GridPoint> Projection::to_grid(double lon_deg, double lat_deg) con
         // Rounded from Snyder's formulas unless a coordinate lies within the
         // guard of a half-step tie, where their nanometres could decide it.
         const double dlon = lon_deg - m_impl->lon0;
-        if (std::fabs(dlon) <= 180 && std::fabs(lat_deg) < 89) {
+        if (std::fabs(dlon) <= 180 && std::fabs(lat_deg) <= 84.5) { // where check_fast compared them
             double x = 0, y = 0;
             fast->forward(lat_deg, dlon, x, y);
             const double fx = (x - m_impl->x0) / m_impl->p.grid_m, fy = (y - m_impl->y0) / m_impl->p.grid_m;
