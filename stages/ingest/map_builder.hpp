@@ -18,6 +18,8 @@
 /// pass-through vertex only, moving the boundary by at most max_snap_shift_m),
 /// as snap rounding (Hobby 1999) would, and the check runs again; each repair
 /// is counted as `snap_repairs`, anything left as crossings, touches or overlaps.
+/// The levels are then built from the checked graph, the coarser ones one
+/// after another on a thread of their own beside the finest.
 
 #include "core/log.hpp"
 #include "core/projection.hpp"
@@ -69,10 +71,10 @@ struct BuildResult {
     std::vector<std::pair<std::string, double>> seconds;
 };
 
-/// Called once per finished chain store. Levels come coarsest first, but within
-/// a level it is called from up to BuildOptions::threads threads at once, in no
-/// particular order: it must be thread-safe. Each store's content does not
-/// depend on the threads.
+/// Called once per finished chain store, from several threads at once and in
+/// no particular order (the coarser levels are built beside the finest, each
+/// on up to BuildOptions::threads threads): it must be thread-safe. Each
+/// store's content does not depend on the threads.
 using StoreSink = std::function<void(const chains::ChainStore&)>;
 
 /// Build every level's chain stores. Throws input_error (naming file and
