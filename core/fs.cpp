@@ -20,22 +20,30 @@ fs::path temp_sibling(const fs::path& path, const char* tag)
     return path.parent_path() / (path.filename().string() + tag + std::to_string(::getpid()));
 }
 
+/// Write `data` to `file`; messages name `name`. Throws environment_error,
+/// after removing what was created if the write failed.
+void write_to(const fs::path& file, const fs::path& name, std::string_view data)
+{
+    std::FILE* f = std::fopen(file.c_str(), "wb");
+    if (f == nullptr) {
+        throw environment_error(name.string() + ": cannot create: " + std::strerror(errno));
+    }
+    const bool ok = std::fwrite(data.data(), 1, data.size(), f) == data.size();
+    const bool closed = std::fclose(f) == 0;
+    if (!ok || !closed) {
+        std::error_code ec;
+        fs::remove(file, ec);
+        throw environment_error(name.string() + ": write failed (disk full?)");
+    }
+}
+
 } // namespace
 
 void write_file_atomic(const fs::path& path, std::string_view data)
 {
     const fs::path tmp = temp_sibling(path, ".tmp-");
-    std::FILE* f = std::fopen(tmp.c_str(), "wb");
-    if (f == nullptr) {
-        throw environment_error(path.string() + ": cannot create: " + std::strerror(errno));
-    }
-    const bool ok = std::fwrite(data.data(), 1, data.size(), f) == data.size();
-    const bool closed = std::fclose(f) == 0;
+    write_to(tmp, path, data);
     std::error_code ec;
-    if (!ok || !closed) {
-        fs::remove(tmp, ec);
-        throw environment_error(path.string() + ": write failed (disk full?)");
-    }
     fs::rename(tmp, path, ec);
     if (ec) {
         fs::remove(tmp, ec);
@@ -45,15 +53,7 @@ void write_file_atomic(const fs::path& path, std::string_view data)
 
 void write_file(const fs::path& path, std::string_view data)
 {
-    std::FILE* f = std::fopen(path.c_str(), "wb");
-    if (f == nullptr) {
-        throw environment_error(path.string() + ": cannot create: " + std::strerror(errno));
-    }
-    const bool ok = std::fwrite(data.data(), 1, data.size(), f) == data.size();
-    const bool closed = std::fclose(f) == 0;
-    if (!ok || !closed) {
-        throw environment_error(path.string() + ": write failed (disk full?)");
-    }
+    write_to(path, path, data);
 }
 
 OutputDir::OutputDir(fs::path final_path, bool overwrite) : m_final(std::move(final_path))

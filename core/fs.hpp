@@ -15,7 +15,8 @@ void write_file_atomic(const std::filesystem::path& path, std::string_view data)
 
 /// Write `data` to `path` directly, for files inside an OutputDir: the
 /// folder, renamed into place whole, is what keeps them from being seen
-/// half-written. Throws environment_error on any I/O failure.
+/// half-written. Throws environment_error on any I/O failure; a file it
+/// began is removed then.
 void write_file(const std::filesystem::path& path, std::string_view data);
 
 /// An output folder built under a temporary name and renamed into place by

@@ -58,7 +58,7 @@ struct SnyderAlbers {
         : a(a_m), e(std::sqrt(f * (2 - f))), e2(f * (2 - f))
     {
         const double m1 = m(lat1_deg), m2 = m(lat2_deg), q1 = q(lat1_deg), q2 = q(lat2_deg);
-        n = lat1_deg == lat2_deg ? std::sin(rad(lat1_deg)) : (m1 * m1 - m2 * m2) / (q2 - q1);
+        n = (m1 * m1 - m2 * m2) / (q2 - q1); // two distinct parallels (fast_albers checks)
         c = m1 * m1 + n * q1;
         rho0 = rho(q(origin_deg));
     }
@@ -80,6 +80,9 @@ struct SnyderAlbers {
         y = rho0 - r * std::cos(theta);
     }
 };
+
+/// The largest grid coordinate: grid points are 32-bit.
+constexpr double grid_limit = 2147483647.0;
 
 } // namespace
 
@@ -216,8 +219,8 @@ std::optional<GridPoint> Projection::to_grid(double lon_deg, double lat_deg) con
             fast->forward(lat_deg, dlon, x, y);
             const double fx = (x - m_impl->x0) / m_impl->p.grid_m, fy = (y - m_impl->y0) / m_impl->p.grid_m;
             const double tx = std::fabs(fx - std::floor(fx) - 0.5), ty = std::fabs(fy - std::floor(fy) - 0.5);
-            constexpr double limit = 2147483647.0;
-            if (tx > m_impl->tie_guard && ty > m_impl->tie_guard && std::fabs(fx) < limit && std::fabs(fy) < limit) {
+            if (tx > m_impl->tie_guard && ty > m_impl->tie_guard && std::fabs(fx) < grid_limit &&
+                std::fabs(fy) < grid_limit) {
                 return GridPoint{static_cast<int32_t>(std::nearbyint(fx)), static_cast<int32_t>(std::nearbyint(fy))};
             }
         }
@@ -237,8 +240,7 @@ std::optional<GridPoint> Projection::to_grid_reference(double lon_deg, double la
     m_impl->raw_forward(lat_deg, lon_deg, x, y);
     const double gx = std::nearbyint((x - m_impl->x0) / m_impl->p.grid_m);
     const double gy = std::nearbyint((y - m_impl->y0) / m_impl->p.grid_m);
-    constexpr double limit = 2147483647.0;
-    if (!std::isfinite(gx) || !std::isfinite(gy) || std::fabs(gx) > limit || std::fabs(gy) > limit) {
+    if (!std::isfinite(gx) || !std::isfinite(gy) || std::fabs(gx) > grid_limit || std::fabs(gy) > grid_limit) {
         return std::nullopt;
     }
     return GridPoint{static_cast<int32_t>(gx), static_cast<int32_t>(gy)};

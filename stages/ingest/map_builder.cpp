@@ -9,7 +9,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
-#include <exception>
+#include <future>
 #include <mutex>
 #include <numbers>
 #include <numeric>
@@ -59,6 +59,14 @@ struct Graph {
     std::span<const uint32_t> edge(size_t i) const noexcept { return {verts.data() + off[i], off[i + 1] - off[i]}; }
 };
 
+/// A problem found on a worker thread, recorded later in a fixed order so
+/// that the report does not depend on the threads.
+struct FoundProblem {
+    const char* kind;
+    double x, y; ///< grid units
+    std::string where;
+};
+
 class Problems {
   public:
     Problems(BuildResult& r, const Projection& proj, size_t max_samples) : m_r(r), m_proj(proj), m_max(max_samples)
@@ -75,6 +83,13 @@ class Problems {
             ProblemSample s{kind, 0, 0, std::move(where)};
             m_proj.to_lonlat(gx, gy, s.lon_deg, s.lat_deg);
             m_r.samples.push_back(std::move(s));
+        }
+    }
+    /// Record `found` in its order.
+    void add_all(std::vector<FoundProblem>&& found)
+    {
+        for (auto& f : found) {
+            add(f.kind, f.x, f.y, std::move(f.where));
         }
     }
     void add_lonlat(const std::string& kind, LonLatE6 p, std::string where)
@@ -263,14 +278,9 @@ std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned th
     };
     // The scan on contiguous parts that start where a key does; each part's
     // pieces and problems are put together in order afterwards.
-    struct Found {
-        const char* kind;
-        double x, y;
-        std::string where;
-    };
     struct Part {
         std::vector<Piece> pieces;
-        std::vector<Found> found;
+        std::vector<FoundProblem> found;
     };
     const unsigned nparts = std::max(1U, std::min<unsigned>(threads, static_cast<unsigned>(nrec / 65536 + 1)));
     std::vector<size_t> bounds(nparts + 1, nrec);
@@ -338,9 +348,7 @@ std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned th
     for (auto& part : parts) {
         out.insert(out.end(), part.pieces.begin(), part.pieces.end());
         part.pieces = {};
-        for (auto& f : part.found) {
-            problems.add(f.kind, f.x, f.y, std::move(f.where));
-        }
+        problems.add_all(std::move(part.found));
     }
     return out;
 }
@@ -1052,17 +1060,10 @@ void log_progress(const BuildOptions& options, const std::string& what)
     }
 }
 
-/// A problem found by a level, recorded in level order once all levels are done.
-struct LevelProblem {
-    const char* kind;
-    GridPoint at;
-    std::string where;
-};
-
 /// One level: its chains, partitions, halos, internal points and stores.
 LevelStats process_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw, const std::vector<LevelCodes>& lcs,
                          size_t L, const std::vector<uint32_t>& bad_edges, const Projection& projection,
-                         const BuildOptions& options, std::vector<LevelProblem>& problems, const StoreSink& sink)
+                         const BuildOptions& options, std::vector<FoundProblem>& problems, const StoreSink& sink)
 {
     const size_t nlev = lcs.size();
     const double halo_grid = options.halo_m / projection.params().grid_m;
@@ -1194,12 +1195,13 @@ LevelStats process_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw
     for (uint32_t code = 0; code < npoints; ++code) {
         const UnitPoint& up = unit_points[code];
         if (up.rejected) {
-            problems.push_back({"internal_points_replaced", *up.rejected,
+            problems.push_back({"internal_points_replaced", double(up.rejected->x), double(up.rejected->y),
                                 raw.where(raw.units[rep[code]].source) + " (" + st.name + " " + lc.codes[code] + ")"});
         }
         st.computed_internal_points += up.computed;
         if (!up.pt) {
-            problems.push_back({"missing_internal_points", up.near, st.name + " " + lc.codes[code]});
+            problems.push_back(
+                {"missing_internal_points", double(up.near.x), double(up.near.y), st.name + " " + lc.codes[code]});
             continue;
         }
         part_points[parent(code)].push_back({code, chains::constraint_internal, *up.pt});
@@ -1359,40 +1361,24 @@ BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptio
     // finest (as a rule the largest, and not busy on every thread throughout).
     // Their problems are recorded in level order afterwards.
     result.levels.resize(nlev);
-    std::vector<std::vector<LevelProblem>> found(nlev);
+    std::vector<std::vector<FoundProblem>> found(nlev);
     const EdgeEnds ends(g);
     auto level = [&](size_t L) {
         result.levels[L] = process_level(g, ends, raw, lcs, L, bad_edges, projection, options, found[L], sink);
     };
-    {
-        std::exception_ptr coarse_error;
-        std::jthread coarse;
-        if (nlev > 1) {
-            coarse = std::jthread([&] {
-                try {
-                    for (size_t L = 0; L + 1 < nlev; ++L) {
-                        level(L);
-                    }
-                } catch (...) {
-                    coarse_error = std::current_exception();
-                }
-            });
-        }
-        if (nlev > 0) {
-            level(nlev - 1);
-        }
-        if (coarse.joinable()) {
-            coarse.join();
-        }
-        if (coarse_error) {
-            std::rethrow_exception(coarse_error);
-        }
+    if (nlev > 0) {
+        // The future's destructor waits for the coarse levels if the finest throws.
+        auto coarse = std::async(std::launch::async, [&] {
+            for (size_t L = 0; L + 1 < nlev; ++L) {
+                level(L);
+            }
+        });
+        level(nlev - 1);
+        coarse.get();
     }
     phase("levels");
-    for (const auto& level_found : found) {
-        for (const auto& f : level_found) {
-            problems.add(f.kind, f.at.x, f.at.y, f.where);
-        }
+    for (auto& level_found : found) {
+        problems.add_all(std::move(level_found));
     }
     return result;
 }

@@ -73,6 +73,14 @@ double mean_segment_length(const ChainStore& store)
     return n ? sum / double(n) : 0.0;
 }
 
+/// The colouring's options with the metric the simplification uses.
+ColorOptions color_options(const SimplifyOptions& opt)
+{
+    ColorOptions copt = opt.color;
+    copt.metric = opt.metric;
+    return copt;
+}
+
 /// How far from an owned chain a halo segment can matter at these
 /// tolerances, in grid units: the conflict graph looks 2 reaches away (eps
 /// in the metric plus the colouring margin), the far rule eps + a reach, the
@@ -85,9 +93,7 @@ double halo_reach(std::span<const double> eps, const SimplifyOptions& opt)
         eps_max = std::max(eps_max, e);
     }
     const double pixel = eps_max * opt.color.pixel_fraction;
-    ColorOptions copt = opt.color;
-    copt.metric = opt.metric;
-    const double reach = reach_radius(eps_max, pixel, copt);
+    const double reach = reach_radius(eps_max, pixel, color_options(opt));
     return 2 * reach + eps_max * l2_reach(opt.metric) + 2 * pixel + 4;
 }
 
@@ -315,9 +321,7 @@ ColorResult color_chains(const ChainStore& store, std::span<const double> eps, c
         const auto& c = store.chains[i];
         geoms[i] = {store.chain_points(c), eps[i], !(c.flags & chains::chain_halo), keep_of(keep, c)};
     }
-    ColorOptions copt = opt.color;
-    copt.metric = opt.metric;
-    return color_tiles(geoms, copt, opt.threads);
+    return color_tiles(geoms, color_options(opt), opt.threads);
 }
 
 } // namespace
