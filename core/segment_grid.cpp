@@ -81,9 +81,9 @@ std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, u
     for (uint32_t i = 0; i < segs.size(); ++i) {
         grid.cover(segs[i].a, segs[i].b, 0, [&](uint64_t k) { entries.emplace_back(k, i); });
     }
-    // Entries come in segment order, and the sort is stable: each cell lists its
-    // segments in order. A segment enters a cell once, as the cover never repeats one.
-    radix_sort_by_key(entries, threads);
+    // Sorted by (cell, segment): each cell lists its segments in order. A segment enters a cell once, as the cover
+    // never repeats one.
+    radix_sort_pairs(entries, threads);
     std::vector<size_t> group_start;
     for (size_t i = 0; i < entries.size(); ++i) {
         if (i == 0 || entries[i].first != entries[i - 1].first) {
@@ -240,7 +240,7 @@ std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRe
             }
         }
     }
-    radix_sort_by_key(reach, threads);
+    radix_sort_pairs(reach, threads);
     std::vector<std::pair<uint32_t, uint32_t>> result; // (chain, part)
     std::vector<uint32_t> parts;
     for (size_t gi = 0; gi < groups; ++gi) {

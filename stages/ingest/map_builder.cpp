@@ -122,7 +122,7 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
     for (size_t i = 0; i < occ.size(); ++i) {
         occ[i] = {pack_key(raw.coords[i]), static_cast<uint32_t>(i)};
     }
-    radix_sort_by_key(occ, threads);
+    radix_sort_pairs(occ, threads);
     std::vector<uint32_t> id(occ.size());
     for (size_t i = 0; i < occ.size(); ++i) {
         if (i == 0 || occ[i].first != occ[i - 1].first) {
@@ -186,7 +186,7 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
                               (static_cast<uint32_t>(g.grid[v].y) ^ 0x80000000U),
                           v};
         }
-        radix_sort_by_key(by_grid, threads); // stable: the smallest id comes first among equals
+        radix_sort_pairs(by_grid, threads); // the smallest id comes first among equals
         for (size_t i = 1; i < by_grid.size(); ++i) {
             if (by_grid[i].first == by_grid[i - 1].first) {
                 const uint32_t v = by_grid[i].second;
@@ -269,8 +269,8 @@ std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned th
             }
         }
     });
-    // Records come in edge order and the sort is stable: (a, b, edge) order.
-    radix_sort_by_key(keys, threads);
+    // Sorted by (a, b, edge * 2 + side): each key's records in edge order.
+    radix_sort_pairs(keys, threads);
     auto edge_of = [&](size_t j) { return keys[j].second / 2; };
     auto unit_of = [&](size_t j) {
         const uint32_t e = edge_of(j);

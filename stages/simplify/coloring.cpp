@@ -89,7 +89,7 @@ std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> cha
         cover_cells(s.ax, s.ay, s.bx, s.by, s.r, cell, 0.0, 0.0,
                     [&](int64_t x, int64_t y) { entries.emplace_back(cell_key(x, y), i); });
     }
-    radix_sort_by_key(entries); // stable: each cell's segments stay in index order, as sorting the pairs gives
+    radix_sort_pairs(entries); // each cell's segments in index order
     std::unordered_set<uint64_t> known;
     std::vector<std::pair<uint32_t, uint32_t>> edges;
     for (size_t b = 0; b < entries.size();) {
@@ -304,7 +304,7 @@ ColorResult color_tiles(std::span<const ChainGeom> chains, const ColorOptions& o
             }
         });
     }
-    radix_sort_by_key(member_of); // stable: chains were added in increasing order
+    radix_sort_pairs(member_of); // each tile's chains in increasing order
     member_of.erase(std::unique(member_of.begin(), member_of.end()), member_of.end());
     for (size_t b = 0; b < member_of.size();) {
         size_t e = b;

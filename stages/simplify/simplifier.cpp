@@ -488,7 +488,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
                         [&](int64_t x, int64_t y) { grid.emplace_back(cell_key(x, y), at); });
         }
     }
-    radix_sort_by_key(grid); // stable: each cell's segments stay in (chain, index) order
+    radix_sort_pairs(grid); // each cell's segments in (chain, index) order
     // Where each cell's run starts: one hash probe per cell, not a binary
     // search over every segment of the store.
     std::unordered_map<uint64_t, uint32_t> cell_start;

@@ -7,31 +7,82 @@
 
 using Items = std::vector<std::pair<uint64_t, uint32_t>>;
 
-TEST(RadixSort, StableAndTheSameForEveryThreadCount)
+namespace {
+
+/// What radix_sort_pairs must give: the pairs in (key, value) order.
+Items sorted(Items v)
 {
-    // Enough items for three parts of the parallel sort, with many equal keys
-    // (few distinct low bits) and a constant middle digit that gets skipped.
+    std::sort(v.begin(), v.end());
+    return v;
+}
+
+void expect_sorted_on_every_thread_count(const Items& in, const char* what)
+{
+    const Items want = sorted(in);
+    for (unsigned threads : {1U, 2U, 3U, 8U}) {
+        Items v = in;
+        tigerlod::radix_sort_pairs(v, threads);
+        EXPECT_EQ(v, want) << what << ", " << threads << " threads";
+    }
+}
+
+} // namespace
+
+TEST(RadixSort, RisingValuesGiveTheStableSortByKey)
+{
+    // Enough pairs for three parts of the parallel passes, with many equal
+    // keys (few distinct low bits) and a constant middle digit.
     std::mt19937_64 rng(7);
     Items in(400000);
     for (uint32_t i = 0; i < in.size(); ++i) {
         const uint64_t hi = rng() % 50000, lo = rng() % 300;
         in[i] = {(hi << 48) | (uint64_t{0xABCD} << 16) | lo, i};
     }
-    Items expect = in;
-    std::stable_sort(expect.begin(), expect.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
-    for (unsigned threads : {1U, 2U, 3U, 8U}) {
-        Items v = in;
-        tigerlod::radix_sort_by_key(v, threads);
-        EXPECT_EQ(v, expect) << threads << " threads";
-    }
-    for (size_t n : {size_t{5000}, size_t{4095}}) { // on each side of the switch to std::stable_sort
+    Items stable = in;
+    std::stable_sort(stable.begin(), stable.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    EXPECT_EQ(sorted(in), stable);
+    expect_sorted_on_every_thread_count(in, "random keys");
+    for (size_t n : {size_t{5000}, size_t{4095}}) { // on each side of the switch to std::sort
         Items v(in.begin(), in.begin() + static_cast<std::ptrdiff_t>(n));
-        Items want = v;
-        std::stable_sort(want.begin(), want.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
-        tigerlod::radix_sort_by_key(v, 2);
+        const Items want = sorted(v);
+        tigerlod::radix_sort_pairs(v, 2);
         EXPECT_EQ(v, want) << n;
     }
     Items small{{3, 0}, {1, 1}, {3, 2}, {0, 3}};
-    tigerlod::radix_sort_by_key(small, 4);
+    tigerlod::radix_sort_pairs(small, 4);
     EXPECT_EQ(small, (Items{{0, 3}, {1, 1}, {3, 0}, {3, 2}}));
+}
+
+TEST(RadixSort, EqualKeysEndInValueOrderWhateverTheirInputOrder)
+{
+    std::mt19937_64 rng(11);
+    Items in(300000);
+    for (auto& x : in) {
+        x = {rng() % 1000, static_cast<uint32_t>(rng())};
+    }
+    expect_sorted_on_every_thread_count(in, "1,000 keys, random values");
+    Items one_key(100000);
+    for (auto& x : one_key) {
+        x = {42, static_cast<uint32_t>(rng())};
+    }
+    expect_sorted_on_every_thread_count(one_key, "one key");
+}
+
+TEST(RadixSort, SkewedKeysSplitBucketsThatAreTooLarge)
+{
+    // Nearly every key in one bucket of the whole range (one far outlier), and
+    // a dense run of keys that fills one bucket again at the second level: the
+    // split buckets must come out sorted like the others.
+    std::mt19937_64 rng(3);
+    Items in;
+    for (uint32_t i = 0; i < 300000; ++i) {
+        in.emplace_back(rng() % 200000, i);
+    }
+    in.emplace_back(~uint64_t{0}, 7);
+    in.emplace_back(uint64_t{1} << 40, 8);
+    for (uint32_t i = 0; i < 100000; ++i) {
+        in.emplace_back(123456 + i % 3, 1000000 - i);
+    }
+    std::shuffle(in.begin(), in.end(), rng);
+    expect_sorted_on_every_thread_count(in, "skewed keys");
 }
