@@ -5,9 +5,22 @@
 
 namespace tigerlod::ingest {
 
+namespace {
+
+/// std::llround (half away from zero) for |x| < 2^31, inline: x minus its
+/// truncation is exact, so comparing it with one half decides as llround does.
+int32_t round_half_away(double x) noexcept
+{
+    const auto t = static_cast<int64_t>(x);
+    const double f = x - static_cast<double>(t);
+    return static_cast<int32_t>(t + (f >= 0.5 ? 1 : (f <= -0.5 ? -1 : 0)));
+}
+
+} // namespace
+
 LonLatE6 snap_e6(double lon_deg, double lat_deg) noexcept
 {
-    return {static_cast<int32_t>(std::llround(lon_deg * 1e6)), static_cast<int32_t>(std::llround(lat_deg * 1e6))};
+    return {round_half_away(lon_deg * 1e6), round_half_away(lat_deg * 1e6)};
 }
 
 void RawMap::add_polyline(std::span<const LonLatE6> pts, uint32_t left_unit, uint32_t right_unit, uint32_t cls,

@@ -161,8 +161,15 @@ void snap_points(OGRGeometryH g, std::vector<LonLatE6>& out, const std::string& 
     out.clear();
     const int n = OGR_G_GetPointCount(g);
     out.reserve(static_cast<size_t>(n));
+    // All points in one call, not two calls a point.
+    thread_local std::vector<double> xy;
+    xy.resize(2 * static_cast<size_t>(n));
+    if (n > 0) {
+        constexpr int stride = 2 * sizeof(double);
+        OGR_G_GetPoints(g, xy.data(), stride, xy.data() + 1, stride, nullptr, 0);
+    }
     for (int i = 0; i < n; ++i) {
-        const double lon = OGR_G_GetX(g, i), lat = OGR_G_GetY(g, i);
+        const double lon = xy[2 * static_cast<size_t>(i)], lat = xy[2 * static_cast<size_t>(i) + 1];
         if (!std::isfinite(lon) || !std::isfinite(lat) || std::fabs(lon) > 180 || std::fabs(lat) > 90) {
             char buf[128];
             std::snprintf(buf, sizeof buf, ": point %d (%.9g, %.9g) is not a lon/lat in degrees", i, lon, lat);

@@ -5,7 +5,9 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <mutex>
+#include <random>
 #include <tuple>
 #include <sstream>
 
@@ -306,6 +308,34 @@ TEST(MapBuilder, PolygonSegmentsJoinIntoOneEdgePerRunBetweenJunctions)
     EXPECT_EQ(b.result.problems.at("overlapping_polygons"), 0U);
     EXPECT_EQ(describe(b.store("l")), (std::vector<std::string>{"A|B 2,0 2,1 3,2 2,4", "B| 2,0 6,0 6,4 2,4",
                                                                 "B|D 4,1 4,2 5,2 5,1 4,1", "|A 2,0 0,0 0,4 2,4"}));
+}
+
+TEST(MapBuilder, SnapRoundsHalfAwayFromZeroExactlyAsLlround)
+{
+    // Random degrees, and values whose micro-degree product lands on or next
+    // to a half (the ties decide which way a point snaps).
+    std::mt19937_64 rng(5);
+    std::uniform_real_distribution<double> lon(-180.0, 180.0), lat(-90.0, 90.0);
+    std::vector<std::pair<double, double>> points;
+    for (int i = 0; i < 200000; ++i) {
+        points.emplace_back(lon(rng), lat(rng));
+    }
+    for (int64_t k : {int64_t{0}, int64_t{1}, int64_t{-1}, int64_t{2}, int64_t{-3}, int64_t{89999999},
+                      int64_t{-96123456}, int64_t{179999999}, int64_t{-179999999}}) {
+        for (double half : {0.5, -0.5}) {
+            const double x = (static_cast<double>(k) + half) / 1e6;
+            for (double v : {x, std::nextafter(x, 0.0), std::nextafter(x, 1e9), std::nextafter(x, -1e9)}) {
+                points.emplace_back(v, std::clamp(v, -90.0, 90.0));
+            }
+        }
+    }
+    points.emplace_back(2.5e-6, -2.5e-6);
+    points.emplace_back(0.0, -0.0);
+    for (const auto& [x, y] : points) {
+        const LonLatE6 s = snap_e6(x, y);
+        ASSERT_EQ(s.lon, std::llround(x * 1e6)) << std::hexfloat << x;
+        ASSERT_EQ(s.lat, std::llround(y * 1e6)) << std::hexfloat << y;
+    }
 }
 
 TEST(MapBuilder, SnappingMergesNearPointsAndSpikesAreRepaired)
