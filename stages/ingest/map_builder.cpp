@@ -608,8 +608,9 @@ Level build_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw, const
             if (is_junction(u)) {
                 break;
             }
-            const uint32_t arrived = in ^ 1U; // the incidence of e at u
-            const uint32_t a = inc[start[ends.of_vertex[u]]], b = inc[start[ends.of_vertex[u]] + 1];
+            const uint32_t arrived = in ^ 1U;               // the incidence of e at u
+            const uint64_t at_u = start[ends.of_vertex[u]]; // u has degree 2: its two incidences
+            const uint32_t a = inc[at_u], b = inc[at_u + 1];
             const uint32_t next = a == arrived ? b : a;
             if (visited[next / 2]) {
                 break; // back at the start of a ring

@@ -10,6 +10,7 @@
 
 #include <atomic>
 #include <cmath>
+#include <limits>
 #include <exception>
 #include <thread>
 #include <cstring>
@@ -161,9 +162,11 @@ void snap_points(OGRGeometryH g, std::vector<LonLatE6>& out, const std::string& 
     out.clear();
     const int n = OGR_G_GetPointCount(g);
     out.reserve(static_cast<size_t>(n));
-    // All points in one call, not two calls a point.
+    // All points in one call, not two calls a point. The buffer is reused, so
+    // it starts as NaN: a point the call did not fill fails the check below
+    // instead of taking the last geometry's value.
     thread_local std::vector<double> xy;
-    xy.resize(2 * static_cast<size_t>(n));
+    xy.assign(2 * static_cast<size_t>(n), std::numeric_limits<double>::quiet_NaN());
     if (n > 0) {
         constexpr int stride = 2 * sizeof(double);
         OGR_G_GetPoints(g, xy.data(), stride, xy.data() + 1, stride, nullptr, 0);
