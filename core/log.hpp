@@ -1,8 +1,9 @@
 #pragma once
 /// @file log.hpp
-/// Verbose output to stderr, each line prefixed with the elapsed time
-/// `[ m:ss]`. Silent unless enabled, so a successful run writes nothing to
-/// stderr by default.
+/// Verbose output to stderr, each line prefixed with the elapsed time and the
+/// process's resident memory, `[ m:ss  NNN MiB]` (the memory where /proc gives
+/// it). Silent unless enabled, so a successful run writes nothing to stderr by
+/// default.
 
 #include <chrono>
 #include <string_view>

@@ -156,7 +156,8 @@ int run_stage_impl(Stage& stage, const char* name, const char* description, int 
         args.group("General");
         args.add("help", &help, "print this help and exit");
         args.add("version", &version, "print versions of tigerlod and its libraries and exit");
-        args.add("verbose", &verbose, "log progress to stderr, each line with the elapsed time");
+        args.add("verbose", &verbose,
+                 "log progress to stderr, each line with the elapsed time and the memory resident then");
         stage.add_args(args);
         std::vector<std::string> argv_list(argv + 1, argv + argc);
         for (auto& a : argv_list) { // -h and -v as short forms

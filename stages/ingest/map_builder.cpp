@@ -1,6 +1,7 @@
 #include "stages/ingest/map_builder.hpp"
 
 #include "core/errors.hpp"
+#include "core/memory.hpp"
 #include "core/parallel.hpp"
 #include "core/radix_sort.hpp"
 #include "core/segment_grid.hpp"
@@ -122,15 +123,23 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
     for (size_t i = 0; i < occ.size(); ++i) {
         occ[i] = {pack_key(raw.coords[i]), static_cast<uint32_t>(i)};
     }
+    // The points are in `occ` now, and every later use goes through their
+    // vertex ids: freed before the sort, they do not add to its peak.
+    release(raw.coords);
     radix_sort_pairs(occ, threads);
     std::vector<uint32_t> id(occ.size());
+    size_t unique = 0;
+    for (size_t i = 0; i < occ.size(); ++i) {
+        unique += i == 0 || occ[i].first != occ[i - 1].first ? 1 : 0;
+    }
+    g.keys.reserve(unique);
     for (size_t i = 0; i < occ.size(); ++i) {
         if (i == 0 || occ[i].first != occ[i - 1].first) {
             g.keys.push_back(occ[i].first);
         }
         id[occ[i].second] = static_cast<uint32_t>(g.keys.size() - 1);
     }
-    occ = {};
+    release(occ);
     g.grid.resize(g.keys.size());
     std::vector<uint8_t> bad(g.keys.size(), 0);
     std::mutex lat_mutex;
@@ -196,6 +205,7 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
         }
     }
     // Clean each polyline: repeated points, then p-q-p spikes.
+    g.verts.reserve(id.size());
     std::vector<uint32_t> buf;
     for (size_t p = 0; p < raw.polyline_count(); ++p) {
         buf.clear();
@@ -218,7 +228,8 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
             buf.pop_back();
         }
         if (buf.size() < 2 || (buf.size() < 4 && buf.front() == buf.back())) {
-            problems.add_lonlat("degenerate_polylines", raw.coords[raw.offsets[p]], raw.where(raw.source[p]));
+            problems.add_lonlat("degenerate_polylines", unpack_key(g.keys[id[raw.offsets[p]]]),
+                                raw.where(raw.source[p]));
             continue;
         }
         g.verts.insert(g.verts.end(), buf.begin(), buf.end());
@@ -229,8 +240,7 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
         g.sid.push_back(raw.source_id[p]);
         g.src.push_back(raw.source[p]);
     }
-    raw.coords = {};
-    raw.offsets = {};
+    release(raw.offsets);
     return g;
 }
 
@@ -276,12 +286,10 @@ std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned th
         const uint32_t e = edge_of(j);
         return g.left[e] != no_unit ? g.left[e] : g.right[e];
     };
-    // The scan on contiguous parts that start where a key does; each part's
-    // pieces and problems are put together in order afterwards.
-    struct Part {
-        std::vector<Piece> pieces;
-        std::vector<FoundProblem> found;
-    };
+    // The scan on contiguous parts that start where a key does. A first pass
+    // counts each part's pieces, so the second writes them straight into
+    // their place in the result (no per-part copies beside the sorted keys);
+    // problems are put together in part order afterwards.
     const unsigned nparts = std::max(1U, std::min<unsigned>(threads, static_cast<unsigned>(nrec / 65536 + 1)));
     std::vector<size_t> bounds(nparts + 1, nrec);
     bounds[0] = 0;
@@ -292,33 +300,60 @@ std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned th
         }
         bounds[t] = b;
     }
-    std::vector<Part> parts(nparts);
-    parallel_each(nparts, threads, [&](size_t t) {
-        Part& out = parts[t];
-        out.pieces.reserve((bounds[t + 1] - bounds[t]) / 2 + 1);
-        for (size_t i = bounds[t]; i < bounds[t + 1];) {
-            size_t j = i;
-            uint32_t l = no_unit, r = no_unit;
-            bool conflict = false;
-            for (; j < nrec && keys[j].first == keys[i].first; ++j) {
-                uint32_t& slot = (keys[j].second & 1U) ? l : r;
-                if (slot == no_unit) {
-                    slot = unit_of(j);
-                } else {
-                    conflict = true;
-                }
+    // The records of the key at i: where they end, the units on each side,
+    // and whether a side was claimed twice.
+    struct Group {
+        size_t end;
+        uint32_t left, right;
+        bool conflict;
+    };
+    auto group = [&](size_t i) {
+        Group gr{i, no_unit, no_unit, false};
+        for (; gr.end < nrec && keys[gr.end].first == keys[i].first; ++gr.end) {
+            uint32_t& slot = (keys[gr.end].second & 1U) ? gr.left : gr.right;
+            if (slot == no_unit) {
+                slot = unit_of(gr.end);
+            } else {
+                gr.conflict = true;
             }
+        }
+        if (lines) {
+            gr.left = gr.right = no_unit;
+        }
+        return gr;
+    };
+    // The same polygon on both sides: a slit or spike in its ring, never a boundary.
+    auto is_spike = [](const Group& gr) { return gr.left != no_unit && gr.left == gr.right; };
+    std::vector<size_t> first_piece(nparts + 1, 0);
+    parallel_each(nparts, threads, [&](size_t t) {
+        size_t n = 0;
+        for (size_t i = bounds[t]; i < bounds[t + 1];) {
+            const Group gr = group(i);
+            n += is_spike(gr) ? 0 : 1;
+            i = gr.end;
+        }
+        first_piece[t + 1] = n;
+    });
+    for (unsigned t = 0; t < nparts; ++t) {
+        first_piece[t + 1] += first_piece[t];
+    }
+    std::vector<Piece> out(first_piece[nparts]);
+    std::vector<std::vector<FoundProblem>> found(nparts);
+    parallel_each(nparts, threads, [&](size_t t) {
+        size_t w = first_piece[t];
+        for (size_t i = bounds[t]; i < bounds[t + 1];) {
+            const Group gr = group(i);
+            const size_t j = gr.end;
             const auto a = static_cast<uint32_t>(keys[i].first >> 32), b = static_cast<uint32_t>(keys[i].first);
             const uint32_t first_edge = edge_of(i);
             const GridPoint pa = g.grid[a], pb = g.grid[b];
             const double mx = pa.x + 0.5 * (pb.x - pa.x), my = pa.y + 0.5 * (pb.y - pa.y);
             if (lines) {
-                l = r = no_unit;
                 if (j - i > 1) {
-                    out.found.push_back({"duplicate_segments", mx, my,
-                                         raw.where(g.src[first_edge]) + " " + raw.where(g.src[edge_of(i + 1)])});
+                    found[t].push_back({"duplicate_segments", mx, my,
+                                        raw.where(g.src[first_edge]) + " " + raw.where(g.src[edge_of(i + 1)])});
                 }
-            } else if (conflict) {
+            } else if (gr.conflict) {
                 std::string where;
                 for (size_t k = i; k < j; ++k) {
                     if (!where.empty()) {
@@ -326,29 +361,20 @@ std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned th
                     }
                     where += raw.where(g.src[edge_of(k)]);
                 }
-                out.found.push_back({"overlapping_polygons", mx, my, std::move(where)});
+                found[t].push_back({"overlapping_polygons", mx, my, std::move(where)});
             }
-            if (l != no_unit && l == r) {
-                // The same polygon on both sides: a slit or spike in its ring, never a boundary.
-                out.found.push_back(
+            if (is_spike(gr)) {
+                found[t].push_back(
                     {"spikes", static_cast<double>(pa.x), static_cast<double>(pa.y), raw.where(g.src[first_edge])});
             } else {
-                out.pieces.push_back({{a, b}, l, r, first_edge});
+                out[w++] = {{a, b}, gr.left, gr.right, first_edge};
             }
             i = j;
         }
     });
-    keys = {};
-    std::vector<Piece> out;
-    size_t total = 0;
-    for (const auto& part : parts) {
-        total += part.pieces.size();
-    }
-    out.reserve(total);
-    for (auto& part : parts) {
-        out.insert(out.end(), part.pieces.begin(), part.pieces.end());
-        part.pieces = {};
-        problems.add_all(std::move(part.found));
+    release(keys);
+    for (auto& f : found) {
+        problems.add_all(std::move(f));
     }
     return out;
 }
