@@ -3,6 +3,7 @@
 #include "core/radix_sort.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <thread>
 
@@ -76,29 +77,39 @@ std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, u
         return {};
     }
     const Grid grid = make_grid(segs, 1.0);
+    // Sized exactly (a counting pass): the entries are this check's peak memory.
+    size_t nentries = 0;
+    for (const auto& sg : segs) {
+        grid.cover(sg.a, sg.b, 0, [&](uint64_t) { ++nentries; });
+    }
     std::vector<std::pair<uint64_t, uint32_t>> entries;
-    entries.reserve(segs.size() * 2);
+    entries.reserve(nentries);
     for (uint32_t i = 0; i < segs.size(); ++i) {
         grid.cover(segs[i].a, segs[i].b, 0, [&](uint64_t k) { entries.emplace_back(k, i); });
     }
     // Sorted by (cell, segment): each cell lists its segments in order. A segment enters a cell once, as the cover
     // never repeats one.
     radix_sort_pairs(entries, threads);
-    std::vector<size_t> group_start;
-    for (size_t i = 0; i < entries.size(); ++i) {
-        if (i == 0 || entries[i].first != entries[i - 1].first) {
-            group_start.push_back(i);
-        }
-    }
-    group_start.push_back(entries.size());
-    const size_t ngroups = group_start.size() - 1;
+    // Runs of whole cells, taken by the threads one after another.
     threads = std::max(1U, threads);
+    const size_t nruns = std::min<size_t>(entries.size(), size_t{threads} * 64);
+    std::vector<size_t> run_start(nruns + 1, entries.size());
+    run_start[0] = 0;
+    for (size_t r = 1; r < nruns; ++r) {
+        size_t b = std::max(run_start[r - 1], entries.size() / nruns * r);
+        while (b > 0 && b < entries.size() && entries[b].first == entries[b - 1].first) {
+            ++b;
+        }
+        run_start[r] = b;
+    }
     std::vector<std::vector<Intersection>> found(threads);
+    std::atomic<size_t> next_run{0};
     auto work = [&](unsigned t) {
-        for (size_t gi = t; gi < ngroups; gi += threads) {
-            for (size_t i = group_start[gi]; i < group_start[gi + 1]; ++i) {
+        for (size_t run = next_run++; run < nruns; run = next_run++) {
+            const size_t run_end = run_start[run + 1];
+            for (size_t i = run_start[run]; i < run_end; ++i) {
                 const Segment& s = segs[entries[i].second];
-                for (size_t j = i + 1; j < group_start[gi + 1]; ++j) {
+                for (size_t j = i + 1; j < run_end && entries[j].first == entries[i].first; ++j) {
                     const Segment& r = segs[entries[j].second];
                     if (std::max(s.a.x, s.b.x) < std::min(r.a.x, r.b.x) ||
                         std::max(r.a.x, r.b.x) < std::min(s.a.x, s.b.x) ||
