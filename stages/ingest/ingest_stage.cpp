@@ -173,7 +173,7 @@ int IngestStage::run(const StageContext& ctx)
     RawMap raw = read_dataset(cfg, threads, ctx.log);
 #ifdef __GLIBC__
     // What the readers freed goes back to the system before the build's peak
-    // (tract set: 125 -> 83 MB resident after reading, peak 8-10 MB lower).
+    // (tract set: 125 -> 83 MB resident after reading, the peak 8-10 MB lower).
     malloc_trim(0);
 #endif
     const double t_read = ctx.log.elapsed_s();
