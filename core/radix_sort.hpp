@@ -225,4 +225,23 @@ inline void radix_sort_pairs(std::vector<std::pair<uint64_t, uint32_t>>& v, unsi
     });
 }
 
+/// Bounds of `n` parts of sorted pairs, about equal in size, each beginning
+/// where a key does, so that no key's run is split: n + 1 indices, the first
+/// 0 and the last v.size() (a part may be empty). For work on the runs of
+/// equal keys spread over threads.
+inline std::vector<size_t> key_aligned_parts(const std::vector<std::pair<uint64_t, uint32_t>>& v, size_t n)
+{
+    n = std::max<size_t>(n, 1);
+    std::vector<size_t> bounds(n + 1, v.size());
+    bounds[0] = 0;
+    for (size_t t = 1; t < n; ++t) {
+        size_t b = std::max(bounds[t - 1], v.size() / n * t);
+        while (b > 0 && b < v.size() && v[b].first == v[b - 1].first) {
+            ++b;
+        }
+        bounds[t] = b;
+    }
+    return bounds;
+}
+
 } // namespace tigerlod

@@ -93,15 +93,7 @@ std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, u
     // Runs of whole cells, taken by the threads one after another.
     threads = std::max(1U, threads);
     const size_t nruns = std::min<size_t>(entries.size(), size_t{threads} * 64);
-    std::vector<size_t> run_start(nruns + 1, entries.size());
-    run_start[0] = 0;
-    for (size_t r = 1; r < nruns; ++r) {
-        size_t b = std::max(run_start[r - 1], entries.size() / nruns * r);
-        while (b > 0 && b < entries.size() && entries[b].first == entries[b - 1].first) {
-            ++b;
-        }
-        run_start[r] = b;
-    }
+    const std::vector<size_t> run_start = key_aligned_parts(entries, nruns);
     std::vector<std::vector<Intersection>> found(threads);
     std::atomic<size_t> next_run{0};
     auto work = [&](unsigned t) {

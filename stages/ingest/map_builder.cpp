@@ -291,15 +291,7 @@ std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned th
     // their place in the result (no per-part copies beside the sorted keys);
     // problems are put together in part order afterwards.
     const unsigned nparts = std::max(1U, std::min<unsigned>(threads, static_cast<unsigned>(nrec / 65536 + 1)));
-    std::vector<size_t> bounds(nparts + 1, nrec);
-    bounds[0] = 0;
-    for (unsigned t = 1; t < nparts; ++t) {
-        size_t b = std::max(bounds[t - 1], nrec / nparts * t);
-        while (b > 0 && b < nrec && keys[b].first == keys[b - 1].first) {
-            ++b;
-        }
-        bounds[t] = b;
-    }
+    const std::vector<size_t> bounds = key_aligned_parts(keys, nparts);
     // The records of the key at i: where they end, the units on each side,
     // and whether a side was claimed twice.
     struct Group {

@@ -86,3 +86,15 @@ TEST(RadixSort, SkewedKeysSplitBucketsThatAreTooLarge)
     std::shuffle(in.begin(), in.end(), rng);
     expect_sorted_on_every_thread_count(in, "skewed keys");
 }
+
+TEST(KeyAlignedParts, PartsBeginWhereAKeyDoes)
+{
+    // Keys 1 x3, 2 x1, 5 x4, 7 x2: ten pairs.
+    const Items v{{1, 0}, {1, 1}, {1, 2}, {2, 3}, {5, 4}, {5, 5}, {5, 6}, {5, 7}, {7, 8}, {7, 9}};
+    // Even cuts at 3, 6 would split key 5's run: the second moves to 8.
+    EXPECT_EQ(tigerlod::key_aligned_parts(v, 3), (std::vector<size_t>{0, 3, 8, 10}));
+    // A cut inside key 1's run moves past it; two cuts can meet (an empty part).
+    EXPECT_EQ(tigerlod::key_aligned_parts(v, 5), (std::vector<size_t>{0, 3, 4, 8, 8, 10}));
+    EXPECT_EQ(tigerlod::key_aligned_parts(v, 1), (std::vector<size_t>{0, 10}));
+    EXPECT_EQ(tigerlod::key_aligned_parts(Items{}, 2), (std::vector<size_t>{0, 0, 0}));
+}
