@@ -174,7 +174,14 @@ std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRe
     if (segs.empty()) {
         return {};
     }
-    const Grid grid = make_grid(segs, std::max(1.0, distance));
+    // Cells exactly `distance` wide (at least 2 units), on lines at multiples of
+    // the width: which pairs come out depends on the two chains alone, not on
+    // the other segments, so a map built region by region gets the same.
+    Grid grid = make_grid(segs, 1.0);
+    grid.c = static_cast<int64_t>(std::max(2.0, std::ceil(distance)));
+    auto align = [&](int64_t o) { return (o >= 0 ? o / grid.c : -((-o + grid.c - 1) / grid.c)) * grid.c; };
+    grid.ox = align(grid.ox);
+    grid.oy = align(grid.oy);
     // The cells each chain passes through (consecutive segments mostly share
     // one), computed once: chain group g spans segs[seg_start[g], seg_start[g+1])
     // and cells[cell_start[g], cell_start[g+1]).

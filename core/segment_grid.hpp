@@ -40,7 +40,9 @@ struct SegmentRef {
 /// Pairs (chain, part) such that a segment of `chain` (owned by another part)
 /// comes within `distance` grid units of a segment that bounds `part` (owned
 /// by it, or a border of it). A conservative superset: pairs up to about two
-/// cells apart may be included. Segments of one chain must be consecutive.
+/// cells apart may be included, the cells being `distance` wide on lines at
+/// multiples of it, so that whether a pair is included depends on the two
+/// chains alone. Segments of one chain must be consecutive.
 /// Sorted by (chain, part). The result does not depend on `threads`.
 std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRef>& segs, double distance,
                                                      unsigned threads);

@@ -6,6 +6,7 @@
 #include "formats/chains/chain_store.hpp"
 #include "stages/ingest/config.hpp"
 #include "stages/ingest/map_builder.hpp"
+#include "stages/ingest/regions.hpp"
 #include "stages/ingest/sources.hpp"
 
 #include <GeographicLib/Config.h>
@@ -82,6 +83,9 @@ void IngestStage::add_args(ArgSet& args)
     args.add("halo-m", &m_halo_m, "halo distance in metres (overrides ingest.halo_m; default 1000)", "M");
     args.add("threads", &m_threads, "worker threads, 0 for all cores (overrides ingest.threads)", "N");
     args.add("max-problem-samples", &m_max_problem_samples, "problems listed with their location in the report", "N");
+    args.add("whole-map", &m_whole_map,
+             "build a polygons dataset of several files as one map in memory, not region by region\n"
+             "      (the same output; memory then follows the dataset, not its largest region)");
 }
 
 void IngestStage::initialize()
@@ -169,18 +173,6 @@ int IngestStage::run(const StageContext& ctx)
         return out;
     });
 
-    const double t0 = ctx.log.elapsed_s();
-    RawMap raw = read_dataset(cfg, threads, ctx.log);
-#ifdef __GLIBC__
-    // What the readers freed goes back to the system before the build's peak
-    // (tract set: 125 -> 83 MB resident after reading, the peak 8-10 MB lower).
-    malloc_trim(0);
-#endif
-    const double t_read = ctx.log.elapsed_s();
-    const uint64_t points_read = raw.points_read;
-    ctx.log.info("read " + std::to_string(points_read) + " points, " + std::to_string(raw.polyline_count()) +
-                 " polylines, " + std::to_string(raw.units.size()) + " units");
-
     OutputDir out(m_output, m_overwrite);
     for (const auto& l : cfg.levels) {
         fs::create_directories(out.path() / l.name);
@@ -191,11 +183,56 @@ int IngestStage::run(const StageContext& ctx)
     options.threads = threads;
     options.max_problem_samples = static_cast<size_t>(m_max_problem_samples);
     options.log = &ctx.log;
-    const BuildResult result = build_map(std::move(raw), projection, options, [&](const chains::ChainStore& s) {
+    const StoreSink sink = [&](const chains::ChainStore& s) {
         // Inside the output folder, renamed into place whole at the end.
         write_file(out.path() / s.level_name / (file_name(s.partition) + ".tlc"), chains::encode(s));
         ++stores;
-    });
+    };
+
+    const double t0 = ctx.log.elapsed_s();
+    double t_read = 0;
+    uint64_t points_read = 0;
+    BuildResult result;
+    if (cfg.dataset.kind == DatasetSpec::Kind::polygons && cfg.dataset.inputs.size() > 1 && !m_whole_map) {
+        // Region by region: each file read once and put aside on disk, inside
+        // the output folder (removed before it is renamed into place).
+        const fs::path aside = out.path() / ".parts";
+        fs::create_directories(aside);
+        auto part_path = [&](size_t i) { return aside / (std::to_string(i) + ".raw"); };
+        std::vector<PartSummary> parts(cfg.dataset.inputs.size());
+        read_polygon_parts(cfg, threads, ctx.log, [&](size_t i, RawMap&& part) {
+            parts[i] = summarize_part(part);
+            write_raw(part, part_path(i));
+        });
+#ifdef __GLIBC__
+        malloc_trim(0);
+#endif
+        t_read = ctx.log.elapsed_s();
+        for (const auto& p : parts) {
+            points_read += p.points_read;
+        }
+        ctx.log.info("read " + std::to_string(points_read) + " points from " + std::to_string(parts.size()) +
+                     " files");
+        std::vector<std::string> level_names;
+        for (const auto& l : cfg.levels) {
+            level_names.push_back(l.name);
+        }
+        result = build_by_regions(
+            parts, [&](size_t i) { return read_raw(part_path(i)); }, level_names, projection, options, sink);
+        fs::remove_all(aside);
+    } else {
+        RawMap raw = read_dataset(cfg, threads, ctx.log);
+#ifdef __GLIBC__
+        // What the readers freed goes back to the system before the build's peak
+        // (tract set: 125 -> 83 MB resident after reading, the peak 8-10 MB lower).
+        malloc_trim(0);
+#endif
+        t_read = ctx.log.elapsed_s();
+        points_read = raw.points_read;
+        ctx.log.info("read " + std::to_string(points_read) + " points, " + std::to_string(raw.polyline_count()) +
+                     " polylines, " + std::to_string(raw.units.size()) + " units");
+        result = build_map(std::move(raw), projection, options, sink);
+    }
     const double t_build = ctx.log.elapsed_s();
 
     json report;

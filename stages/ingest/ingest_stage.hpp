@@ -25,6 +25,7 @@ class IngestStage final : public Stage {
     std::string m_config, m_output;
     bool m_overwrite = false;
     bool m_validate = false;
+    bool m_whole_map = false;
     double m_halo_m = -1.0;
     int m_threads = -1;
     int m_max_problem_samples = 200;

@@ -14,6 +14,8 @@
 #include <mutex>
 #include <numbers>
 #include <numeric>
+#include <stdexcept>
+#include <tuple>
 #include <thread>
 #include <unordered_map>
 
@@ -80,10 +82,10 @@ class Problems {
     void add(const std::string& kind, double gx, double gy, std::string where)
     {
         count(kind);
-        if (m_r.samples.size() < m_max) {
+        if (m_max > 0) {
             ProblemSample s{kind, 0, 0, std::move(where)};
             m_proj.to_lonlat(gx, gy, s.lon_deg, s.lat_deg);
-            m_r.samples.push_back(std::move(s));
+            keep(std::move(s));
         }
     }
     /// Record `found` in its order.
@@ -96,15 +98,42 @@ class Problems {
     void add_lonlat(const std::string& kind, LonLatE6 p, std::string where)
     {
         count(kind);
-        if (m_r.samples.size() < m_max) {
-            m_r.samples.push_back({kind, p.lon * 1e-6, p.lat * 1e-6, std::move(where)});
+        if (m_max > 0) {
+            keep({kind, p.lon * 1e-6, p.lat * 1e-6, std::move(where)});
         }
     }
+    /// The samples kept, in their order.
+    void finish() { first_samples(m_r.samples, m_max); }
 
   private:
+    void keep(ProblemSample&& s)
+    {
+        m_r.samples.push_back(std::move(s));
+        if (m_r.samples.size() >= 2 * m_max + 64) {
+            first_samples(m_r.samples, m_max);
+        }
+    }
     BuildResult& m_r;
     const Projection& m_proj;
     size_t m_max;
+};
+
+/// What a build counts and reports: everything, for a whole map; for a region
+/// (RegionScope), what concerns one of its own codes first: the smallest
+/// region-level code among the units around a vertex, on the sides of an edge
+/// or a pair of edges, or of a unit. Each such thing then belongs to exactly
+/// one region, and that region holds all the units it depends on.
+struct Owner {
+    std::vector<uint32_t> unit_rank; ///< unit -> region-level code id (sorted codes); empty for a whole map
+    std::vector<uint8_t> own_rank;   ///< region-level code id -> own
+    std::vector<uint32_t> vertex_rank;
+
+    bool whole() const noexcept { return unit_rank.empty(); }
+    uint32_t rank(uint32_t u) const noexcept { return u == no_unit || whole() ? none : unit_rank[u]; }
+    bool of_rank(uint32_t r) const noexcept { return whole() || (r != none && own_rank[r] != 0); }
+    bool unit(uint32_t u) const noexcept { return whole() || of_rank(rank(u)); }
+    bool units(uint32_t a, uint32_t b) const noexcept { return whole() || of_rank(std::min(rank(a), rank(b))); }
+    bool vertex(uint32_t v) const noexcept { return whole() || of_rank(vertex_rank[v]); }
 };
 
 /// Contiguous ranges of at least 4096 items per thread.
@@ -114,7 +143,7 @@ template <class F> void parallel_for(size_t n, unsigned threads, F&& f)
 }
 
 /// Intern and project the vertices, then clean every polyline.
-Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems& problems)
+Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems& problems, Owner& owner)
 {
     Graph g;
     // Sort (key, occurrence) by key: vertex ids follow the keys, so they do not
@@ -186,6 +215,7 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
     // grid anywhere short of the polar caps): then the search is skipped.
     std::vector<uint32_t> remap(g.keys.size());
     std::iota(remap.begin(), remap.end(), 0U);
+    std::vector<uint32_t> merged;
     const double spacing =
         g.keys.empty() ? 0.0 : proj.lattice_separation_m(1e-6, lat_lo * 1e-6, lat_hi * 1e-6) / proj.params().grid_m;
     if (!(spacing > std::numbers::sqrt2)) {
@@ -200,36 +230,63 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
             if (by_grid[i].first == by_grid[i - 1].first) {
                 const uint32_t v = by_grid[i].second;
                 remap[v] = remap[by_grid[i - 1].second];
-                problems.add("merged_vertices", g.grid[v].x, g.grid[v].y, "");
+                if (owner.whole()) {
+                    problems.add("merged_vertices", g.grid[v].x, g.grid[v].y, "");
+                } else {
+                    merged.push_back(v); // counted once the owners of the vertices are known
+                }
             }
         }
     }
     // Clean each polyline: repeated points, then p-q-p spikes.
     g.verts.reserve(id.size());
+    if (!owner.whole()) {
+        owner.vertex_rank.assign(g.keys.size(), none);
+        for (size_t p = 0; p < raw.polyline_count(); ++p) {
+            const uint32_t r = std::min(owner.rank(raw.left[p]), owner.rank(raw.right[p]));
+            for (uint64_t k = raw.offsets[p]; k < raw.offsets[p + 1]; ++k) {
+                owner.vertex_rank[id[k]] = std::min(owner.vertex_rank[id[k]], r);
+            }
+        }
+        for (uint32_t v : merged) {
+            if (owner.vertex(v)) {
+                problems.add("merged_vertices", g.grid[v].x, g.grid[v].y, "");
+            }
+        }
+    }
     std::vector<uint32_t> buf;
     for (size_t p = 0; p < raw.polyline_count(); ++p) {
+        const bool mine = owner.units(raw.left[p], raw.right[p]);
         buf.clear();
         for (uint64_t k = raw.offsets[p]; k < raw.offsets[p + 1]; ++k) {
             const uint32_t v = remap[id[k]];
             if (!buf.empty() && buf.back() == v) {
-                problems.add("duplicate_points", g.grid[v].x, g.grid[v].y, raw.where(raw.source[p]));
+                if (mine) {
+                    problems.add("duplicate_points", g.grid[v].x, g.grid[v].y, raw.where(raw.source[p]));
+                }
                 continue;
             }
             buf.push_back(v);
             while (buf.size() >= 3 && buf[buf.size() - 1] == buf[buf.size() - 3]) {
                 const uint32_t q = buf[buf.size() - 2];
-                problems.add("spikes", g.grid[q].x, g.grid[q].y, raw.where(raw.source[p]));
+                if (mine) {
+                    problems.add("spikes", g.grid[q].x, g.grid[q].y, raw.where(raw.source[p]));
+                }
                 buf.resize(buf.size() - 2);
             }
         }
         while (buf.size() >= 4 && buf.front() == buf.back() && buf[1] == buf[buf.size() - 2]) {
-            problems.add("spikes", g.grid[buf.front()].x, g.grid[buf.front()].y, raw.where(raw.source[p]));
+            if (mine) {
+                problems.add("spikes", g.grid[buf.front()].x, g.grid[buf.front()].y, raw.where(raw.source[p]));
+            }
             buf.erase(buf.begin());
             buf.pop_back();
         }
         if (buf.size() < 2 || (buf.size() < 4 && buf.front() == buf.back())) {
-            problems.add_lonlat("degenerate_polylines", unpack_key(g.keys[id[raw.offsets[p]]]),
-                                raw.where(raw.source[p]));
+            if (mine) {
+                problems.add_lonlat("degenerate_polylines", unpack_key(g.keys[id[raw.offsets[p]]]),
+                                    raw.where(raw.source[p]));
+            }
             continue;
         }
         g.verts.insert(g.verts.end(), buf.begin(), buf.end());
@@ -256,7 +313,8 @@ struct Piece {
 /// polygons share into one piece with a unit on each side. For a line layer,
 /// split the lines and keep one of each set of identical segments (a river
 /// stored twice becomes one chain), counted as `duplicate_segments`.
-std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned threads, Problems& problems)
+std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned threads, Problems& problems,
+                                  const Owner& owner)
 {
     const bool lines = raw.kind == RawMap::Kind::lines;
     if (g.edge_count() >= (size_t{1} << 31)) {
@@ -346,18 +404,26 @@ std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned th
                                         raw.where(g.src[first_edge]) + " " + raw.where(g.src[edge_of(i + 1)])});
                 }
             } else if (gr.conflict) {
-                std::string where;
+                uint32_t rank = none;
                 for (size_t k = i; k < j; ++k) {
+                    rank = std::min(rank, owner.rank(unit_of(k)));
+                }
+                std::string where;
+                for (size_t k = i; k < j && owner.of_rank(rank); ++k) {
                     if (!where.empty()) {
                         where += ' ';
                     }
                     where += raw.where(g.src[edge_of(k)]);
                 }
-                found[t].push_back({"overlapping_polygons", mx, my, std::move(where)});
+                if (owner.of_rank(rank)) {
+                    found[t].push_back({"overlapping_polygons", mx, my, std::move(where)});
+                }
             }
             if (is_spike(gr)) {
-                found[t].push_back(
-                    {"spikes", static_cast<double>(pa.x), static_cast<double>(pa.y), raw.where(g.src[first_edge])});
+                if (owner.unit(gr.left)) {
+                    found[t].push_back({"spikes", static_cast<double>(pa.x), static_cast<double>(pa.y),
+                                        raw.where(g.src[first_edge])});
+                }
             } else {
                 out[w++] = {{a, b}, gr.left, gr.right, first_edge};
             }
@@ -472,7 +538,7 @@ struct LevelCodes {
     uint32_t side(uint32_t unit) const noexcept { return unit == no_unit ? none : of_unit[unit]; }
 };
 
-std::vector<LevelCodes> level_codes(const RawMap& raw, Problems& problems)
+std::vector<LevelCodes> level_codes(const RawMap& raw, Problems& problems, const Owner& owner)
 {
     const size_t nlev = raw.level_names.size();
     std::vector<LevelCodes> out(nlev);
@@ -495,7 +561,7 @@ std::vector<LevelCodes> level_codes(const RawMap& raw, Problems& problems)
                 const uint32_t want = out[L - 1].of_unit[u];
                 if (p == none) {
                     p = want;
-                } else if (p != want) {
+                } else if (p != want && owner.unit(static_cast<uint32_t>(u))) {
                     problems.add_lonlat("non_nesting_units", raw.units[u].intpt.value_or(LonLatE6{}),
                                         raw.where(raw.units[u].source) + " (" + raw.level_names[L] + " " +
                                             lc.codes[lc.of_unit[u]] + ")");
@@ -810,7 +876,8 @@ double distance2(GridPoint p, GridPoint a, GridPoint b)
 /// by at most `max_shift` grid units, drop it, as snap rounding would, and
 /// check again. Returns the intersections that remain; repairs are counted.
 std::vector<Intersection> repair_snap_crossings(Graph& g, const RawMap& raw, const std::vector<LevelCodes>& lcs,
-                                                double max_shift, unsigned threads, Problems& problems)
+                                                double max_shift, unsigned threads, Problems& problems,
+                                                const Owner& owner)
 {
     constexpr int max_rounds = 8;
     // After the first round only what a repair touched can change: the repaired
@@ -921,7 +988,9 @@ std::vector<Intersection> repair_snap_crossings(Graph& g, const RawMap& raw, con
             }
             const auto ev = g.edge(best->edge);
             const GridPoint at = g.grid[best->v];
-            problems.add("snap_repairs", at.x, at.y, raw.where(g.src[best->edge]));
+            if (owner.units(g.left[best->edge], g.right[best->edge])) {
+                problems.add("snap_repairs", at.x, at.y, raw.where(g.src[best->edge]));
+            }
             if (best->index > 0 && best->index + 1 < ev.size()) {
                 drop_interior.emplace_back(best->edge, best->index);
                 touched[best->edge] = 1;
@@ -1080,12 +1149,20 @@ void log_progress(const BuildOptions& options, const std::string& what)
 }
 
 /// One level: its chains, partitions, halos, internal points and stores.
+/// Codes of each level that a build owns (for a region: those under its own
+/// region-level codes); an empty list owns every code of its level.
+using OwnedCodes = std::vector<std::vector<uint8_t>>;
+
 LevelStats process_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw, const std::vector<LevelCodes>& lcs,
                          size_t L, const std::vector<uint32_t>& bad_edges, const Projection& projection,
-                         const BuildOptions& options, std::vector<FoundProblem>& problems, const StoreSink& sink)
+                         const BuildOptions& options, const Owner& owner, const OwnedCodes& owned,
+                         std::vector<FoundProblem>& problems, const StoreSink& sink)
 {
     const size_t nlev = lcs.size();
-    const double halo_grid = options.halo_m / projection.params().grid_m;
+    auto owns = [&](size_t level, uint32_t code) { return owned[level].empty() || owned[level][code] != 0; };
+    // Cells of at least 100 m: a halo of 0 then holds the chains that come
+    // within about that, and the search stays fast.
+    const double halo_grid = std::max(options.halo_m, 100.0) / projection.params().grid_m;
     auto note = [&](const std::string& what) { log_progress(options, what); };
     Level lev = build_level(g, ends, raw, lcs, L);
     note("level " + raw.level_names[L] + ": built chains");
@@ -1103,6 +1180,7 @@ LevelStats process_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw
         npart = static_cast<uint32_t>(part_names.size());
     }
     auto parent = [&](uint32_t code) { return L == 0 ? 0U : lc.parent[code]; };
+    auto owns_part = [&](uint32_t part) { return L == 0 || owns(L - 1, part); };
     for (auto& c : lev.chains) {
         uint32_t o = none;
         for (uint32_t side : {c.left, c.right}) {
@@ -1165,8 +1243,12 @@ LevelStats process_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw
     }
     LevelStats st;
     st.name = raw.level_names[L];
-    st.units = raw.kind == RawMap::Kind::lines ? 0 : lc.codes.size();
-    st.partitions = npart;
+    for (uint32_t code = 0; code < lc.codes.size() && raw.kind != RawMap::Kind::lines; ++code) {
+        st.units += owns(L, code) ? 1 : 0;
+    }
+    for (uint32_t part = 0; part < npart; ++part) {
+        st.partitions += owns_part(part) ? 1 : 0;
+    }
     // Internal points, unit by unit on the worker threads; problems are
     // recorded afterwards in code order.
     struct UnitPoint {
@@ -1181,6 +1263,9 @@ LevelStats process_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw
     parallel_blocks(npoints, options.threads, 64, [&](size_t b, size_t e) {
         std::vector<std::pair<GridPoint, GridPoint>> useg;
         for (size_t code = b; code < e; ++code) {
+            if (!owns(L, static_cast<uint32_t>(code))) {
+                continue;
+            }
             useg.clear();
             for (uint32_t ci : unit_chains[code]) {
                 const auto cv = lev.chain(lev.chains[ci]);
@@ -1212,6 +1297,9 @@ LevelStats process_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw
     });
     std::vector<std::vector<chains::ConstraintPoint>> part_points(npart);
     for (uint32_t code = 0; code < npoints; ++code) {
+        if (!owns(L, code)) {
+            continue;
+        }
         const UnitPoint& up = unit_points[code];
         if (up.rejected) {
             problems.push_back({"internal_points_replaced", double(up.rejected->x), double(up.rejected->y),
@@ -1227,21 +1315,32 @@ LevelStats process_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw
     }
     // One store per partition, built, encoded and handed to the sink on the
     // worker threads, each taking the next partition as it finishes one.
+    // Chains in order of id (unique within the level), so that a store's
+    // strings come in an order that depends on its content alone.
     std::vector<std::vector<uint32_t>> own(npart);
     for (uint32_t ci = 0; ci < lev.chains.size(); ++ci) {
-        own[lev.chains[ci].owner].push_back(ci);
         const auto& c = lev.chains[ci];
+        if (!owns_part(c.owner)) {
+            continue;
+        }
+        own[c.owner].push_back(ci);
         st.chains += 1;
         st.rings += c.ring ? 1 : 0;
         st.vertices += c.count;
     }
+    auto by_id = [&](uint32_t a, uint32_t b) { return lev.chains[a].id < lev.chains[b].id; };
     for (uint32_t part = 0; part < npart; ++part) {
+        if (!owns_part(part)) {
+            continue;
+        }
+        std::sort(own[part].begin(), own[part].end(), by_id);
+        std::sort(halo[part].begin(), halo[part].end(), by_id);
         st.halo_chains += halo[part].size();
         st.constraint_points += part_points[part].size();
     }
     parallel_each(npart, options.threads, [&](size_t part) {
         std::vector<GridPoint> pts;
-        if (own[part].empty() && part_points[part].empty()) {
+        if (!owns_part(static_cast<uint32_t>(part)) || (own[part].empty() && part_points[part].empty())) {
             return;
         }
         chains::ChainStore s;
@@ -1310,7 +1409,9 @@ LevelStats process_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw
         s.canonicalize();
         sink(s);
     });
-    st.junctions = lev.junctions.size();
+    for (uint32_t v : lev.junctions) {
+        st.junctions += owner.vertex(v) ? 1 : 0;
+    }
     note("level " + st.name + ": " + std::to_string(st.chains) + " chains in " + std::to_string(st.partitions) +
          " partitions");
     return st;
@@ -1318,7 +1419,41 @@ LevelStats process_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw
 
 } // namespace
 
-BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptions& options, const StoreSink& sink)
+namespace {
+
+/// Levels [first, end), the coarser ones one after another on a thread of their
+/// own beside the finest (as a rule the largest, and not busy on every thread
+/// throughout); their problems are recorded in level order afterwards.
+void build_levels(const Graph& g, const RawMap& raw, const std::vector<LevelCodes>& lcs, size_t first, size_t end,
+                  const std::vector<uint32_t>& bad_edges, const Projection& projection, const BuildOptions& options,
+                  const Owner& owner, const OwnedCodes& owned, BuildResult& result, Problems& problems,
+                  const StoreSink& sink)
+{
+    std::vector<std::vector<FoundProblem>> found(end);
+    const EdgeEnds ends(g);
+    auto level = [&](size_t L) {
+        result.levels[L] =
+            process_level(g, ends, raw, lcs, L, bad_edges, projection, options, owner, owned, found[L], sink);
+    };
+    if (end > first) {
+        // The future's destructor waits for the coarse levels if the finest throws.
+        auto coarse = std::async(std::launch::async, [&] {
+            for (size_t L = first; L + 1 < end; ++L) {
+                level(L);
+            }
+        });
+        level(end - 1);
+        coarse.get();
+    }
+    for (auto& level_found : found) {
+        problems.add_all(std::move(level_found));
+    }
+}
+
+/// A whole map, or with `scope` one region of it (its levels finer than the
+/// region level, and in `out` what the coarse levels need).
+BuildResult build(RawMap raw, const Projection& projection, const BuildOptions& options, const StoreSink& sink,
+                  const RegionScope* scope, RegionOutput* out)
 {
     BuildResult result;
     Problems problems(result, projection, options.max_problem_samples);
@@ -1332,17 +1467,38 @@ BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptio
         result.seconds.emplace_back(std::move(name), std::chrono::duration<double>(now - last).count());
         last = now;
     };
-    Graph g = make_graph(raw, projection, options.threads, problems);
+    Owner owner;
+    std::vector<std::string> region_codes; // sorted, for a region
+    if (scope != nullptr) {
+        for (const auto& u : raw.units) {
+            region_codes.push_back(u.codes[scope->level]);
+        }
+        std::sort(region_codes.begin(), region_codes.end());
+        region_codes.erase(std::unique(region_codes.begin(), region_codes.end()), region_codes.end());
+        for (const auto& u : raw.units) {
+            owner.unit_rank.push_back(static_cast<uint32_t>(
+                std::lower_bound(region_codes.begin(), region_codes.end(), u.codes[scope->level]) -
+                region_codes.begin()));
+        }
+        for (const auto& c : region_codes) {
+            owner.own_rank.push_back(std::binary_search(scope->own.begin(), scope->own.end(), c) ? 1 : 0);
+        }
+    }
+    Graph g = make_graph(raw, projection, options.threads, problems, owner);
     phase("intern_project");
     note("interned and projected " + std::to_string(g.keys.size()) + " vertices");
     if (raw.kind != RawMap::Kind::edges) {
-        join_pieces(g, merge_segments(g, raw, options.threads, problems));
+        join_pieces(g, merge_segments(g, raw, options.threads, problems, owner));
     }
     phase("merge_join");
     note("merged shared segments: " + std::to_string(g.edge_count()) + " edges");
-    result.unique_vertices = g.keys.size();
-    result.edges = g.edge_count();
-    const auto lcs = level_codes(raw, problems);
+    for (uint32_t v = 0; v < g.keys.size(); ++v) {
+        result.unique_vertices += owner.vertex(v) ? 1 : 0;
+    }
+    for (size_t e = 0; e < g.edge_count(); ++e) {
+        result.edges += owner.units(g.left[e], g.right[e]) ? 1 : 0;
+    }
+    const auto lcs = level_codes(raw, problems, owner);
     {
         std::vector<uint8_t> used(raw.units.size(), 0);
         for (size_t e = 0; e < g.edge_count(); ++e) {
@@ -1353,7 +1509,7 @@ BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptio
             }
         }
         for (size_t u = 0; u < raw.units.size(); ++u) {
-            if (!used[u]) {
+            if (!used[u] && owner.unit(static_cast<uint32_t>(u))) {
                 problems.add_lonlat("unreferenced_units", raw.units[u].intpt.value_or(LonLatE6{}),
                                     raw.where(raw.units[u].source));
             }
@@ -1363,11 +1519,15 @@ BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptio
     // with safe repairs of crossings that snapping made.
     const double max_shift = options.max_snap_shift_m / projection.params().grid_m;
     std::vector<uint32_t> bad_edges;
-    for (const auto& f : repair_snap_crossings(g, raw, lcs, max_shift, options.threads, problems)) {
+    for (const auto& f : repair_snap_crossings(g, raw, lcs, max_shift, options.threads, problems, owner)) {
         const char* kind = f.relation == SegmentRelation::cross     ? "crossings"
                            : f.relation == SegmentRelation::overlap ? "overlaps"
                                                                     : "touches";
-        problems.add(kind, f.x, f.y, raw.where(g.src[f.first]) + " " + raw.where(g.src[f.second]));
+        const uint32_t rank = std::min({owner.rank(g.left[f.first]), owner.rank(g.right[f.first]),
+                                        owner.rank(g.left[f.second]), owner.rank(g.right[f.second])});
+        if (owner.of_rank(rank)) {
+            problems.add(kind, f.x, f.y, raw.where(g.src[f.first]) + " " + raw.where(g.src[f.second]));
+        }
         bad_edges.push_back(f.first);
         bad_edges.push_back(f.second);
     }
@@ -1376,29 +1536,153 @@ BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptio
     std::sort(bad_edges.begin(), bad_edges.end());
     bad_edges.erase(std::unique(bad_edges.begin(), bad_edges.end()), bad_edges.end());
 
-    // The coarser levels one after another on a thread of their own, beside the
-    // finest (as a rule the largest, and not busy on every thread throughout).
-    // Their problems are recorded in level order afterwards.
     result.levels.resize(nlev);
-    std::vector<std::vector<FoundProblem>> found(nlev);
-    const EdgeEnds ends(g);
-    auto level = [&](size_t L) {
-        result.levels[L] = process_level(g, ends, raw, lcs, L, bad_edges, projection, options, found[L], sink);
-    };
-    if (nlev > 0) {
-        // The future's destructor waits for the coarse levels if the finest throws.
-        auto coarse = std::async(std::launch::async, [&] {
-            for (size_t L = 0; L + 1 < nlev; ++L) {
-                level(L);
+    OwnedCodes owned(nlev);
+    size_t first = 0;
+    if (scope != nullptr) {
+        // Codes at the region level and below go by their region-level code.
+        first = scope->level + 1;
+        for (size_t L = scope->level; L < nlev; ++L) {
+            owned[L].assign(lcs[L].codes.size(), 0);
+            for (size_t u = 0; u < raw.units.size(); ++u) {
+                if (owner.unit(static_cast<uint32_t>(u))) {
+                    owned[L][lcs[L].of_unit[u]] = 1;
+                }
             }
-        });
-        level(nlev - 1);
-        coarse.get();
+        }
+        // What the coarse levels need: the edges between region-level codes
+        // that this region owns, and a representative unit per own code.
+        const auto& lr = lcs[scope->level];
+        for (size_t e = 0; e < g.edge_count(); ++e) {
+            const uint32_t l = lr.side(g.left[e]), r = lr.side(g.right[e]);
+            if (l == r || !owner.units(g.left[e], g.right[e])) {
+                continue;
+            }
+            CoarseEdge ce;
+            for (uint32_t v : g.edge(e)) {
+                ce.keys.push_back(g.keys[v]);
+                ce.points.push_back(g.grid[v]);
+            }
+            ce.left = l == none ? std::string() : lr.codes[l];
+            ce.right = r == none ? std::string() : lr.codes[r];
+            ce.cls = g.cls[e];
+            ce.sid = g.sid[e];
+            ce.src = g.src[e];
+            ce.problem = std::binary_search(bad_edges.begin(), bad_edges.end(), static_cast<uint32_t>(e));
+            out->edges.push_back(std::move(ce));
+        }
+        std::vector<uint32_t> rep(lr.codes.size(), none);
+        for (uint32_t u = 0; u < raw.units.size(); ++u) {
+            if (!owner.unit(u)) {
+                continue;
+            }
+            uint32_t& r = rep[lr.of_unit[u]];
+            const auto& cand = raw.units[u];
+            if (r == none || (cand.intpt && (!raw.units[r].intpt || cand.weight > raw.units[r].weight))) {
+                r = u;
+            }
+        }
+        for (uint32_t r : rep) {
+            if (r != none) {
+                out->units.push_back(raw.units[r]);
+            }
+        }
+        for (size_t L = 0; L < first; ++L) {
+            result.levels[L].name = raw.level_names[L];
+        }
     }
+    build_levels(g, raw, lcs, first, nlev, bad_edges, projection, options, owner, owned, result, problems, sink);
     phase("levels");
-    for (auto& level_found : found) {
-        problems.add_all(std::move(level_found));
+    problems.finish();
+    return result;
+}
+
+} // namespace
+
+void first_samples(std::vector<ProblemSample>& samples, size_t max)
+{
+    auto before = [](const ProblemSample& a, const ProblemSample& b) {
+        return std::tie(a.kind, a.lon_deg, a.lat_deg, a.where) < std::tie(b.kind, b.lon_deg, b.lat_deg, b.where);
+    };
+    if (samples.size() > max) {
+        std::nth_element(samples.begin(), samples.begin() + static_cast<std::ptrdiff_t>(max), samples.end(), before);
+        samples.resize(max);
     }
+    std::sort(samples.begin(), samples.end(), before);
+}
+
+BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptions& options, const StoreSink& sink)
+{
+    return build(std::move(raw), projection, options, sink, nullptr, nullptr);
+}
+
+BuildResult build_region(RawMap raw, const RegionScope& scope, const Projection& projection,
+                         const BuildOptions& options, const StoreSink& sink, RegionOutput& out)
+{
+    return build(std::move(raw), projection, options, sink, &scope, &out);
+}
+
+BuildResult build_coarse(const RawMap& meta, std::vector<RawUnit> units, const std::vector<CoarseEdge>& edges,
+                         size_t level, const Projection& projection, const BuildOptions& options,
+                         const StoreSink& sink)
+{
+    BuildResult result;
+    Problems problems(result, projection, options.max_problem_samples);
+    RawMap raw;
+    raw.kind = meta.kind;
+    raw.level_names = meta.level_names;
+    raw.files = meta.files;
+    raw.classes = meta.classes;
+    raw.units = std::move(units);
+    // The units stand for their region-level codes.
+    std::unordered_map<std::string, uint32_t> unit_of_code;
+    for (uint32_t u = 0; u < raw.units.size(); ++u) {
+        unit_of_code.try_emplace(raw.units[u].codes[level], u);
+    }
+    auto unit_of = [&](const std::string& code) {
+        if (code.empty()) {
+            return no_unit;
+        }
+        auto it = unit_of_code.find(code);
+        if (it == unit_of_code.end()) {
+            throw std::logic_error("region build: no unit for code " + code);
+        }
+        return it->second;
+    };
+    // Vertex ids follow the keys, as a whole map's do.
+    Graph g;
+    for (const auto& e : edges) {
+        g.keys.insert(g.keys.end(), e.keys.begin(), e.keys.end());
+    }
+    std::sort(g.keys.begin(), g.keys.end());
+    g.keys.erase(std::unique(g.keys.begin(), g.keys.end()), g.keys.end());
+    g.grid.resize(g.keys.size());
+    std::vector<uint32_t> bad_edges;
+    for (const auto& e : edges) {
+        for (size_t k = 0; k < e.keys.size(); ++k) {
+            const auto v = static_cast<uint32_t>(std::lower_bound(g.keys.begin(), g.keys.end(), e.keys[k]) -
+                                                 g.keys.begin());
+            g.grid[v] = e.points[k];
+            g.verts.push_back(v);
+        }
+        if (e.problem) {
+            bad_edges.push_back(static_cast<uint32_t>(g.edge_count()));
+        }
+        g.off.push_back(g.verts.size());
+        g.left.push_back(unit_of(e.left));
+        g.right.push_back(unit_of(e.right));
+        g.cls.push_back(e.cls);
+        g.sid.push_back(e.sid);
+        g.src.push_back(e.src);
+    }
+    BuildResult unused; // the regions check the nesting
+
+    Problems nesting(unused, projection, 0);
+    const auto lcs = level_codes(raw, nesting, Owner{});
+    result.levels.resize(raw.level_names.size());
+    build_levels(g, raw, lcs, 0, level + 1, bad_edges, projection, options, Owner{},
+                 OwnedCodes(raw.level_names.size()), result, problems, sink);
+    problems.finish();
     return result;
 }
 

@@ -59,10 +59,15 @@ struct LevelStats {
              constraint_points = 0, computed_internal_points = 0;
 };
 
+/// Keep the first `max` samples in their order: by kind, longitude, latitude,
+/// then place. The order does not depend on how the map was found (whole or
+/// region by region) or on the threads.
+void first_samples(std::vector<ProblemSample>& samples, size_t max);
+
 struct BuildResult {
     std::vector<LevelStats> levels;
     std::map<std::string, uint64_t> problems; ///< counts by kind, every kind listed
-    std::vector<ProblemSample> samples;
+    std::vector<ProblemSample> samples;       ///< the first ones, as first_samples keeps them
     uint64_t input_vertices = 0, unique_vertices = 0;
     /// Edges of the cleaned graph: the TIGER edges, or for polygons and lines
     /// the runs between vertices where the sides change or other than two meet.
@@ -80,5 +85,49 @@ using StoreSink = std::function<void(const chains::ChainStore&)>;
 /// Build every level's chain stores. Throws input_error (naming file and
 /// feature) for a coordinate outside the projection's domain.
 BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptions& options, const StoreSink& sink);
+
+// Building a map region by region (stages/ingest/regions.hpp) ---------------
+
+/// One region of a map built region by region: the level whose codes split
+/// the map into regions (the first with more than one code), and the
+/// region's own codes at that level. Its RawMap holds the units of those codes
+/// and, read-only, the neighbouring units that its chains and halos depend on.
+struct RegionScope {
+    size_t level = 0;
+    std::vector<std::string> own; ///< sorted
+};
+
+/// An edge that bounds something at the region level or a coarser one, owned
+/// by the region: those levels are built afterwards from every region's.
+struct CoarseEdge {
+    std::vector<uint64_t> keys; ///< the vertices' packed lon/lat
+    std::vector<GridPoint> points;
+    std::string left, right; ///< region-level codes on each side, "" for the outside
+    uint32_t cls = 0;
+    uint64_t sid = 0;
+    SourceRef src;
+    bool problem = false;
+};
+
+/// What a region hands on for the coarse levels.
+struct RegionOutput {
+    /// One unit per own region-level code: the heaviest with a given internal
+    /// point (else the first), standing for the code's units at the coarse levels.
+    std::vector<RawUnit> units;
+    std::vector<CoarseEdge> edges;
+};
+
+/// Build a region: the levels finer than `scope.level`, stores of the
+/// partitions under its own codes only, counts and problems of what it owns
+/// (the smallest region-level code among the units concerned is its own).
+BuildResult build_region(RawMap raw, const RegionScope& scope, const Projection& projection,
+                         const BuildOptions& options, const StoreSink& sink, RegionOutput& out);
+
+/// Build the levels up to `level` (the region level) from the regions'
+/// outputs. `meta` gives kind, level names, classes and files; its units and
+/// polylines are ignored. `units` must be in input order (file, feature).
+BuildResult build_coarse(const RawMap& meta, std::vector<RawUnit> units, const std::vector<CoarseEdge>& edges,
+                         size_t level, const Projection& projection, const BuildOptions& options,
+                         const StoreSink& sink);
 
 } // namespace tigerlod::ingest

@@ -1,7 +1,12 @@
 #include "stages/ingest/raw_map.hpp"
 
+#include "core/errors.hpp"
+
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <memory>
+#include <type_traits>
 
 namespace tigerlod::ingest {
 
@@ -16,7 +21,156 @@ int32_t round_half_away(double x) noexcept
     return static_cast<int32_t>(t + (f >= 0.5 ? 1 : (f <= -0.5 ? -1 : 0)));
 }
 
+/// A file of plain values: vectors as a count and their bytes.
+class RawFile {
+  public:
+    RawFile(const std::filesystem::path& path, const char* mode)
+        : m_path(path), m_f(std::fopen(path.c_str(), mode), &std::fclose)
+    {
+        if (!m_f) {
+            fail();
+        }
+    }
+    template <class T> void put(const T& v)
+    {
+        static_assert(std::is_trivially_copyable_v<T>);
+        write(&v, sizeof v);
+    }
+    template <class T> void put_vec(const std::vector<T>& v)
+    {
+        put(static_cast<uint64_t>(v.size()));
+        write(v.data(), v.size() * sizeof(T));
+    }
+    void put_str(const std::string& s)
+    {
+        put(static_cast<uint64_t>(s.size()));
+        write(s.data(), s.size());
+    }
+    template <class T> T get()
+    {
+        T v;
+        read(&v, sizeof v);
+        return v;
+    }
+    template <class T> void get_vec(std::vector<T>& v)
+    {
+        v.resize(get<uint64_t>());
+        read(v.data(), v.size() * sizeof(T));
+    }
+    std::string get_str()
+    {
+        std::string s(get<uint64_t>(), '\0');
+        read(s.data(), s.size());
+        return s;
+    }
+    void close()
+    {
+        if (std::fclose(m_f.release()) != 0) {
+            fail();
+        }
+    }
+
+  private:
+    [[noreturn]] void fail() const { throw environment_error(m_path.string() + ": cannot write or read a part put aside"); }
+    void write(const void* p, size_t n)
+    {
+        if (n > 0 && std::fwrite(p, 1, n, m_f.get()) != n) {
+            fail();
+        }
+    }
+    void read(void* p, size_t n)
+    {
+        if (n > 0 && std::fread(p, 1, n, m_f.get()) != n) {
+            fail();
+        }
+    }
+    std::filesystem::path m_path;
+    std::unique_ptr<std::FILE, int (*)(std::FILE*)> m_f;
+};
+
 } // namespace
+
+void write_raw(const RawMap& raw, const std::filesystem::path& path)
+{
+    RawFile f(path, "wb");
+    f.put(static_cast<uint32_t>(raw.kind));
+    f.put(static_cast<uint64_t>(raw.level_names.size()));
+    for (const auto& s : raw.level_names) {
+        f.put_str(s);
+    }
+    f.put(static_cast<uint64_t>(raw.files.size()));
+    for (const auto& s : raw.files) {
+        f.put_str(s);
+    }
+    f.put(static_cast<uint64_t>(raw.classes.size()));
+    for (const auto& s : raw.classes) {
+        f.put_str(s);
+    }
+    f.put(static_cast<uint64_t>(raw.units.size()));
+    for (const auto& u : raw.units) {
+        f.put(static_cast<uint64_t>(u.codes.size()));
+        for (const auto& c : u.codes) {
+            f.put_str(c);
+        }
+        f.put(static_cast<uint8_t>(u.intpt.has_value()));
+        f.put(u.intpt.value_or(LonLatE6{}));
+        f.put(u.weight);
+        f.put(u.source);
+    }
+    f.put_vec(raw.coords);
+    f.put_vec(raw.offsets);
+    f.put_vec(raw.left);
+    f.put_vec(raw.right);
+    f.put_vec(raw.feature_class);
+    f.put_vec(raw.source_id);
+    f.put_vec(raw.source);
+    f.put(raw.points_read);
+    f.put(raw.empty_geometries);
+    f.close();
+}
+
+RawMap read_raw(const std::filesystem::path& path)
+{
+    RawFile f(path, "rb");
+    RawMap raw;
+    raw.kind = static_cast<RawMap::Kind>(f.get<uint32_t>());
+    raw.level_names.resize(f.get<uint64_t>());
+    for (auto& s : raw.level_names) {
+        s = f.get_str();
+    }
+    raw.files.resize(f.get<uint64_t>());
+    for (auto& s : raw.files) {
+        s = f.get_str();
+    }
+    raw.classes.resize(f.get<uint64_t>());
+    for (auto& s : raw.classes) {
+        s = f.get_str();
+    }
+    raw.units.resize(f.get<uint64_t>());
+    for (auto& u : raw.units) {
+        u.codes.resize(f.get<uint64_t>());
+        for (auto& c : u.codes) {
+            c = f.get_str();
+        }
+        const bool has = f.get<uint8_t>() != 0;
+        const auto p = f.get<LonLatE6>();
+        if (has) {
+            u.intpt = p;
+        }
+        u.weight = f.get<double>();
+        u.source = f.get<SourceRef>();
+    }
+    f.get_vec(raw.coords);
+    f.get_vec(raw.offsets);
+    f.get_vec(raw.left);
+    f.get_vec(raw.right);
+    f.get_vec(raw.feature_class);
+    f.get_vec(raw.source_id);
+    f.get_vec(raw.source);
+    raw.points_read = f.get<uint64_t>();
+    raw.empty_geometries = f.get<uint64_t>();
+    return raw;
+}
 
 LonLatE6 snap_e6(double lon_deg, double lat_deg) noexcept
 {

@@ -6,6 +6,7 @@
 /// build maps by hand.
 
 #include <cstdint>
+#include <filesystem>
 #include <optional>
 #include <span>
 #include <string>
@@ -85,5 +86,11 @@ struct RawMap {
     /// "file:feature" for messages.
     std::string where(SourceRef src) const;
 };
+
+/// Put a RawMap aside in a file of this process's own (native layout, no
+/// version: written and read back by one run), and read it back. Throw
+/// environment_error if the file cannot be written or read.
+void write_raw(const RawMap& raw, const std::filesystem::path& path);
+RawMap read_raw(const std::filesystem::path& path);
 
 } // namespace tigerlod::ingest

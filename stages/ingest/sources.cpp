@@ -468,18 +468,22 @@ void read_line_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw)
 }
 
 /// Read every file with `read_one` on up to `threads` threads, each into a part
-/// of its own, and append the parts in file order: the result does not depend
-/// on the thread count, nor does the first error reported.
+/// of its own, handed to `take` on the thread that read it. The first error in
+/// file order is the one thrown, whatever the thread count.
 template <class F>
-void read_files(const std::vector<fs::path>& files, unsigned threads, RawMap& raw, const Log& log, F&& read_one)
+void read_each(const std::vector<fs::path>& files, unsigned threads, const Log& log, F&& read_one,
+               const std::function<void(size_t, RawMap&&)>& take)
 {
-    std::vector<RawMap> parts(files.size());
     std::vector<std::exception_ptr> errors(files.size());
     std::atomic<size_t> next{0};
     auto work = [&] {
         for (size_t i = next++; i < files.size(); i = next++) {
             try {
-                read_one(files[i], parts[i]);
+                RawMap part;
+                read_one(files[i], part);
+                log.info("read " + files[i].string() + ": " + std::to_string(part.units.size()) + " units, " +
+                         std::to_string(part.points_read) + " points");
+                take(i, std::move(part));
             } catch (...) {
                 errors[i] = std::current_exception();
             }
@@ -493,19 +497,28 @@ void read_files(const std::vector<fs::path>& files, unsigned threads, RawMap& ra
     for (auto& t : pool) {
         t.join();
     }
+    for (const auto& e : errors) {
+        if (e) {
+            std::rethrow_exception(e);
+        }
+    }
+}
+
+/// Read every file into `raw`, in file order.
+template <class F>
+void read_files(const std::vector<fs::path>& files, unsigned threads, RawMap& raw, const Log& log, F&& read_one)
+{
+    std::vector<RawMap> parts(files.size());
+    read_each(files, threads, log, std::forward<F>(read_one),
+              [&](size_t i, RawMap&& part) { parts[i] = std::move(part); });
     size_t points = raw.coords.size(), lines = raw.polyline_count();
     for (const auto& part : parts) {
         points += part.coords.size();
         lines += part.polyline_count();
     }
     raw.reserve(points, lines);
-    for (size_t i = 0; i < files.size(); ++i) {
-        if (errors[i]) {
-            std::rethrow_exception(errors[i]);
-        }
-        log.info("read " + files[i].string() + ": " + std::to_string(parts[i].units.size()) + " units, " +
-                 std::to_string(parts[i].points_read) + " points");
-        raw.append(std::move(parts[i]));
+    for (auto& part : parts) {
+        raw.append(std::move(part));
     }
 }
 
@@ -534,6 +547,21 @@ RawMap read_dataset(const IngestConfig& cfg, unsigned threads, const Log& log)
         break;
     }
     return raw;
+}
+
+void read_polygon_parts(const IngestConfig& cfg, unsigned threads, const Log& log,
+                        const std::function<void(size_t, RawMap&&)>& take)
+{
+    read_each(
+        cfg.dataset.inputs, threads, log,
+        [&](const fs::path& p, RawMap& part) {
+            part.kind = RawMap::Kind::polygon_rings;
+            for (const auto& l : cfg.levels) {
+                part.level_names.push_back(l.name);
+            }
+            read_polygon_file(cfg, p, part);
+        },
+        take);
 }
 
 void validate_dataset(const IngestConfig& cfg)

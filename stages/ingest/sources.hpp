@@ -8,12 +8,20 @@
 #include "stages/ingest/config.hpp"
 #include "stages/ingest/raw_map.hpp"
 
+#include <functional>
+
 namespace tigerlod::ingest {
 
 /// Read the dataset of `cfg` into a RawMap, coordinates snapped to 1e-6
 /// degrees. Polygon and line files are read on up to `threads` threads; the
 /// result is the same for any thread count.
 RawMap read_dataset(const IngestConfig& cfg, unsigned threads, const Log& log);
+
+/// Read a polygons dataset file by file on up to `threads` threads, handing
+/// each file's part (file index 0 in it) to `take` on the thread that read it,
+/// in no particular order. Throws the first error in file order.
+void read_polygon_parts(const IngestConfig& cfg, unsigned threads, const Log& log,
+                        const std::function<void(size_t, RawMap&&)>& take);
 
 /// Open every input of `cfg` and check its layer, geometry type and fields,
 /// reading no features. Throws input_error as read_dataset would.

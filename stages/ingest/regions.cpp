@@ -1,0 +1,473 @@
+#include "stages/ingest/regions.hpp"
+
+#include "core/errors.hpp"
+#include "core/memory.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <mutex>
+#include <numeric>
+#include <set>
+
+namespace tigerlod::ingest {
+
+namespace {
+
+/// A box in micro-degrees.
+struct Box {
+    int64_t x0 = INT64_MAX, y0 = INT64_MAX, x1 = INT64_MIN, y1 = INT64_MIN;
+    void extend(LonLatE6 p) noexcept
+    {
+        x0 = std::min<int64_t>(x0, p.lon);
+        y0 = std::min<int64_t>(y0, p.lat);
+        x1 = std::max<int64_t>(x1, p.lon);
+        y1 = std::max<int64_t>(y1, p.lat);
+    }
+    bool empty() const noexcept { return x0 > x1; }
+    bool meets(const Box& o) const noexcept { return !empty() && !o.empty() && x0 <= o.x1 && o.x0 <= x1 && y0 <= o.y1 && o.y0 <= y1; }
+    Box grown(int64_t dx, int64_t dy) const noexcept { return empty() ? *this : Box{x0 - dx, y0 - dy, x1 + dx, y1 + dy}; }
+};
+
+/// The unit of a polygon ring: the side that is not the outside.
+uint32_t unit_of(const RawMap& part, size_t p) noexcept
+{
+    return part.left[p] != no_unit ? part.left[p] : part.right[p];
+}
+
+std::vector<Box> unit_boxes(const RawMap& part)
+{
+    std::vector<Box> boxes(part.units.size());
+    for (size_t p = 0; p < part.polyline_count(); ++p) {
+        const uint32_t u = unit_of(part, p);
+        if (u == no_unit) {
+            continue;
+        }
+        for (uint64_t k = part.offsets[p]; k < part.offsets[p + 1]; ++k) {
+            boxes[u].extend(part.coords[k]);
+        }
+    }
+    return boxes;
+}
+
+/// Coarse cells over lon/lat, for "does this box come near the region's units".
+class CellSet {
+  public:
+    CellSet(int64_t cx, int64_t cy) : m_cx(cx), m_cy(cy) {}
+    template <class F> void each(const Box& b, F&& f) const
+    {
+        for (int64_t ix = cell(b.x0, m_cx); ix <= cell(b.x1, m_cx); ++ix) {
+            for (int64_t iy = cell(b.y0, m_cy); iy <= cell(b.y1, m_cy); ++iy) {
+                f((static_cast<uint64_t>(ix) << 32) | static_cast<uint64_t>(iy));
+            }
+        }
+    }
+    void add(const Box& b)
+    {
+        each(b, [&](uint64_t k) { m_cells.push_back(k); });
+    }
+    void seal()
+    {
+        std::sort(m_cells.begin(), m_cells.end());
+        m_cells.erase(std::unique(m_cells.begin(), m_cells.end()), m_cells.end());
+    }
+    bool meets(const Box& b) const
+    {
+        bool hit = false;
+        each(b, [&](uint64_t k) { hit = hit || std::binary_search(m_cells.begin(), m_cells.end(), k); });
+        return hit;
+    }
+
+  private:
+    static int64_t cell(int64_t v, int64_t c) noexcept { return (v + 400'000'000) / c; }
+    int64_t m_cx, m_cy;
+    std::vector<uint64_t> m_cells;
+};
+
+size_t find_root(std::vector<size_t>& parent, size_t x)
+{
+    while (parent[x] != x) {
+        parent[x] = parent[parent[x]];
+        x = parent[x];
+    }
+    return x;
+}
+
+/// Sum a region's counts into `total`.
+void add_result(BuildResult& total, BuildResult&& r, size_t first_level, size_t max_samples)
+{
+    for (size_t L = first_level; L < r.levels.size(); ++L) {
+        auto& t = total.levels[L];
+        const auto& l = r.levels[L];
+        t.units += l.units;
+        t.chains += l.chains;
+        t.rings += l.rings;
+        t.vertices += l.vertices;
+        t.junctions += l.junctions;
+        t.partitions += l.partitions;
+        t.halo_chains += l.halo_chains;
+        t.constraint_points += l.constraint_points;
+        t.computed_internal_points += l.computed_internal_points;
+    }
+    for (const auto& [k, v] : r.problems) {
+        total.problems[k] += v;
+    }
+    total.samples.insert(total.samples.end(), std::make_move_iterator(r.samples.begin()),
+                         std::make_move_iterator(r.samples.end()));
+    first_samples(total.samples, max_samples);
+    total.unique_vertices += r.unique_vertices;
+    total.edges += r.edges;
+    for (auto& [name, s] : r.seconds) {
+        auto it = std::find_if(total.seconds.begin(), total.seconds.end(), [&](const auto& p) { return p.first == name; });
+        if (it == total.seconds.end()) {
+            total.seconds.emplace_back(name, s);
+        } else {
+            it->second += s;
+        }
+    }
+}
+
+} // namespace
+
+PartSummary summarize_part(const RawMap& part, size_t max_codes)
+{
+    PartSummary s;
+    const size_t nlev = part.level_names.size();
+    s.codes.resize(nlev);
+    s.many.assign(nlev, 0);
+    for (size_t L = 0; L < nlev; ++L) {
+        auto& codes = s.codes[L];
+        for (const auto& u : part.units) {
+            codes.push_back(u.codes[L]);
+        }
+        std::sort(codes.begin(), codes.end());
+        codes.erase(std::unique(codes.begin(), codes.end()), codes.end());
+        if (codes.size() > max_codes) {
+            release(codes);
+            s.many[L] = 1;
+        }
+    }
+    for (const auto& p : part.coords) {
+        s.lo.lon = std::min(s.lo.lon, p.lon);
+        s.lo.lat = std::min(s.lo.lat, p.lat);
+        s.hi.lon = std::max(s.hi.lon, p.lon);
+        s.hi.lat = std::max(s.hi.lat, p.lat);
+    }
+    s.points_read = part.points_read;
+    s.empty_geometries = part.empty_geometries;
+    s.file = part.files.empty() ? std::string() : part.files.front();
+    s.classes = part.classes;
+    return s;
+}
+
+BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::function<RawMap(size_t)>& load,
+                             const std::vector<std::string>& level_names, const Projection& projection,
+                             const BuildOptions& options, const StoreSink& sink)
+{
+    const size_t nlev = level_names.size();
+    const size_t nparts = parts.size();
+    // The region level: the first with more than one code.
+    size_t R = nlev;
+    for (size_t L = 0; L < nlev && R == nlev; ++L) {
+        const std::string* first = nullptr;
+        for (const auto& p : parts) {
+            if (p.many[L] != 0) {
+                R = L;
+                break;
+            }
+            for (const auto& c : p.codes[L]) {
+                if (first == nullptr) {
+                    first = &c;
+                } else if (c != *first) {
+                    R = L;
+                    break;
+                }
+            }
+            if (R != nlev) {
+                break;
+            }
+        }
+    }
+    // Files that share a region-level code make one region.
+    std::vector<size_t> parent(nparts);
+    std::iota(parent.begin(), parent.end(), size_t{0});
+    bool separable = R < nlev && nparts > 1;
+    if (separable) {
+        std::map<std::string, size_t> first_part;
+        for (size_t i = 0; i < nparts && separable; ++i) {
+            separable = parts[i].many[R] == 0;
+            for (const auto& c : parts[i].codes[R]) {
+                auto [it, added] = first_part.try_emplace(c, i);
+                if (!added) {
+                    parent[find_root(parent, i)] = find_root(parent, it->second);
+                }
+            }
+        }
+    }
+    std::map<size_t, std::vector<size_t>> groups;
+    for (size_t i = 0; i < nparts; ++i) {
+        groups[find_root(parent, i)].push_back(i);
+    }
+    auto log = [&](const std::string& what) {
+        if (options.log != nullptr) {
+            options.log->info(what);
+        }
+    };
+    if (!separable || groups.size() < 2) {
+        // One region: the whole map at once.
+        RawMap raw;
+        for (size_t i = 0; i < nparts; ++i) {
+            RawMap part = load(i);
+            if (i == 0) {
+                raw.kind = part.kind;
+                raw.level_names = part.level_names;
+            }
+            raw.append(std::move(part));
+        }
+        log("building the map whole (one region)");
+        return build_map(std::move(raw), projection, options, sink);
+    }
+
+    struct Region {
+        std::vector<size_t> parts;
+        std::vector<std::string> own;
+    };
+    std::vector<Region> regions;
+    for (auto& [root, members] : groups) {
+        Region r;
+        r.parts = members;
+        for (size_t i : members) {
+            r.own.insert(r.own.end(), parts[i].codes[R].begin(), parts[i].codes[R].end());
+        }
+        std::sort(r.own.begin(), r.own.end());
+        r.own.erase(std::unique(r.own.begin(), r.own.end()), r.own.end());
+        if (!r.own.empty()) {
+            regions.push_back(std::move(r));
+        }
+    }
+    std::sort(regions.begin(), regions.end(), [](const Region& a, const Region& b) { return a.own < b.own; });
+
+    // What every region's map shares: files and classes, numbered as a whole map numbers them.
+    RawMap meta;
+    meta.kind = RawMap::Kind::polygon_rings;
+    meta.level_names = level_names;
+    std::vector<std::vector<uint32_t>> class_of(nparts);
+    for (size_t i = 0; i < nparts; ++i) {
+        meta.files.push_back(parts[i].file);
+        for (const auto& c : parts[i].classes) {
+            class_of[i].push_back(meta.intern_class(c));
+        }
+    }
+
+    BuildResult total;
+    total.levels.resize(nlev);
+    for (size_t L = 0; L < nlev; ++L) {
+        total.levels[L].name = level_names[L];
+    }
+    std::mutex written_mutex;
+    std::set<std::string> written;
+    const StoreSink checked = [&](const chains::ChainStore& s) {
+        {
+            const std::lock_guard lock(written_mutex);
+            if (!written.insert(s.level_name + "/" + s.partition).second) {
+                throw input_error("level '" + s.level_name + "': partition '" + s.partition +
+                                  "' has units under two codes of level '" + level_names[R] +
+                                  "' in different files: the codes do not nest");
+            }
+        }
+        sink(s);
+    };
+    // How far a region's results can depend on other units: three halo cells
+    // (find_near reaches up to about two) and a margin, in degrees, for the
+    // smallest scale of the projection over the region.
+    const double reach_m = 3.0 * std::max(options.halo_m, 100.0) + 100.0;
+    const bool halos = R + 1 < nlev;
+    RegionOutput coarse_in;
+    const auto t_start = std::chrono::steady_clock::now();
+    double build_s = 0;
+    for (const Region& region : regions) {
+        std::vector<uint8_t> is_own(nparts, 0);
+        Box own_box;
+        for (size_t i : region.parts) {
+            is_own[i] = 1;
+            if (parts[i].lo.lon <= parts[i].hi.lon) {
+                own_box.extend(parts[i].lo);
+                own_box.extend(parts[i].hi);
+            }
+        }
+        double kmin = 1.0;
+        double max_lat = 0.0;
+        if (!own_box.empty()) {
+            for (int64_t x : {own_box.x0, (own_box.x0 + own_box.x1) / 2, own_box.x1}) {
+                for (int64_t y : {own_box.y0, (own_box.y0 + own_box.y1) / 2, own_box.y1}) {
+                    const double k = projection.scale(static_cast<double>(x) * 1e-6, static_cast<double>(y) * 1e-6);
+                    if (k > 0 && std::isfinite(k)) {
+                        kmin = std::min({kmin, k, 1.0 / k});
+                    }
+                }
+            }
+            max_lat = static_cast<double>(std::max(std::abs(own_box.y0), std::abs(own_box.y1))) * 1e-6;
+        }
+        const double e_lat = 1.25 * reach_m / (110000.0 * kmin);
+        const double e_lon = e_lat / std::max(0.01, std::cos(std::min(89.0, max_lat + e_lat) * M_PI / 180.0));
+        const auto ex = static_cast<int64_t>(std::ceil(e_lon * 1e6)) + 1;
+        const auto ey = static_cast<int64_t>(std::ceil(e_lat * 1e6)) + 1;
+        const Box near_box = own_box.grown(ex, ey);
+
+        // The own parts, their units' neighbourhood as cells, and their points.
+        std::map<size_t, RawMap> loaded;
+        CellSet cells(std::max<int64_t>(ex, 50'000), std::max<int64_t>(ey, 50'000));
+        std::vector<uint64_t> keys;
+        for (size_t i : region.parts) {
+            RawMap part = load(i);
+            for (const Box& b : unit_boxes(part)) {
+                if (!b.empty()) {
+                    cells.add(b.grown(ex, ey));
+                }
+            }
+            for (const auto& p : part.coords) {
+                keys.push_back(pack_key(p));
+            }
+            loaded.emplace(i, std::move(part));
+        }
+        cells.seal();
+        // Other parts near: the whole finer-level units (counties) that come
+        // within reach, their points added to the keys.
+        std::vector<size_t> near;
+        std::map<size_t, std::vector<uint8_t>> core;
+        for (size_t j = 0; j < nparts; ++j) {
+            const Box b{parts[j].lo.lon, parts[j].lo.lat, parts[j].hi.lon, parts[j].hi.lat};
+            if (is_own[j] || !b.meets(near_box)) {
+                continue;
+            }
+            near.push_back(j);
+            if (!halos) {
+                continue;
+            }
+            const RawMap part = load(j);
+            const auto boxes = unit_boxes(part);
+            std::set<std::string> band;
+            for (size_t u = 0; u < part.units.size(); ++u) {
+                if (!boxes[u].empty() && cells.meets(boxes[u])) {
+                    band.insert(part.units[u].codes[R + 1]);
+                }
+            }
+            if (band.empty()) {
+                continue;
+            }
+            auto& flags = core[j];
+            flags.assign(part.units.size(), 0);
+            for (size_t u = 0; u < part.units.size(); ++u) {
+                flags[u] = band.count(part.units[u].codes[R + 1]) != 0 ? 1 : 0;
+            }
+            for (size_t p = 0; p < part.polyline_count(); ++p) {
+                const uint32_t u = unit_of(part, p);
+                if (u != no_unit && flags[u]) {
+                    for (uint64_t k = part.offsets[p]; k < part.offsets[p + 1]; ++k) {
+                        keys.push_back(pack_key(part.coords[k]));
+                    }
+                }
+            }
+        }
+        std::sort(keys.begin(), keys.end());
+        keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+
+        // The region's map, parts in file order: its own units, the near
+        // whole units, and every unit that shares a point with one of those.
+        RawMap raw;
+        raw.kind = RawMap::Kind::polygon_rings;
+        raw.level_names = level_names;
+        raw.files = meta.files;
+        raw.classes = meta.classes;
+        std::vector<size_t> order = region.parts;
+        order.insert(order.end(), near.begin(), near.end());
+        std::sort(order.begin(), order.end());
+        size_t own_units = 0;
+        for (size_t i : order) {
+            RawMap part;
+            if (auto it = loaded.find(i); it != loaded.end()) {
+                part = std::move(it->second);
+                loaded.erase(it);
+            } else {
+                part = load(i);
+            }
+            std::vector<uint8_t> take(part.units.size(), is_own[i]);
+            if (auto it = core.find(i); it != core.end()) {
+                for (size_t u = 0; u < take.size(); ++u) {
+                    take[u] = take[u] | it->second[u];
+                }
+            }
+            if (!is_own[i]) {
+                for (size_t p = 0; p < part.polyline_count(); ++p) {
+                    const uint32_t u = unit_of(part, p);
+                    if (u == no_unit || take[u]) {
+                        continue;
+                    }
+                    for (uint64_t k = part.offsets[p]; k < part.offsets[p + 1]; ++k) {
+                        if (std::binary_search(keys.begin(), keys.end(), pack_key(part.coords[k]))) {
+                            take[u] = 1;
+                            break;
+                        }
+                    }
+                }
+            } else {
+                own_units += part.units.size();
+            }
+            std::vector<uint32_t> new_id(part.units.size(), no_unit);
+            for (size_t u = 0; u < part.units.size(); ++u) {
+                if (take[u]) {
+                    new_id[u] = static_cast<uint32_t>(raw.units.size());
+                    RawUnit unit = std::move(part.units[u]);
+                    unit.source.file = static_cast<uint32_t>(i);
+                    raw.units.push_back(std::move(unit));
+                }
+            }
+            for (size_t p = 0; p < part.polyline_count(); ++p) {
+                const uint32_t u = unit_of(part, p);
+                if (u == no_unit || !take[u]) {
+                    continue;
+                }
+                const auto first = static_cast<std::ptrdiff_t>(part.offsets[p]);
+                const auto last = static_cast<std::ptrdiff_t>(part.offsets[p + 1]);
+                raw.add_polyline({part.coords.begin() + first, part.coords.begin() + last},
+                                 part.left[p] == no_unit ? no_unit : new_id[part.left[p]],
+                                 part.right[p] == no_unit ? no_unit : new_id[part.right[p]],
+                                 class_of[i][part.feature_class[p]], part.source_id[p],
+                                 {static_cast<uint32_t>(i), part.source[p].feature});
+            }
+        }
+        release(keys);
+        log("region " + region.own.front() + (region.own.size() > 1 ? "..." : "") + ": " +
+            std::to_string(own_units) + " own units, " + std::to_string(raw.units.size() - own_units) +
+            " neighbouring, " + std::to_string(raw.coords.size()) + " points");
+        RegionScope scope;
+        scope.level = R;
+        scope.own = region.own;
+        const auto t0 = std::chrono::steady_clock::now();
+        add_result(total, build_region(std::move(raw), scope, projection, options, checked, coarse_in), R + 1,
+                   options.max_problem_samples);
+        build_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    }
+    const double regions_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+    // The region level and the coarser ones, from the regions' edges between codes.
+    std::sort(coarse_in.units.begin(), coarse_in.units.end(), [](const RawUnit& a, const RawUnit& b) {
+        return std::pair{a.source.file, a.source.feature} < std::pair{b.source.file, b.source.feature};
+    });
+    const auto t_coarse = std::chrono::steady_clock::now();
+    BuildResult coarse = build_coarse(meta, std::move(coarse_in.units), coarse_in.edges, R, projection, options, checked);
+    for (size_t L = 0; L <= R; ++L) {
+        total.levels[L] = coarse.levels[L];
+    }
+    add_result(total, std::move(coarse), nlev, options.max_problem_samples);
+    total.seconds.emplace_back("coarse_levels",
+                               std::chrono::duration<double>(std::chrono::steady_clock::now() - t_coarse).count());
+    total.seconds.emplace_back("regions_load", regions_s - build_s);
+    for (const auto& p : parts) {
+        total.input_vertices += p.points_read;
+        total.problems["empty_geometries"] += p.empty_geometries;
+    }
+    return total;
+}
+
+} // namespace tigerlod::ingest

@@ -1,0 +1,60 @@
+#pragma once
+/// @file regions.hpp
+/// Building a polygon map region by region, so that memory follows the
+/// largest region, not the dataset.
+///
+/// Method. The inputs are read once, one part per file, and put aside (the
+/// ingest stage writes them to disk). The region level is the first level
+/// with more than one code (the states of a nation > state > county > tract
+/// map); the files that share a code there form one region. Each region is
+/// built alone from its own units plus, read-only, the neighbouring units
+/// that its results depend on:
+/// - the whole finer-level units (counties) of other regions that come within
+///   reach of its units: three halo cells, where find_near looks for halos;
+/// - every unit that shares a vertex with one of those or with its own units,
+///   so that the degree of each vertex it walks through is the whole map's.
+/// A region writes the stores of the partitions under its own codes and counts
+/// what it owns (map_builder.hpp, RegionScope); the region level and the
+/// coarser ones are then built from the edges between region-level codes that
+/// the regions hand on. The output is the one a whole build gives, byte for
+/// byte: the tests compare them. Two limits: codes must nest across regions
+/// (a partition under two region-level codes is an error here, named), and a
+/// repair at a vertex on the outer edge of a region's neighbourhood could see
+/// fewer segments than the whole map's check.
+
+#include "core/log.hpp"
+#include "core/projection.hpp"
+#include "stages/ingest/map_builder.hpp"
+#include "stages/ingest/raw_map.hpp"
+
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace tigerlod::ingest {
+
+/// What the regions plan needs of one part, gathered when it is read.
+struct PartSummary {
+    /// Distinct codes per level, sorted; a level with more than `max_codes`
+    /// codes lists none and sets `many`.
+    std::vector<std::vector<std::string>> codes;
+    std::vector<uint8_t> many;
+    LonLatE6 lo{INT32_MAX, INT32_MAX}, hi{INT32_MIN, INT32_MIN}; ///< box of the points
+    uint64_t points_read = 0, empty_geometries = 0;
+    std::string file; ///< the part's file, for messages
+    std::vector<std::string> classes;
+};
+
+/// The summary of a part read from one file (its files holds that one name).
+PartSummary summarize_part(const RawMap& part, size_t max_codes = 4096);
+
+/// Build a polygon map from its parts (each read from one file, file index 0
+/// in it), region by region when there are two regions or more, else whole.
+/// `load(i)` reads part i again; it is called from this thread only.
+/// Throws as build_map does, and input_error where codes do not nest across
+/// regions.
+BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::function<RawMap(size_t)>& load,
+                             const std::vector<std::string>& level_names, const Projection& projection,
+                             const BuildOptions& options, const StoreSink& sink);
+
+} // namespace tigerlod::ingest
