@@ -211,8 +211,7 @@ int IngestStage::run(const StageContext& ctx)
         for (const auto& p : parts) {
             points_read += p.points_read;
         }
-        ctx.log.info("read " + std::to_string(points_read) + " points from " + std::to_string(parts.size()) +
-                     " files");
+        ctx.log.info("read " + std::to_string(points_read) + " points from " + std::to_string(parts.size()) + " files");
         std::vector<std::string> level_names;
         for (const auto& l : cfg.levels) {
             level_names.push_back(l.name);

@@ -421,8 +421,8 @@ std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned th
             }
             if (is_spike(gr)) {
                 if (owner.unit(gr.left)) {
-                    found[t].push_back({"spikes", static_cast<double>(pa.x), static_cast<double>(pa.y),
-                                        raw.where(g.src[first_edge])});
+                    found[t].push_back(
+                        {"spikes", static_cast<double>(pa.x), static_cast<double>(pa.y), raw.where(g.src[first_edge])});
                 }
             } else {
                 out[w++] = {{a, b}, gr.left, gr.right, first_edge};
@@ -1623,8 +1623,7 @@ BuildResult build_region(RawMap raw, const RegionScope& scope, const Projection&
 }
 
 BuildResult build_coarse(const RawMap& meta, std::vector<RawUnit> units, const std::vector<CoarseEdge>& edges,
-                         size_t level, const Projection& projection, const BuildOptions& options,
-                         const StoreSink& sink)
+                         size_t level, const Projection& projection, const BuildOptions& options, const StoreSink& sink)
 {
     BuildResult result;
     Problems problems(result, projection, options.max_problem_samples);
@@ -1660,8 +1659,8 @@ BuildResult build_coarse(const RawMap& meta, std::vector<RawUnit> units, const s
     std::vector<uint32_t> bad_edges;
     for (const auto& e : edges) {
         for (size_t k = 0; k < e.keys.size(); ++k) {
-            const auto v = static_cast<uint32_t>(std::lower_bound(g.keys.begin(), g.keys.end(), e.keys[k]) -
-                                                 g.keys.begin());
+            const auto v =
+                static_cast<uint32_t>(std::lower_bound(g.keys.begin(), g.keys.end(), e.keys[k]) - g.keys.begin());
             g.grid[v] = e.points[k];
             g.verts.push_back(v);
         }
@@ -1680,8 +1679,8 @@ BuildResult build_coarse(const RawMap& meta, std::vector<RawUnit> units, const s
     Problems nesting(unused, projection, 0);
     const auto lcs = level_codes(raw, nesting, Owner{});
     result.levels.resize(raw.level_names.size());
-    build_levels(g, raw, lcs, 0, level + 1, bad_edges, projection, options, Owner{},
-                 OwnedCodes(raw.level_names.size()), result, problems, sink);
+    build_levels(g, raw, lcs, 0, level + 1, bad_edges, projection, options, Owner{}, OwnedCodes(raw.level_names.size()),
+                 result, problems, sink);
     problems.finish();
     return result;
 }

@@ -71,7 +71,10 @@ class RawFile {
     }
 
   private:
-    [[noreturn]] void fail() const { throw environment_error(m_path.string() + ": cannot write or read a part put aside"); }
+    [[noreturn]] void fail() const
+    {
+        throw environment_error(m_path.string() + ": cannot write or read a part put aside");
+    }
     void write(const void* p, size_t n)
     {
         if (n > 0 && std::fwrite(p, 1, n, m_f.get()) != n) {

@@ -26,8 +26,14 @@ struct Box {
         y1 = std::max<int64_t>(y1, p.lat);
     }
     bool empty() const noexcept { return x0 > x1; }
-    bool meets(const Box& o) const noexcept { return !empty() && !o.empty() && x0 <= o.x1 && o.x0 <= x1 && y0 <= o.y1 && o.y0 <= y1; }
-    Box grown(int64_t dx, int64_t dy) const noexcept { return empty() ? *this : Box{x0 - dx, y0 - dy, x1 + dx, y1 + dy}; }
+    bool meets(const Box& o) const noexcept
+    {
+        return !empty() && !o.empty() && x0 <= o.x1 && o.x0 <= x1 && y0 <= o.y1 && o.y0 <= y1;
+    }
+    Box grown(int64_t dx, int64_t dy) const noexcept
+    {
+        return empty() ? *this : Box{x0 - dx, y0 - dy, x1 + dx, y1 + dy};
+    }
 };
 
 /// The unit of a polygon ring: the side that is not the outside.
@@ -119,7 +125,8 @@ void add_result(BuildResult& total, BuildResult&& r, size_t first_level, size_t 
     total.unique_vertices += r.unique_vertices;
     total.edges += r.edges;
     for (auto& [name, s] : r.seconds) {
-        auto it = std::find_if(total.seconds.begin(), total.seconds.end(), [&](const auto& p) { return p.first == name; });
+        auto it =
+            std::find_if(total.seconds.begin(), total.seconds.end(), [&](const auto& p) { return p.first == name; });
         if (it == total.seconds.end()) {
             total.seconds.emplace_back(name, s);
         } else {
@@ -438,9 +445,9 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
             }
         }
         release(keys);
-        log("region " + region.own.front() + (region.own.size() > 1 ? "..." : "") + ": " +
-            std::to_string(own_units) + " own units, " + std::to_string(raw.units.size() - own_units) +
-            " neighbouring, " + std::to_string(raw.coords.size()) + " points");
+        log("region " + region.own.front() + (region.own.size() > 1 ? "..." : "") + ": " + std::to_string(own_units) +
+            " own units, " + std::to_string(raw.units.size() - own_units) + " neighbouring, " +
+            std::to_string(raw.coords.size()) + " points");
         RegionScope scope;
         scope.level = R;
         scope.own = region.own;
@@ -455,7 +462,8 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
         return std::pair{a.source.file, a.source.feature} < std::pair{b.source.file, b.source.feature};
     });
     const auto t_coarse = std::chrono::steady_clock::now();
-    BuildResult coarse = build_coarse(meta, std::move(coarse_in.units), coarse_in.edges, R, projection, options, checked);
+    BuildResult coarse =
+        build_coarse(meta, std::move(coarse_in.units), coarse_in.edges, R, projection, options, checked);
     for (size_t L = 0; L <= R; ++L) {
         total.levels[L] = coarse.levels[L];
     }

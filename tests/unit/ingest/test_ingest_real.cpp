@@ -3,12 +3,14 @@
 #include "core/errors.hpp"
 #include "stages/ingest/config.hpp"
 #include "stages/ingest/map_builder.hpp"
+#include "stages/ingest/regions.hpp"
 #include "stages/ingest/sources.hpp"
 
 #include <gdal.h>
 #include <ogr_api.h>
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
@@ -187,6 +189,66 @@ TEST(IngestReal, TwentyStateTracts)
     EXPECT_EQ(r.result.problems.at("snap_repairs"), 1U);
     expect_no_topology_problems(r);
     expect_points_inside(r);
+}
+
+TEST(IngestReal, TwentyStateTractsRegionByRegionAreTheWholeBuild)
+{
+    if (!fs::exists(shared_data / "tiger" / "tracts2010")) {
+        GTEST_SKIP() << "../shared/data/tiger/tracts2010 is absent: the 20-state tract test needs it";
+    }
+    const fs::path config = source_dir / "configs" / "tracts2010.yaml";
+    const Ingested whole = run_ingest(config);
+    // As the stage does it: each file read once and put aside on disk.
+    const IngestConfig cfg = load_config(config);
+    const fs::path aside = fs::temp_directory_path() / ("tigerlod-regions-test-" + std::to_string(::getpid()));
+    fs::create_directories(aside);
+    auto part_path = [&](size_t i) { return aside / (std::to_string(i) + ".raw"); };
+    std::vector<PartSummary> parts(cfg.dataset.inputs.size());
+    Log log;
+    read_polygon_parts(cfg, 2, log, [&](size_t i, RawMap&& part) {
+        parts[i] = summarize_part(part);
+        write_raw(part, part_path(i));
+    });
+    std::vector<std::string> names;
+    for (const auto& l : cfg.levels) {
+        names.push_back(l.name);
+    }
+    BuildOptions o;
+    o.halo_m = cfg.halo_m;
+    o.threads = 2;
+    std::mutex m;
+    std::map<std::string, std::string> stores;
+    const BuildResult r = build_by_regions(
+        parts, [&](size_t i) { return read_raw(part_path(i)); }, names, Projection(cfg.projection), o,
+        [&](const chains::ChainStore& s) {
+            const std::lock_guard lock(m);
+            stores[s.level_name + "/" + s.partition] = chains::encode(s);
+        });
+    fs::remove_all(aside);
+    ASSERT_EQ(stores.size(), whole.stores.size());
+    for (const auto& s : whole.stores) {
+        const std::string name = s.level_name + "/" + s.partition;
+        ASSERT_TRUE(stores.count(name)) << name;
+        EXPECT_TRUE(stores.at(name) == chains::encode(s)) << name;
+    }
+    EXPECT_EQ(r.problems, whole.result.problems);
+    ASSERT_EQ(r.samples.size(), whole.result.samples.size());
+    for (size_t i = 0; i < r.samples.size(); ++i) {
+        EXPECT_EQ(r.samples[i].where, whole.result.samples[i].where);
+    }
+    EXPECT_EQ(r.input_vertices, whole.result.input_vertices);
+    EXPECT_EQ(r.unique_vertices, whole.result.unique_vertices);
+    EXPECT_EQ(r.edges, whole.result.edges);
+    ASSERT_EQ(r.levels.size(), whole.result.levels.size());
+    for (size_t L = 0; L < r.levels.size(); ++L) {
+        const auto& a = r.levels[L];
+        const auto& b = whole.result.levels[L];
+        EXPECT_EQ(std::tie(a.units, a.chains, a.rings, a.vertices, a.junctions, a.partitions, a.halo_chains,
+                           a.constraint_points, a.computed_internal_points),
+                  std::tie(b.units, b.chains, b.rings, b.vertices, b.junctions, b.partitions, b.halo_chains,
+                           b.constraint_points, b.computed_internal_points))
+            << a.name;
+    }
 }
 
 TEST(IngestReal, DefaultDatasetUsAtlas)
