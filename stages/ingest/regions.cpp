@@ -322,7 +322,18 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
         const auto ey = static_cast<int64_t>(std::ceil(e_lat * 1e6)) + 1;
         const Box near_box = own_box.grown(ex, ey);
 
-        // The own parts, their units' neighbourhood as cells, and their points.
+        // Other parts near.
+        std::vector<size_t> near;
+        std::vector<Box> near_boxes;
+        for (size_t j = 0; j < nparts; ++j) {
+            const Box b{parts[j].lo.lon, parts[j].lo.lat, parts[j].hi.lon, parts[j].hi.lat};
+            if (!is_own[j] && b.meets(near_box)) {
+                near.push_back(j);
+                near_boxes.push_back(b);
+            }
+        }
+        // The own parts, their units' neighbourhood as cells, and their points
+        // that a unit of a part near could share.
         std::map<size_t, RawMap> loaded;
         CellSet cells(std::max<int64_t>(ex, 50'000), std::max<int64_t>(ey, 50'000));
         std::vector<uint64_t> keys;
@@ -334,21 +345,18 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
                 }
             }
             for (const auto& p : part.coords) {
-                keys.push_back(pack_key(p));
+                const Box at{p.lon, p.lat, p.lon, p.lat};
+                if (std::any_of(near_boxes.begin(), near_boxes.end(), [&](const Box& b) { return b.meets(at); })) {
+                    keys.push_back(pack_key(p));
+                }
             }
             loaded.emplace(i, std::move(part));
         }
         cells.seal();
-        // Other parts near: the whole finer-level units (counties) that come
+        // The whole finer-level units (counties) of the parts near that come
         // within reach, their points added to the keys.
-        std::vector<size_t> near;
         std::map<size_t, std::vector<uint8_t>> core;
-        for (size_t j = 0; j < nparts; ++j) {
-            const Box b{parts[j].lo.lon, parts[j].lo.lat, parts[j].hi.lon, parts[j].hi.lat};
-            if (is_own[j] || !b.meets(near_box)) {
-                continue;
-            }
-            near.push_back(j);
+        for (size_t j : near) {
             if (!halos) {
                 continue;
             }
