@@ -450,6 +450,25 @@ TEST_F(Cli, LineAndPolygonLayersWithMissingFields)
                    1, "geometry type is Line String, a polygons dataset needs polygons");
 }
 
+TEST_F(Cli, PolygonFilesWithABadOneLeaveNothingBehind)
+{
+    // Several polygon files go region by region: the good first file is put
+    // aside inside the temporary output before the second fails.
+    make_tiger();
+    make_tiger("b");
+    const auto size = fs::file_size(m_dir / "facesb.shp");
+    fs::resize_file(m_dir / "facesb.shp", size - 30);
+    const std::string levels = "  code_field: TFID\nlevels:\n  - {name: a, prefix: 1}\n  - {name: b, prefix: 3}\n";
+    expect_failure(
+        run("ingest", config("dataset:\n  kind: polygons\n  inputs: [faces.zip, facesb.shp]\n" + levels).string() +
+                          " " + out() + " --threads 1"),
+        1, "facesb.shp:");
+    expect_failure(
+        run("ingest",
+            config("dataset:\n  kind: polygons\n  inputs: [faces.zip, edges.zip]\n" + levels).string() + " " + out()),
+        1, "edges.zip layer 'edges': geometry type is Line String, a polygons dataset needs polygons");
+}
+
 TEST_F(Cli, ColorAndSimplifyRunTheLadderDeterministically)
 {
     make_tiger();
