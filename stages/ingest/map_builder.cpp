@@ -124,8 +124,8 @@ class Problems {
 /// or a pair of edges, or of a unit. Each such thing then belongs to exactly
 /// one region, and that region holds all the units it depends on.
 struct Owner {
-    std::vector<uint32_t> unit_rank; ///< unit -> region-level code id (sorted codes); empty for a whole map
-    std::vector<uint8_t> own_rank;   ///< region-level code id -> own
+    std::span<const uint32_t> unit_rank; ///< unit -> region-level code id (LevelCodes::of_unit); empty for a whole map
+    std::vector<uint8_t> own_rank;       ///< region-level code id -> own
     std::vector<uint32_t> vertex_rank;
 
     bool whole() const noexcept { return unit_rank.empty(); }
@@ -538,7 +538,9 @@ struct LevelCodes {
     uint32_t side(uint32_t unit) const noexcept { return unit == no_unit ? none : of_unit[unit]; }
 };
 
-std::vector<LevelCodes> level_codes(const RawMap& raw, Problems& problems, const Owner& owner)
+/// The codes of every level; units whose code at a level has another parent
+/// than the code's first unit gave it go into `non_nesting` as (unit, level).
+std::vector<LevelCodes> level_codes(const RawMap& raw, std::vector<std::pair<uint32_t, uint32_t>>& non_nesting)
 {
     const size_t nlev = raw.level_names.size();
     std::vector<LevelCodes> out(nlev);
@@ -561,10 +563,8 @@ std::vector<LevelCodes> level_codes(const RawMap& raw, Problems& problems, const
                 const uint32_t want = out[L - 1].of_unit[u];
                 if (p == none) {
                     p = want;
-                } else if (p != want && owner.unit(static_cast<uint32_t>(u))) {
-                    problems.add_lonlat("non_nesting_units", raw.units[u].intpt.value_or(LonLatE6{}),
-                                        raw.where(raw.units[u].source) + " (" + raw.level_names[L] + " " +
-                                            lc.codes[lc.of_unit[u]] + ")");
+                } else if (p != want) {
+                    non_nesting.emplace_back(static_cast<uint32_t>(u), static_cast<uint32_t>(L));
                 }
             }
         }
@@ -1467,21 +1467,21 @@ BuildResult build(RawMap raw, const Projection& projection, const BuildOptions& 
         result.seconds.emplace_back(std::move(name), std::chrono::duration<double>(now - last).count());
         last = now;
     };
+    std::vector<std::pair<uint32_t, uint32_t>> non_nesting;
+    const auto lcs = level_codes(raw, non_nesting);
     Owner owner;
-    std::vector<std::string> region_codes; // sorted, for a region
     if (scope != nullptr) {
-        for (const auto& u : raw.units) {
-            region_codes.push_back(u.codes[scope->level]);
-        }
-        std::sort(region_codes.begin(), region_codes.end());
-        region_codes.erase(std::unique(region_codes.begin(), region_codes.end()), region_codes.end());
-        for (const auto& u : raw.units) {
-            owner.unit_rank.push_back(static_cast<uint32_t>(
-                std::lower_bound(region_codes.begin(), region_codes.end(), u.codes[scope->level]) -
-                region_codes.begin()));
-        }
-        for (const auto& c : region_codes) {
+        const auto& lr = lcs[scope->level];
+        owner.unit_rank = lr.of_unit;
+        for (const auto& c : lr.codes) {
             owner.own_rank.push_back(std::binary_search(scope->own.begin(), scope->own.end(), c) ? 1 : 0);
+        }
+    }
+    for (auto [u, L] : non_nesting) {
+        if (owner.unit(u)) {
+            problems.add_lonlat("non_nesting_units", raw.units[u].intpt.value_or(LonLatE6{}),
+                                raw.where(raw.units[u].source) + " (" + raw.level_names[L] + " " +
+                                    lcs[L].codes[lcs[L].of_unit[u]] + ")");
         }
     }
     Graph g = make_graph(raw, projection, options.threads, problems, owner);
@@ -1498,7 +1498,6 @@ BuildResult build(RawMap raw, const Projection& projection, const BuildOptions& 
     for (size_t e = 0; e < g.edge_count(); ++e) {
         result.edges += owner.units(g.left[e], g.right[e]) ? 1 : 0;
     }
-    const auto lcs = level_codes(raw, problems, owner);
     {
         std::vector<uint8_t> used(raw.units.size(), 0);
         for (size_t e = 0; e < g.edge_count(); ++e) {
@@ -1674,10 +1673,8 @@ BuildResult build_coarse(const RawMap& meta, std::vector<RawUnit> units, const s
         g.sid.push_back(e.sid);
         g.src.push_back(e.src);
     }
-    BuildResult unused; // the regions check the nesting
-
-    Problems nesting(unused, projection, 0);
-    const auto lcs = level_codes(raw, nesting, Owner{});
+    std::vector<std::pair<uint32_t, uint32_t>> non_nesting; // the regions report these
+    const auto lcs = level_codes(raw, non_nesting);
     result.levels.resize(raw.level_names.size());
     build_levels(g, raw, lcs, 0, level + 1, bad_edges, projection, options, Owner{}, OwnedCodes(raw.level_names.size()),
                  result, problems, sink);

@@ -1,6 +1,7 @@
 #include "stages/ingest/regions.hpp"
 
 #include "core/errors.hpp"
+#include "core/geometry.hpp"
 #include "core/memory.hpp"
 
 #include <algorithm>
@@ -8,6 +9,7 @@
 #include <cmath>
 #include <map>
 #include <mutex>
+#include <numbers>
 #include <numeric>
 #include <set>
 
@@ -15,26 +17,16 @@ namespace tigerlod::ingest {
 
 namespace {
 
-/// A box in micro-degrees.
-struct Box {
-    int64_t x0 = INT64_MAX, y0 = INT64_MAX, x1 = INT64_MIN, y1 = INT64_MIN;
-    void extend(LonLatE6 p) noexcept
-    {
-        x0 = std::min<int64_t>(x0, p.lon);
-        y0 = std::min<int64_t>(y0, p.lat);
-        x1 = std::max<int64_t>(x1, p.lon);
-        y1 = std::max<int64_t>(y1, p.lat);
-    }
-    bool empty() const noexcept { return x0 > x1; }
-    bool meets(const Box& o) const noexcept
-    {
-        return !empty() && !o.empty() && x0 <= o.x1 && o.x0 <= x1 && y0 <= o.y1 && o.y0 <= y1;
-    }
-    Box grown(int64_t dx, int64_t dy) const noexcept
-    {
-        return empty() ? *this : Box{x0 - dx, y0 - dy, x1 + dx, y1 + dy};
-    }
-};
+/// Boxes here are in micro-degrees: GridBoxes of (lon, lat).
+GridPoint as_point(LonLatE6 p) noexcept
+{
+    return {p.lon, p.lat};
+}
+
+GridBox grown(const GridBox& b, int64_t dx, int64_t dy) noexcept
+{
+    return b.empty() ? b : GridBox{b.min_x - dx, b.min_y - dy, b.max_x + dx, b.max_y + dy};
+}
 
 /// The unit of a polygon ring: the side that is not the outside.
 uint32_t unit_of(const RawMap& part, size_t p) noexcept
@@ -42,16 +34,16 @@ uint32_t unit_of(const RawMap& part, size_t p) noexcept
     return part.left[p] != no_unit ? part.left[p] : part.right[p];
 }
 
-std::vector<Box> unit_boxes(const RawMap& part)
+std::vector<GridBox> unit_boxes(const RawMap& part)
 {
-    std::vector<Box> boxes(part.units.size());
+    std::vector<GridBox> boxes(part.units.size());
     for (size_t p = 0; p < part.polyline_count(); ++p) {
         const uint32_t u = unit_of(part, p);
         if (u == no_unit) {
             continue;
         }
         for (uint64_t k = part.offsets[p]; k < part.offsets[p + 1]; ++k) {
-            boxes[u].extend(part.coords[k]);
+            boxes[u].extend(as_point(part.coords[k]));
         }
     }
     return boxes;
@@ -61,15 +53,15 @@ std::vector<Box> unit_boxes(const RawMap& part)
 class CellSet {
   public:
     CellSet(int64_t cx, int64_t cy) : m_cx(cx), m_cy(cy) {}
-    template <class F> void each(const Box& b, F&& f) const
+    template <class F> void each(const GridBox& b, F&& f) const
     {
-        for (int64_t ix = cell(b.x0, m_cx); ix <= cell(b.x1, m_cx); ++ix) {
-            for (int64_t iy = cell(b.y0, m_cy); iy <= cell(b.y1, m_cy); ++iy) {
+        for (int64_t ix = cell(b.min_x, m_cx); ix <= cell(b.max_x, m_cx); ++ix) {
+            for (int64_t iy = cell(b.min_y, m_cy); iy <= cell(b.max_y, m_cy); ++iy) {
                 f((static_cast<uint64_t>(ix) << 32) | static_cast<uint64_t>(iy));
             }
         }
     }
-    void add(const Box& b)
+    void add(const GridBox& b)
     {
         each(b, [&](uint64_t k) { m_cells.push_back(k); });
     }
@@ -78,7 +70,7 @@ class CellSet {
         std::sort(m_cells.begin(), m_cells.end());
         m_cells.erase(std::unique(m_cells.begin(), m_cells.end()), m_cells.end());
     }
-    bool meets(const Box& b) const
+    bool meets(const GridBox& b) const
     {
         bool hit = false;
         each(b, [&](uint64_t k) { hit = hit || std::binary_search(m_cells.begin(), m_cells.end(), k); });
@@ -295,39 +287,40 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
     double build_s = 0;
     for (const Region& region : regions) {
         std::vector<uint8_t> is_own(nparts, 0);
-        Box own_box;
+        GridBox own_box;
         for (size_t i : region.parts) {
             is_own[i] = 1;
             if (parts[i].lo.lon <= parts[i].hi.lon) {
-                own_box.extend(parts[i].lo);
-                own_box.extend(parts[i].hi);
+                own_box.extend(as_point(parts[i].lo));
+                own_box.extend(as_point(parts[i].hi));
             }
         }
         double kmin = 1.0;
         double max_lat = 0.0;
         if (!own_box.empty()) {
-            for (int64_t x : {own_box.x0, (own_box.x0 + own_box.x1) / 2, own_box.x1}) {
-                for (int64_t y : {own_box.y0, (own_box.y0 + own_box.y1) / 2, own_box.y1}) {
+            for (int64_t x : {own_box.min_x, (own_box.min_x + own_box.max_x) / 2, own_box.max_x}) {
+                for (int64_t y : {own_box.min_y, (own_box.min_y + own_box.max_y) / 2, own_box.max_y}) {
                     const double k = projection.scale(static_cast<double>(x) * 1e-6, static_cast<double>(y) * 1e-6);
                     if (k > 0 && std::isfinite(k)) {
                         kmin = std::min({kmin, k, 1.0 / k});
                     }
                 }
             }
-            max_lat = static_cast<double>(std::max(std::abs(own_box.y0), std::abs(own_box.y1))) * 1e-6;
+            max_lat = static_cast<double>(std::max(std::abs(own_box.min_y), std::abs(own_box.max_y))) * 1e-6;
         }
         const double e_lat = 1.25 * reach_m / (110000.0 * kmin);
-        const double e_lon = e_lat / std::max(0.01, std::cos(std::min(89.0, max_lat + e_lat) * M_PI / 180.0));
+        const double e_lon =
+            e_lat / std::max(0.01, std::cos(std::min(89.0, max_lat + e_lat) * std::numbers::pi / 180.0));
         const auto ex = static_cast<int64_t>(std::ceil(e_lon * 1e6)) + 1;
         const auto ey = static_cast<int64_t>(std::ceil(e_lat * 1e6)) + 1;
-        const Box near_box = own_box.grown(ex, ey);
+        const GridBox near_box = grown(own_box, ex, ey);
 
         // Other parts near.
         std::vector<size_t> near;
-        std::vector<Box> near_boxes;
+        std::vector<GridBox> near_boxes;
         for (size_t j = 0; j < nparts; ++j) {
-            const Box b{parts[j].lo.lon, parts[j].lo.lat, parts[j].hi.lon, parts[j].hi.lat};
-            if (!is_own[j] && b.meets(near_box)) {
+            const GridBox b{parts[j].lo.lon, parts[j].lo.lat, parts[j].hi.lon, parts[j].hi.lat};
+            if (!is_own[j] && b.intersects(near_box)) {
                 near.push_back(j);
                 near_boxes.push_back(b);
             }
@@ -339,14 +332,15 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
         std::vector<uint64_t> keys;
         for (size_t i : region.parts) {
             RawMap part = load(i);
-            for (const Box& b : unit_boxes(part)) {
+            for (const GridBox& b : unit_boxes(part)) {
                 if (!b.empty()) {
-                    cells.add(b.grown(ex, ey));
+                    cells.add(grown(b, ex, ey));
                 }
             }
             for (const auto& p : part.coords) {
-                const Box at{p.lon, p.lat, p.lon, p.lat};
-                if (std::any_of(near_boxes.begin(), near_boxes.end(), [&](const Box& b) { return b.meets(at); })) {
+                const GridBox at{p.lon, p.lat, p.lon, p.lat};
+                if (std::any_of(near_boxes.begin(), near_boxes.end(),
+                                [&](const GridBox& b) { return b.intersects(at); })) {
                     keys.push_back(pack_key(p));
                 }
             }
