@@ -79,9 +79,47 @@ Arc arc_around(double ux, double uy, double sin_h, double cos_h) noexcept
 
 } // namespace
 
-std::vector<Shortcut> proximate_shortcuts(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach)
+void Candidates::finish(uint32_t n)
+{
+    runs_.shrink_to_fit();
+    base_.assign(runs_.size() + 1, 0);
+    for (size_t r = 0; r < runs_.size(); ++r) {
+        base_[r + 1] = base_[r] + (runs_[r].hi - runs_[r].lo + 1);
+    }
+    run_first_.clear();
+    if (runs_.empty()) {
+        return;
+    }
+    run_first_.assign(size_t{n} + 1, 0);
+    for (const Run& r : runs_) {
+        ++run_first_[r.from + 1];
+    }
+    for (uint32_t v = 0; v < n; ++v) {
+        run_first_[v + 1] += run_first_[v];
+    }
+}
+
+Shortcut Candidates::at(uint32_t id) const noexcept
+{
+    const auto r = static_cast<size_t>(std::upper_bound(base_.begin(), base_.end(), id) - base_.begin()) - 1;
+    return {runs_[r].from, runs_[r].lo + (id - base_[r])};
+}
+
+std::vector<Shortcut> Candidates::list() const
 {
     std::vector<Shortcut> out;
+    out.reserve(size());
+    for (const Run& r : runs_) {
+        for (uint32_t k = r.lo; k <= r.hi; ++k) {
+            out.push_back({r.from, k});
+        }
+    }
+    return out;
+}
+
+Candidates proximate_shortcuts(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach)
+{
+    Candidates out;
     const auto n = static_cast<uint32_t>(pts.size());
     // The L2 disc that holds the metric's ball: a vertex must be within this
     // radius of the ray from v_j, so the wedge is a necessary condition.
@@ -141,33 +179,36 @@ std::vector<Shortcut> proximate_shortcuts(std::span<const GridPoint> pts, const 
             const double len2 = bx * bx + by * by;
             const bool sure = tol.metric == Metric::l2 && inside_clearly && far2 * (1 + 1e-12) < len2;
             if (sure || proximate_exact(pts, j, k, tol)) {
-                out.push_back({j, k});
+                out.add(j, k);
             }
         }
     }
+    out.finish(n);
     return out;
 }
 
-size_t cull_by_points(std::span<const GridPoint> pts, std::vector<Shortcut>& shortcuts,
-                      std::span<const GridPoint> points)
+std::vector<uint32_t> cull_by_points(std::span<const GridPoint> pts, const Candidates& cand,
+                                     std::span<const GridPoint> points)
 {
-    if (points.empty() || shortcuts.empty()) {
-        return 0;
+    std::vector<uint32_t> bad;
+    if (points.empty() || cand.empty()) {
+        return bad;
     }
-    std::vector<uint8_t> bad(shortcuts.size(), 0);
+    const auto runs = cand.runs();
     size_t begin = 0;
-    while (begin < shortcuts.size()) {
-        const uint32_t j = shortcuts[begin].from;
+    while (begin < runs.size()) {
+        const uint32_t j = runs[begin].from;
         size_t end = begin;
-        while (end < shortcuts.size() && shortcuts[end].from == j) {
+        while (end < runs.size() && runs[end].from == j) {
             ++end;
         }
-        const uint32_t reach = shortcuts[end - 1].to;
+        const uint32_t reach = runs[end - 1].hi;
         // Box of the subchain j..reach: a point outside it is outside every region.
         GridBox box;
         for (uint32_t i = j; i <= reach; ++i) {
             box.extend(pts[i]);
         }
+        const size_t first_bad = bad.size();
         for (const GridPoint p : points) {
             if (p.x < box.min_x || p.x > box.max_x || p.y < box.min_y || p.y > box.max_y) {
                 continue;
@@ -175,32 +216,28 @@ size_t cull_by_points(std::span<const GridPoint> pts, std::vector<Shortcut>& sho
             // Even-odd state of p against the subchain j..k, extended one edge
             // at a time; closing it with edge k -> j gives the region's test.
             PointInPolygon acc(p);
-            size_t s = begin;
-            for (uint32_t k = j + 1; k <= reach && s < end; ++k) {
+            size_t r = begin;
+            for (uint32_t k = j + 1; k <= reach && r < end; ++k) {
                 acc.add_segment(pts[k - 1], pts[k]);
-                if (shortcuts[s].to != k) {
+                if (k < runs[r].lo) {
                     continue;
                 }
                 PointInPolygon closed = acc;
                 closed.add_segment(pts[k], pts[j]);
                 if (closed.location() != PointLocation::outside) {
-                    bad[s] = 1;
+                    bad.push_back(cand.run_id(r) + (k - runs[r].lo));
                 }
-                ++s;
+                if (k == runs[r].hi) {
+                    ++r;
+                }
             }
         }
+        // Several points can cull the same shortcut.
+        std::sort(bad.begin() + static_cast<std::ptrdiff_t>(first_bad), bad.end());
+        bad.erase(std::unique(bad.begin() + static_cast<std::ptrdiff_t>(first_bad), bad.end()), bad.end());
         begin = end;
     }
-    size_t w = 0, removed = 0;
-    for (size_t i = 0; i < shortcuts.size(); ++i) {
-        if (bad[i]) {
-            ++removed;
-        } else {
-            shortcuts[w++] = shortcuts[i];
-        }
-    }
-    shortcuts.resize(w);
-    return removed;
+    return bad;
 }
 
 } // namespace tigerlod::simplify

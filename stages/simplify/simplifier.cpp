@@ -106,7 +106,7 @@ std::span<const uint8_t> keep_of(const std::vector<uint8_t>& keep, const chains:
 /// Lazy rounds per chain before its remaining shortcuts are tested at once.
 constexpr uint32_t lazy_rounds = 3;
 
-enum State : uint8_t { unknown = 0, good = 1, bad_raster = 2, bad_exact = 3 };
+enum State : uint8_t { unknown = 0, good = 1, bad_raster = 2, bad_exact = 3, bad_points = 4 };
 
 /// Per owned chain.
 struct Work {
@@ -114,9 +114,8 @@ struct Work {
     Tolerance tol;
     bool ring = false;
     bool fixed = false; ///< problem chain: kept as it is
-    std::vector<Shortcut> cand;
-    std::vector<uint32_t> first; ///< CSR: shortcuts from vertex v are cand[first[v], first[v+1])
-    std::vector<uint8_t> state;
+    Candidates cand;
+    std::vector<uint8_t> state;      ///< per shortcut id
     std::vector<uint32_t> path;      ///< vertex indices
     std::vector<uint32_t> path_cand; ///< candidate index of each path edge, UINT32_MAX for an original edge
     uint32_t rounds = 0;             ///< lazy rounds that tested this chain
@@ -151,15 +150,16 @@ void shortest_path(Work& w, size_t n)
             const uint32_t rr = r > 0 ? r - 1 : 0;
             uint32_t best = inf, bk = 0, bc = UINT32_MAX;
             // Candidates from v, farthest first; ties keep the farthest.
-            for (uint32_t c = w.first[v + 1]; c-- > w.first[v];) {
-                if (w.state[c] >= bad_raster) {
-                    continue;
-                }
-                const uint32_t k = w.cand[c].to;
-                if (f[at(rr, k)] + 1 < best) {
-                    best = f[at(rr, k)] + 1;
-                    bk = k;
-                    bc = c;
+            const auto runs = w.cand.runs_from(v);
+            for (size_t q = runs.size(); q-- > 0;) {
+                const auto& run = runs[q];
+                const uint32_t id0 = w.cand.run_id(w.cand.first_run(v) + q);
+                for (uint32_t k = run.hi + 1; k-- > run.lo;) {
+                    if (f[at(rr, k)] + 1 < best && w.state[id0 + (k - run.lo)] < bad_raster) {
+                        best = f[at(rr, k)] + 1;
+                        bk = k;
+                        bc = id0 + (k - run.lo);
+                    }
                 }
             }
             if (f[at(rr, v + 1)] + 1 < best) {
@@ -373,7 +373,6 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         Work& w = work[i];
         if (!w.fixed) {
             w.cand = proximate_shortcuts(points_of(w), w.tol, opt.max_reach);
-            w.cand.shrink_to_fit(); // the scan grew it by doubling: up to half of it was slack
         }
     });
     st.seconds_candidates += since(t0);
@@ -402,7 +401,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         }
     }
     index.finish();
-    std::vector<size_t> culled(work.size(), 0);
+    std::vector<std::vector<uint32_t>> culled(work.size());
     parallel_each(work.size(), opt.threads, [&](size_t i) {
         Work& w = work[i];
         if (w.cand.empty()) {
@@ -422,18 +421,12 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     });
     for (size_t i = 0; i < work.size(); ++i) {
         Work& w = work[i];
-        st.banned_points += culled[i];
-        st.candidates += w.cand.size();
-        const size_t n = points_of(w).size();
-        w.first.assign(n + 1, 0);
-        for (const auto& s : w.cand) {
-            ++w.first[s.from + 1];
-        }
-        for (size_t v = 0; v < n; ++v) {
-            w.first[v + 1] += w.first[v];
-        }
-        w.cand.shrink_to_fit(); // point culling removed some
+        st.banned_points += culled[i].size();
+        st.candidates += w.cand.size() - culled[i].size();
         w.state.assign(w.cand.size(), unknown);
+        for (const uint32_t id : culled[i]) {
+            w.state[id] = bad_points;
+        }
     }
     st.seconds_constraints += since(t0);
 
@@ -565,16 +558,16 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     st.seconds_far += since(t0);
 
     // The far rule: no blocked segment between the shortcut's ends.
-    auto proved_far = [&](uint32_t wi, uint32_t ci) {
+    auto proved_far = [&](uint32_t wi, Shortcut sc) {
         const auto& b = blocked[wi];
-        return !b.empty() && b[work[wi].cand[ci].to] == b[work[wi].cand[ci].from];
+        return !b.empty() && b[sc.to] == b[sc.from];
     };
 
     // Raster test of (work, candidate) pairs, tile by tile.
     auto raster_test = [&](const std::vector<std::pair<uint32_t, uint32_t>>& all_tests) {
         std::vector<std::pair<uint32_t, uint32_t>> tests;
         for (size_t t = 0; t < all_tests.size(); ++t) {
-            if (proved_far(all_tests[t].first, all_tests[t].second)) {
+            if (proved_far(all_tests[t].first, work[all_tests[t].first].cand.at(all_tests[t].second))) {
                 work[all_tests[t].first].state[all_tests[t].second] = good;
                 ++st.proved_far;
             } else {
@@ -586,7 +579,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         for (uint32_t id = 0; id < tests.size(); ++id) {
             const auto [wi, ci] = tests[id];
             const auto pts = points_of(work[wi]);
-            const Shortcut sc = work[wi].cand[ci];
+            const Shortcut sc = work[wi].cand.at(ci);
             const GridPoint a = pts[sc.from], b = pts[sc.to];
             if (blocked[wi].empty() || !opt.clip_tests) {
                 parts.assign(1, {0.0, 1.0});
@@ -658,12 +651,19 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         std::vector<std::pair<uint32_t, uint32_t>> near;
         for (uint32_t wi = 0; wi < work.size(); ++wi) {
             auto& w = work[wi];
-            for (uint32_t ci = 0; ci < w.cand.size(); ++ci) {
-                if (proved_far(wi, ci)) {
-                    w.state[ci] = good;
-                    ++st.proved_far;
-                } else {
-                    near.emplace_back(wi, ci);
+            const auto runs = w.cand.runs();
+            for (size_t r = 0; r < runs.size(); ++r) {
+                for (uint32_t k = runs[r].lo; k <= runs[r].hi; ++k) {
+                    const uint32_t ci = w.cand.run_id(r) + (k - runs[r].lo);
+                    if (w.state[ci] != unknown) {
+                        continue; // culled by a point
+                    }
+                    if (proved_far(wi, {runs[r].from, k})) {
+                        w.state[ci] = good;
+                        ++st.proved_far;
+                    } else {
+                        near.emplace_back(wi, ci);
+                    }
                 }
             }
         }
@@ -692,10 +692,10 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
                             break;
                         }
                         uint32_t worst = UINT32_MAX, span = 0;
-                        for (const uint32_t c : w.path_cand) {
-                            if (c != UINT32_MAX && w.cand[c].to - w.cand[c].from > span) {
-                                span = w.cand[c].to - w.cand[c].from;
-                                worst = c;
+                        for (size_t e = 0; e < w.path_cand.size(); ++e) {
+                            if (w.path_cand[e] != UINT32_MAX && w.path[e + 1] - w.path[e] > span) {
+                                span = w.path[e + 1] - w.path[e];
+                                worst = w.path_cand[e];
                             }
                         }
                         if (worst == UINT32_MAX) {
@@ -733,7 +733,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
                     continue;
                 }
                 for (const uint32_t v : w.path) {
-                    for (uint32_t c = w.first[v]; c < w.first[v + 1]; ++c) {
+                    for (uint32_t c = w.cand.first_id(v); c < w.cand.first_id(v + 1); ++c) {
                         if (w.state[c] == unknown) {
                             tests.emplace_back(wi, c);
                         }

@@ -212,7 +212,7 @@ TEST(Candidates, MatchBruteForceOnRandomChains)
                     }
                 }
             }
-            const auto got = proximate_shortcuts(pts, tol, reach);
+            const auto got = proximate_shortcuts(pts, tol, reach).list();
             ASSERT_EQ(got.size(), want.size()) << metric_name(m) << " trial " << trial;
             for (size_t i = 0; i < got.size(); ++i) {
                 EXPECT_EQ(got[i].from, want[i].from);
@@ -222,12 +222,83 @@ TEST(Candidates, MatchBruteForceOnRandomChains)
     }
 }
 
+TEST(Candidates, RunsNumberTheShortcutsInOrder)
+{
+    // A straight stretch 0..4 then a right-angle turn: from 0 every end up
+    // to 4 (one run of 3), none past the corner.
+    const Pts pts{{0, 0}, {100, 0}, {200, 0}, {300, 0}, {400, 0}, {400, 300}, {400, 600}};
+    const auto c = proximate_shortcuts(pts, Tolerance(10, Metric::l2), 0);
+    const std::vector<Shortcut> want{{0, 2}, {0, 3}, {0, 4}, {1, 3}, {1, 4}, {2, 4}, {4, 6}};
+    EXPECT_EQ(c.list(), want);
+    ASSERT_EQ(c.runs().size(), 4U);
+    EXPECT_EQ(c.size(), 7U);
+    for (uint32_t id = 0; id < c.size(); ++id) {
+        EXPECT_EQ(c.at(id), want[id]) << id;
+    }
+    const std::vector<uint32_t> first{0, 3, 5, 6, 6, 7, 7, 7};
+    for (uint32_t v = 0; v <= pts.size(); ++v) {
+        EXPECT_EQ(c.first_id(v), first[v]) << v;
+    }
+    EXPECT_TRUE(c.runs_from(3).empty());
+    ASSERT_EQ(c.runs_from(4).size(), 1U);
+    EXPECT_EQ(c.run_id(c.first_run(4)), 6U);
+    // A chain with no shortcut at all.
+    const auto none = proximate_shortcuts(Pts{{0, 0}, {100, 0}}, Tolerance(10, Metric::l2), 0);
+    EXPECT_TRUE(none.empty());
+    EXPECT_EQ(none.first_id(0), 0U);
+}
+
+TEST(Candidates, PointCullingMatchesTheRegionTestOnRandomChains)
+{
+    std::mt19937 rng(5);
+    size_t culled = 0, kept = 0;
+    for (int trial = 0; trial < 100; ++trial) {
+        Pts pts;
+        GridPoint p{0, 0};
+        std::uniform_int_distribution<int> step(-40, 100);
+        for (int i = 0; i < 30; ++i) {
+            pts.push_back(p);
+            p = {p.x + step(rng), p.y + step(rng) / 3};
+        }
+        // Points near the chain, where the regions between shortcuts and subchains are.
+        Pts points;
+        std::uniform_int_distribution<size_t> at(0, pts.size() - 1);
+        std::uniform_int_distribution<int> off(-50, 50);
+        for (int i = 0; i < 20; ++i) {
+            const GridPoint v = pts[at(rng)];
+            points.push_back({v.x + off(rng), v.y + off(rng)});
+        }
+        const auto cand = proximate_shortcuts(pts, Tolerance(double(60 + trial % 5 * 40), Metric::l2), 0);
+        std::vector<uint32_t> want;
+        const auto all = cand.list();
+        for (uint32_t id = 0; id < all.size(); ++id) {
+            for (const GridPoint q : points) {
+                // The region between the shortcut and its subchain, closed by the shortcut.
+                PointInPolygon pip(q);
+                for (uint32_t k = all[id].from; k < all[id].to; ++k) {
+                    pip.add_segment(pts[k], pts[k + 1]);
+                }
+                pip.add_segment(pts[all[id].to], pts[all[id].from]);
+                if (pip.location() != PointLocation::outside) {
+                    want.push_back(id);
+                    break;
+                }
+            }
+        }
+        EXPECT_EQ(cull_by_points(pts, cand, points), want) << "trial " << trial;
+        culled += want.size();
+        kept += all.size() - want.size();
+    }
+    EXPECT_GT(culled, 100U) << "trials that cull nothing test nothing";
+    EXPECT_GT(kept, 100U);
+}
+
 TEST(Candidates, Figure5NonProximateSegmentInsideTheBandIsNotACandidate)
 {
     // v1 -> v6 runs along the x axis inside C + B_eps (the legs of the deep
     // notch are 20 apart), but v3 and v4 are 180 from it.
     const Pts pts{{0, 0}, {100, 0}, {100, 180}, {120, 180}, {120, 0}, {220, 0}};
-    const auto got = proximate_shortcuts(pts, Tolerance(50, Metric::l2), 0);
+    const auto got = proximate_shortcuts(pts, Tolerance(50, Metric::l2), 0).list();
     for (const auto& s : got) {
         EXPECT_FALSE(s.from <= 1 && s.to >= 4) << s.from << "->" << s.to << " skips the notch";
     }
@@ -465,7 +536,7 @@ TEST(Simplify, ShortestPathThatSelfIntersectsIsRepaired)
     const Pts c{{900, 400}, {200, 0}, {800, 0}, {900, 300}, {900, 700}, {200, 900}};
     MapBuilder m;
     m.chain(1, c);
-    const auto cand = proximate_shortcuts(c, Tolerance(200, Metric::l2), 0);
+    const auto cand = proximate_shortcuts(c, Tolerance(200, Metric::l2), 0).list();
     ASSERT_EQ(cand.size(), 1U);
     EXPECT_EQ(cand[0].from, 2U);
     EXPECT_EQ(cand[0].to, 4U);
