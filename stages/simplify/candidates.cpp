@@ -28,6 +28,14 @@ struct Arc {
         const double c1 = ax * y - ay * x, c2 = x * by - y * bx;
         return strict ? (c1 > 0 && c2 > 0) : (c1 >= 0 && c2 >= 0);
     }
+    /// v inside the arc with an angle whose squared sine is at least `sin2`
+    /// from both edges; `len2` = |v|^2.
+    bool deep_inside(double x, double y, double len2, double sin2) const noexcept
+    {
+        const double c1 = ax * y - ay * x, c2 = x * by - y * bx;
+        return c1 > 0 && c2 > 0 && c1 * c1 >= sin2 * (ax * ax + ay * ay) * len2 &&
+               c2 * c2 >= sin2 * (bx * bx + by * by) * len2;
+    }
     /// This arc narrowed to its intersection with `o` (both under pi); false if empty.
     bool intersect(const Arc& o) noexcept
     {
@@ -117,51 +125,61 @@ std::vector<Shortcut> Candidates::list() const
     return out;
 }
 
-Candidates proximate_shortcuts(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach)
+namespace {
+
+/// The scan of proximate_shortcuts with squared lengths in `Wide`: int64_t
+/// when every coordinate difference of the chain is under 2^31 (so a
+/// squared length fits; 21,000 km on a 1 cm grid), int128 otherwise. The
+/// conversions to double round the same way, so both give the same answer.
+template <class Wide>
+void scan(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach, int128 reps2, Candidates& out)
 {
-    Candidates out;
     const auto n = static_cast<uint32_t>(pts.size());
-    // The L2 disc that holds the metric's ball: a vertex must be within this
-    // radius of the ray from v_j, so the wedge is a necessary condition.
-    // Its square is an integer: threshold (L2), threshold^2 (L1), 2 threshold^2 (Linf).
-    const int128 reps2 = std::max<int128>(0, tol.metric == Metric::l2   ? tol.threshold
-                                             : tol.metric == Metric::l1 ? tol.threshold * tol.threshold
-                                                                        : 2 * tol.threshold * tol.threshold);
+    const auto wide_reps2 = static_cast<Wide>(reps2); // fits: checked by the caller
     const double r_eps = std::sqrt(double(reps2));
-    // Two wedges, without trigonometry: every constraint's half-angle
-    // widened by `slack` (outside it: surely not proximate; empty: stop) and
-    // narrowed by it (strictly inside: surely within eps, when no vertex lies
-    // beyond the end). Between them, the exact test decides.
+    // One wedge, without trigonometry: every constraint's half-angle widened
+    // by `slack` (outside it: surely not proximate; empty: stop). An end at
+    // least 2 x slack inside it is inside every exact constraint (its
+    // neighbourhood of that angle lies in the wedge, so in every widened
+    // arc): with no vertex beyond it, proximate without the exact test.
     constexpr double slack = 1e-9; // radians; far above the double error of the rotations
     const double cos_s = std::cos(slack), sin_s = std::sin(slack);
+    const double deep2 = std::pow(std::sin(2 * slack), 2);
     for (uint32_t j = 0; j + 2 < n; ++j) {
         const GridPoint a = pts[j];
-        Wedge wide, narrow;
-        double far2 = 0; // max squared distance of an intermediate vertex from a
+        Wedge wide;
+        bool complete = true; // every constraint is in the wedge (none left out near pi / 2)
+        double far2 = 0;      // max squared distance of an intermediate vertex from a
         const auto last = static_cast<uint32_t>(max_reach ? std::min<uint64_t>(n - 1, uint64_t{j} + max_reach) : n - 1);
+        // Each vertex's squared distance from a and its root are taken one
+        // step ahead, so the root's latency overlaps the step before.
+        auto dist = [&](GridPoint q, Wide& r2, double& c) {
+            const int64_t qx = int64_t{q.x} - a.x, qy = int64_t{q.y} - a.y;
+            r2 = Wide{qx} * qx + Wide{qy} * qy;
+            c = std::sqrt(std::fabs(double(r2 - wide_reps2))); // used only when r2 > reps2
+        };
+        Wide r2_next;
+        double c_next;
+        dist(pts[j + 1], r2_next, c_next);
         for (uint32_t k = j + 2; k <= last; ++k) {
-            // Vertex k - 1 becomes an intermediate vertex: narrow the wedges.
+            // Vertex k - 1 becomes an intermediate vertex: narrow the wedge.
             const GridPoint q = pts[k - 1];
             const int64_t qx = int64_t{q.x} - a.x, qy = int64_t{q.y} - a.y;
-            const int128 r2 = int128{qx} * qx + int128{qy} * qy;
+            const Wide r2 = r2_next;
+            const double c = c_next;
+            dist(pts[k], r2_next, c_next);
             far2 = std::max(far2, double(r2));
-            if (r2 > reps2) {
+            if (r2 > wide_reps2) {
                 // The arc of directions within h of q, sin h = r_eps / |q|,
                 // as vectors scaled by |q|: c = |q| cos h, exact under the
                 // root (integers), so no division and one square root.
-                const double c = std::sqrt(double(r2 - reps2));
                 // h + slack; a half-angle this close to pi / 2 is left out
-                // of the wide wedge (wider is safe; |q| <= c + r_eps).
+                // of the wedge (wider is safe; |q| <= c + r_eps).
                 const double sin_w = r_eps * cos_s + c * sin_s, cos_w = c * cos_s - r_eps * sin_s;
-                if (cos_w > 1e-6 * (c + r_eps) && !wide.narrow(arc_around(double(qx), double(qy), sin_w, cos_w))) {
+                if (cos_w <= 1e-6 * (c + r_eps)) {
+                    complete = false;
+                } else if (!wide.narrow(arc_around(double(qx), double(qy), sin_w, cos_w))) {
                     break; // no segment from a can pass near every vertex seen
-                }
-                // h - slack
-                const double sin_n = r_eps * cos_s - c * sin_s, cos_n = c * cos_s + r_eps * sin_s;
-                if (sin_n < 0) {
-                    narrow.state = Wedge::empty;
-                } else {
-                    narrow.narrow(arc_around(double(qx), double(qy), sin_n, cos_n));
                 }
             }
             const GridPoint b = pts[k];
@@ -172,16 +190,39 @@ Candidates proximate_shortcuts(std::span<const GridPoint> pts, const Tolerance& 
             if (wide.state == Wedge::set && !wide.arc.holds(bx, by)) {
                 continue; // the ray through b misses a vertex: not proximate
             }
-            const bool inside_clearly =
-                narrow.state == Wedge::open || (narrow.state == Wedge::set && narrow.arc.holds(bx, by, true));
-            // Clearly inside the wedge and no vertex beyond b: every
-            // intermediate vertex projects onto the segment within eps (L2).
             const double len2 = bx * bx + by * by;
-            const bool sure = tol.metric == Metric::l2 && inside_clearly && far2 * (1 + 1e-12) < len2;
+            // Clearly inside every constraint and no vertex beyond b: every
+            // intermediate vertex projects onto the segment within eps (L2).
+            const bool sure = tol.metric == Metric::l2 && complete && far2 * (1 + 1e-12) < len2 &&
+                              (wide.state == Wedge::open || wide.arc.deep_inside(bx, by, len2, deep2));
             if (sure || proximate_exact(pts, j, k, tol)) {
                 out.add(j, k);
             }
         }
+    }
+}
+
+} // namespace
+
+Candidates proximate_shortcuts(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach)
+{
+    Candidates out;
+    const auto n = static_cast<uint32_t>(pts.size());
+    // The L2 disc that holds the metric's ball: a vertex must be within this
+    // radius of the ray from v_j, so the wedge is a necessary condition.
+    // Its square is an integer: threshold (L2), threshold^2 (L1), 2 threshold^2 (Linf).
+    const int128 reps2 = std::max<int128>(0, tol.metric == Metric::l2   ? tol.threshold
+                                             : tol.metric == Metric::l1 ? tol.threshold * tol.threshold
+                                                                        : 2 * tol.threshold * tol.threshold);
+    GridBox box;
+    for (const GridPoint p : pts) {
+        box.extend(p);
+    }
+    constexpr int64_t limit = int64_t{1} << 31;
+    if (!pts.empty() && box.max_x - box.min_x < limit && box.max_y - box.min_y < limit && reps2 < int128{limit}) {
+        scan<int64_t>(pts, tol, max_reach, reps2, out);
+    } else {
+        scan<int128>(pts, tol, max_reach, reps2, out);
     }
     out.finish(n);
     return out;
