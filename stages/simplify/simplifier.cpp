@@ -12,7 +12,6 @@
 #include <chrono>
 #include <cmath>
 #include <optional>
-#include <unordered_map>
 
 namespace tigerlod::simplify {
 
@@ -482,14 +481,12 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         }
     }
     radix_sort_pairs(grid); // each cell's segments in (chain, index) order
-    // Where each cell's run starts: one hash probe per cell, not a binary
-    // search over every segment of the store.
-    std::unordered_map<uint64_t, uint32_t> cell_start;
-    cell_start.reserve(grid.size() / 2 + 1);
-    for (uint32_t g = 0; g < grid.size(); ++g) {
-        if (g == 0 || grid[g].first != grid[g - 1].first) {
-            cell_start.emplace(grid[g].first, g);
-        }
+    // Where each cell's run is, and each entry's chain and segment in list
+    // order: the lookups read one table slot and then consecutive entries.
+    const CellRuns cell_runs(grid);
+    std::vector<GridSeg> entry(grid.size());
+    for (size_t g = 0; g < grid.size(); ++g) {
+        entry[g] = grid_segs[grid[g].second];
     }
     // The part of segment ab that another chain's segment comes within r of
     // (the hull of those parts, as parameters along ab), or nothing.
@@ -501,13 +498,9 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             if (near && near->first == 0 && near->second == 1) {
                 return; // the whole segment already
             }
-            const uint64_t key = cell_key(x, y);
-            const auto start = cell_start.find(key);
-            if (start == cell_start.end()) {
-                return;
-            }
-            for (auto it = grid.begin() + start->second; it != grid.end() && it->first == key; ++it) {
-                const GridSeg gs = grid_segs[it->second];
+            const auto [begin, end] = cell_runs.find(cell_key(x, y));
+            for (uint32_t g = begin; g < end; ++g) {
+                const GridSeg gs = entry[g];
                 if (gs.chain == chain) {
                     continue;
                 }
