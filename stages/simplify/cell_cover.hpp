@@ -6,24 +6,12 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <span>
 #include <utility>
 #include <vector>
 
 namespace tigerlod::simplify {
 
-/// One 64-bit key for cell (x, y), ordered by x then y; for cell coordinates
-/// within +-2^31.
-inline uint64_t cell_key(int64_t x, int64_t y) noexcept
-{
-    return (static_cast<uint64_t>(x + (int64_t{1} << 31)) << 32) | static_cast<uint32_t>(y + (int64_t{1} << 31));
-}
-
-/// Calls f(x, y) for every cell of a grid (side `cell`, origin ox, oy) that
-/// the r-neighbourhood of segment (ax, ay)-(bx, by) touches, row by row: the
-/// part of the segment within the row's band widened by r, widened by r.
-/// Conservative, and proportional to the segment's length in cells, not to
-/// its bounding box (a long diagonal border at a small cell size covers
-/// millions of cells of its box but thousands of its own).
 /// floor(v) as an integer, for |v| < 2^62, without a call into libm.
 inline int64_t floor_int(double v) noexcept
 {
@@ -31,6 +19,39 @@ inline int64_t floor_int(double v) noexcept
     return double(t) > v ? t - 1 : t;
 }
 
+/// Keys for the cells of a box of a grid of side `cell` (origin 0, 0),
+/// ordered by x then y and numbered from the box's corner: the keys of a
+/// county's cells span 20-odd bits, so a radix sort of them takes two or
+/// three passes, where keys of (x, y) offset by 2^31 span 64 bits near an
+/// axis of the projection (six passes).
+class CellGrid {
+  public:
+    CellGrid() = default;
+    /// The cells of the box [min_x, max_x] x [min_y, max_y] (grid units), and
+    /// one more around them for rounding.
+    CellGrid(double min_x, double min_y, double max_x, double max_y, double cell) noexcept
+        : m_x0(floor_int(min_x / cell) - 1), m_y0(floor_int(min_y / cell) - 1), m_x1(floor_int(max_x / cell) + 1),
+          m_y1(floor_int(max_y / cell) + 1)
+    {
+    }
+    bool contains(int64_t x, int64_t y) const noexcept { return x >= m_x0 && x <= m_x1 && y >= m_y0 && y <= m_y1; }
+    /// The key of a cell that the box contains.
+    uint64_t key(int64_t x, int64_t y) const noexcept
+    {
+        return static_cast<uint64_t>(x - m_x0) * static_cast<uint64_t>(m_y1 - m_y0 + 1) +
+               static_cast<uint64_t>(y - m_y0);
+    }
+
+  private:
+    int64_t m_x0 = 0, m_y0 = 0, m_x1 = -1, m_y1 = -1;
+};
+
+/// Calls f(x, y) for every cell of a grid (side `cell`, origin ox, oy) that
+/// the r-neighbourhood of segment (ax, ay)-(bx, by) touches, row by row: the
+/// part of the segment within the row's band widened by r, widened by r.
+/// Conservative, and proportional to the segment's length in cells, not to
+/// its bounding box (a long diagonal border at a small cell size covers
+/// millions of cells of its box but thousands of its own).
 template <class F>
 void cover_cells(double ax, double ay, double bx, double by, double r, double cell, double ox, double oy, F&& f)
 {
@@ -64,44 +85,59 @@ void cover_cells(double ax, double ay, double bx, double by, double r, double ce
     }
 }
 
-/// Where each cell's run starts and ends in a list of (cell key, value)
-/// pairs sorted by key, found in one probe or a few: an open-addressing
-/// table over the distinct keys, at most half full. std::unordered_map
-/// took most of the far rule's lookups (a node per cell, a division per probe).
-class CellRuns {
+/// Values grouped by cell key, each cell's in the order they were added:
+/// a counting sort through an open-addressing table over the distinct keys
+/// (at most half full), so a cell's values are found in one probe or a few.
+/// Sorting the (key, value) pairs took a third of the conflict graph and
+/// std::unordered_map most of the far rule's lookups.
+template <class V> class CellBuckets {
   public:
-    template <class Pair> explicit CellRuns(const std::vector<Pair>& sorted)
+    /// Groups the values of `pairs` (cell key, value) by key.
+    explicit CellBuckets(const std::vector<std::pair<uint64_t, V>>& pairs)
     {
-        size_t distinct = 0;
-        for (size_t i = 0; i < sorted.size(); ++i) {
-            distinct += (i == 0 || sorted[i].first != sorted[i - 1].first) ? 1 : 0;
-        }
-        const size_t size = std::bit_ceil(std::max<size_t>(2 * distinct, 16));
+        const size_t size = std::bit_ceil(std::max<size_t>(2 * pairs.size(), 16));
         m_shift = 64 - std::countr_zero(size);
         m_slots.assign(size, Slot{});
-        for (size_t b = 0; b < sorted.size();) {
-            size_t e = b + 1;
-            while (e < sorted.size() && sorted[e].first == sorted[b].first) {
-                ++e;
-            }
-            size_t at = slot_of(sorted[b].first);
-            while (m_slots[at].end != 0) {
+        std::vector<uint32_t> slot(pairs.size());
+        for (size_t i = 0; i < pairs.size(); ++i) {
+            size_t at = slot_of(pairs[i].first);
+            while (m_slots[at].count != 0 && m_slots[at].key != pairs[i].first) {
                 at = (at + 1) & (size - 1);
             }
-            m_slots[at] = {sorted[b].first, static_cast<uint32_t>(b), static_cast<uint32_t>(e)};
-            b = e;
+            m_slots[at].key = pairs[i].first;
+            ++m_slots[at].count;
+            slot[i] = static_cast<uint32_t>(at);
+        }
+        uint32_t sum = 0;
+        for (Slot& s : m_slots) {
+            s.begin = sum;
+            sum += s.count;
+        }
+        m_values.resize(pairs.size());
+        std::vector<uint32_t> fill(size, 0);
+        for (size_t i = 0; i < pairs.size(); ++i) {
+            m_values[m_slots[slot[i]].begin + fill[slot[i]]++] = pairs[i].second;
         }
     }
-    /// [begin, end) of `key`'s run in the list; begin == end if it has none.
-    std::pair<uint32_t, uint32_t> find(uint64_t key) const noexcept
+    /// The values of cell `key`, in the order added (none if it has none).
+    std::span<const V> find(uint64_t key) const noexcept
     {
         for (size_t at = slot_of(key);; at = (at + 1) & (m_slots.size() - 1)) {
             const Slot& s = m_slots[at];
-            if (s.end == 0) {
-                return {0, 0};
+            if (s.count == 0) {
+                return {};
             }
             if (s.key == key) {
-                return {s.begin, s.end};
+                return std::span<const V>(m_values).subspan(s.begin, s.count);
+            }
+        }
+    }
+    /// f(values) for every cell, in no particular order.
+    template <class F> void for_each(F&& f) const
+    {
+        for (const Slot& s : m_slots) {
+            if (s.count != 0) {
+                f(std::span<const V>(m_values).subspan(s.begin, s.count));
             }
         }
     }
@@ -109,16 +145,14 @@ class CellRuns {
   private:
     struct Slot {
         uint64_t key = 0;
-        uint32_t begin = 0, end = 0; ///< end == 0: empty (a run ends after its first entry)
+        uint32_t begin = 0, count = 0; ///< count == 0: empty
     };
-    /// A row (the low half of a key) hashed, plus the column: the cells of a
-    /// row that a query visits one after the other sit in nearby slots.
     size_t slot_of(uint64_t key) const noexcept
     {
-        const uint64_t row = ((key & 0xffffffffULL) * 0x9E3779B97F4A7C15ULL) >> m_shift;
-        return static_cast<size_t>((row + (key >> 32)) & (m_slots.size() - 1));
+        return static_cast<size_t>((key * 0x9E3779B97F4A7C15ULL) >> m_shift);
     }
     std::vector<Slot> m_slots;
+    std::vector<V> m_values;
     int m_shift = 60;
 };
 

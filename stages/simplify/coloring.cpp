@@ -83,33 +83,53 @@ std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> cha
     // fraction of a segment, each segment filling dozens. The graph does not
     // depend on the size (a pair within r_s + r_t shares a cell).
     const double cell = std::max({2 * rmax, segs.empty() ? 0.0 : length / double(segs.size()), 1.0});
+    double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
+    for (const auto& s : segs) {
+        x0 = std::min({x0, s.ax - s.r, s.bx - s.r});
+        y0 = std::min({y0, s.ay - s.r, s.by - s.r});
+        x1 = std::max({x1, s.ax + s.r, s.bx + s.r});
+        y1 = std::max({y1, s.ay + s.r, s.by + s.r});
+    }
+    const CellGrid cells = segs.empty() ? CellGrid{} : CellGrid(x0, y0, x1, y1, cell);
     std::vector<std::pair<uint64_t, uint32_t>> entries;
     for (uint32_t i = 0; i < segs.size(); ++i) {
         const Seg& s = segs[i];
         cover_cells(s.ax, s.ay, s.bx, s.by, s.r, cell, 0.0, 0.0,
-                    [&](int64_t x, int64_t y) { entries.emplace_back(cell_key(x, y), i); });
+                    [&](int64_t x, int64_t y) { entries.emplace_back(cells.key(x, y), i); });
     }
-    radix_sort_pairs(entries); // each cell's segments in index order
+    radix_sort_pairs(entries); // each cell's segments in index order, so by chain
     std::unordered_set<uint64_t> known;
     std::vector<std::pair<uint32_t, uint32_t>> edges;
+    std::vector<size_t> run; // where each chain's entries start in the cell, and its end
     for (size_t b = 0; b < entries.size();) {
         size_t e = b;
+        run.clear();
         while (e < entries.size() && entries[e].first == entries[b].first) {
+            if (e == b || segs[entries[e].second].chain != segs[entries[e - 1].second].chain) {
+                run.push_back(e);
+            }
             ++e;
         }
-        for (size_t i = b; i < e; ++i) {
-            const Seg& s = segs[entries[i].second];
-            for (size_t j = i + 1; j < e; ++j) {
-                const Seg& t = segs[entries[j].second];
-                if (s.chain == t.chain) {
-                    continue;
-                }
-                const uint32_t lo = std::min(s.chain, t.chain), hi = std::max(s.chain, t.chain);
+        run.push_back(e);
+        // Each pair of chains in the cell once: the first close pair of
+        // their segments makes the edge.
+        for (size_t p = 0; p + 1 < run.size(); ++p) {
+            const uint32_t lo = segs[entries[run[p]].second].chain;
+            for (size_t q = p + 1; q + 1 < run.size(); ++q) {
+                const uint32_t hi = segs[entries[run[q]].second].chain;
                 const uint64_t key = (uint64_t{lo} << 32) | hi;
                 if (known.count(key)) {
                     continue;
                 }
-                if (seg_seg_distance(s, t) < s.r + t.r) {
+                bool close = false;
+                for (size_t i = run[p]; i < run[p + 1] && !close; ++i) {
+                    const Seg& s = segs[entries[i].second];
+                    for (size_t j = run[q]; j < run[q + 1] && !close; ++j) {
+                        const Seg& t = segs[entries[j].second];
+                        close = seg_seg_distance(s, t) < s.r + t.r;
+                    }
+                }
+                if (close) {
                     known.insert(key);
                     edges.emplace_back(lo, hi);
                 }

@@ -2,7 +2,6 @@
 
 #include "core/parallel.hpp"
 #include "core/projection.hpp"
-#include "core/radix_sort.hpp"
 #include "core/segment_grid.hpp"
 #include "stages/simplify/candidates.hpp"
 #include "stages/simplify/cell_cover.hpp"
@@ -462,11 +461,19 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     struct GridSeg {
         uint32_t chain, index;
     };
-    std::vector<GridSeg> grid_segs;                  // every segment, in (chain, index) order
-    std::vector<std::pair<uint64_t, uint32_t>> grid; // (cell, place in grid_segs)
+    std::vector<std::pair<uint64_t, GridSeg>> grid; // (cell, segment), segments in (chain, index) order
     // Only the L2 far-shortcut rule below reads the grid.
     // Each segment goes in the cells it passes through (not its bounding box:
     // a 10 km diagonal at 1 m covers 25 M cells of its box, measured at 17 GB).
+    GridBox extent;
+    for (uint32_t c = 0; opt.metric == Metric::l2 && c < store.chains.size(); ++c) {
+        for (const GridPoint p : store.chain_points(store.chains[c])) {
+            extent.extend(p);
+        }
+    }
+    const CellGrid cells = extent.empty() ? CellGrid{}
+                                          : CellGrid(double(extent.min_x), double(extent.min_y), double(extent.max_x),
+                                                     double(extent.max_y), cell);
     for (uint32_t c = 0; opt.metric == Metric::l2 && c < store.chains.size(); ++c) {
         const auto pts = store.chain_points(store.chains[c]);
         const auto use = keep_of(keep, store.chains[c]);
@@ -474,20 +481,13 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             if (!takes_part(use, i)) {
                 continue;
             }
-            const auto at = static_cast<uint32_t>(grid_segs.size());
-            grid_segs.push_back({c, i});
-            cover_cells(pts[i].x, pts[i].y, pts[i + 1].x, pts[i + 1].y, 0.0, cell, 0.0, 0.0,
-                        [&](int64_t x, int64_t y) { grid.emplace_back(cell_key(x, y), at); });
+            cover_cells(pts[i].x, pts[i].y, pts[i + 1].x, pts[i + 1].y, 0.0, cell, 0.0, 0.0, [&](int64_t x, int64_t y) {
+                grid.emplace_back(cells.key(x, y), GridSeg{c, i});
+            });
         }
     }
-    radix_sort_pairs(grid); // each cell's segments in (chain, index) order
-    // Where each cell's run is, and each entry's chain and segment in list
-    // order: the lookups read one table slot and then consecutive entries.
-    const CellRuns cell_runs(grid);
-    std::vector<GridSeg> entry(grid.size());
-    for (size_t g = 0; g < grid.size(); ++g) {
-        entry[g] = grid_segs[grid[g].second];
-    }
+    const CellBuckets<GridSeg> grid_cells(grid); // each cell's segments in (chain, index) order
+    grid = {};
     // The part of segment ab that another chain's segment comes within r of
     // (the hull of those parts, as parameters along ab), or nothing.
     auto near_other = [&](uint32_t chain, GridPoint a, GridPoint b, double r) {
@@ -498,9 +498,10 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             if (near && near->first == 0 && near->second == 1) {
                 return; // the whole segment already
             }
-            const auto [begin, end] = cell_runs.find(cell_key(x, y));
-            for (uint32_t g = begin; g < end; ++g) {
-                const GridSeg gs = entry[g];
+            if (!cells.contains(x, y)) {
+                return; // beyond every segment of the store
+            }
+            for (const GridSeg gs : grid_cells.find(cells.key(x, y))) {
                 if (gs.chain == chain) {
                     continue;
                 }

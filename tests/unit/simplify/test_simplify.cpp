@@ -4,6 +4,7 @@
 #include "core/segment_grid.hpp"
 #include "gl/context.hpp"
 #include "stages/simplify/candidates.hpp"
+#include "stages/simplify/cell_cover.hpp"
 #include "stages/simplify/coloring.hpp"
 #include "stages/simplify/near_parts.hpp"
 #include "stages/simplify/raster.hpp"
@@ -11,6 +12,7 @@
 
 #include <gtest/gtest.h>
 
+#include <map>
 #include <random>
 
 using namespace tigerlod;
@@ -291,6 +293,48 @@ TEST(Candidates, PointCullingMatchesTheRegionTestOnRandomChains)
     }
     EXPECT_GT(culled, 100U) << "trials that cull nothing test nothing";
     EXPECT_GT(kept, 100U);
+}
+
+TEST(Cells, GridKeysKeepTheOrderOfCellsAndBucketsKeepTheOrderOfValues)
+{
+    const CellGrid grid(-250.0, -90.0, 310.0, 40.0, 100.0); // cells x -4..4, y -2..1 with the margin
+    EXPECT_TRUE(grid.contains(-4, -2));
+    EXPECT_TRUE(grid.contains(4, 1));
+    EXPECT_FALSE(grid.contains(5, 0));
+    EXPECT_FALSE(grid.contains(0, -3));
+    std::vector<std::pair<int64_t, int64_t>> cells;
+    for (int64_t x = -4; x <= 4; ++x) {
+        for (int64_t y = -2; y <= 1; ++y) {
+            cells.emplace_back(x, y);
+        }
+    }
+    for (size_t i = 0; i < cells.size(); ++i) {
+        EXPECT_EQ(grid.key(cells[i].first, cells[i].second), i) << "keys are dense and ordered by x, then y";
+    }
+    // Values come back per key in the order they were added, whatever the keys' order.
+    std::vector<std::pair<uint64_t, uint32_t>> pairs;
+    std::mt19937 rng(3);
+    std::uniform_int_distribution<uint64_t> key(0, 40);
+    std::map<uint64_t, std::vector<uint32_t>> want;
+    for (uint32_t v = 0; v < 500; ++v) {
+        const uint64_t k = key(rng) * 0x10000001ULL; // spread over many bits
+        pairs.emplace_back(k, v);
+        want[k].push_back(v);
+    }
+    const CellBuckets<uint32_t> buckets(pairs);
+    size_t cells_seen = 0, values_seen = 0;
+    buckets.for_each([&](std::span<const uint32_t> values) {
+        ++cells_seen;
+        values_seen += values.size();
+    });
+    EXPECT_EQ(cells_seen, want.size());
+    EXPECT_EQ(values_seen, pairs.size());
+    for (const auto& [k, values] : want) {
+        const auto got = buckets.find(k);
+        EXPECT_EQ(std::vector<uint32_t>(got.begin(), got.end()), values) << k;
+    }
+    EXPECT_TRUE(buckets.find(7).empty());
+    EXPECT_TRUE(CellBuckets<uint32_t>({}).find(0).empty());
 }
 
 TEST(Candidates, Figure5NonProximateSegmentInsideTheBandIsNotACandidate)
