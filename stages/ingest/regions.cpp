@@ -329,12 +329,16 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
         // that a unit of a part near could share.
         std::map<size_t, RawMap> loaded;
         CellSet cells(std::max<int64_t>(ex, 50'000), std::max<int64_t>(ey, 50'000));
+        // Where the keys' units are: a unit of a part near whose box misses
+        // these cells shares no point with them, and is not searched.
+        CellSet key_cells(50'000, 50'000);
         std::vector<uint64_t> keys;
         for (size_t i : region.parts) {
             RawMap part = load(i);
             for (const GridBox& b : unit_boxes(part)) {
                 if (!b.empty()) {
                     cells.add(grown(b, ex, ey));
+                    key_cells.add(b);
                 }
             }
             for (const auto& p : part.coords) {
@@ -378,7 +382,13 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
                     }
                 }
             }
+            for (size_t u = 0; u < part.units.size(); ++u) {
+                if (flags[u] && !boxes[u].empty()) {
+                    key_cells.add(boxes[u]);
+                }
+            }
         }
+        key_cells.seal();
         std::sort(keys.begin(), keys.end());
         keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
 
@@ -408,9 +418,18 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
                 }
             }
             if (!is_own[i]) {
+                // Only units whose box meets an own or whole neighbouring
+                // unit's cells can share a point with one: the others are not
+                // searched (a neighbouring state's every point was, 0.10 of
+                // the tract set's 0.15 s of region work).
+                const auto boxes = unit_boxes(part);
+                std::vector<uint8_t> maybe(part.units.size(), 0);
+                for (size_t u = 0; u < maybe.size(); ++u) {
+                    maybe[u] = !boxes[u].empty() && key_cells.meets(boxes[u]) ? 1 : 0;
+                }
                 for (size_t p = 0; p < part.polyline_count(); ++p) {
                     const uint32_t u = unit_of(part, p);
-                    if (u == no_unit || take[u]) {
+                    if (u == no_unit || take[u] || !maybe[u]) {
                         continue;
                     }
                     for (uint64_t k = part.offsets[p]; k < part.offsets[p + 1]; ++k) {
