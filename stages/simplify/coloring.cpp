@@ -77,7 +77,8 @@ std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> cha
     double rmax = 0, length = 0;
     for (const auto& s : segs) {
         rmax = std::max(rmax, s.r);
-        length += std::hypot(s.bx - s.ax, s.by - s.ay);
+        const double dx = s.bx - s.ax, dy = s.by - s.ay;
+        length += std::sqrt(dx * dx + dy * dy); // sets a cell size only: no need for hypot's care
     }
     // At least the mean segment: small tolerances made 2 x reach cells a
     // fraction of a segment, each segment filling dozens. The graph does not

@@ -64,7 +64,8 @@ double mean_segment_length(const ChainStore& store)
     for (const auto& c : store.chains) {
         const auto pts = store.chain_points(c);
         for (size_t i = 0; i + 1 < pts.size(); ++i) {
-            sum += std::hypot(double(pts[i + 1].x) - pts[i].x, double(pts[i + 1].y) - pts[i].y);
+            const double dx = double(pts[i + 1].x) - pts[i].x, dy = double(pts[i + 1].y) - pts[i].y;
+            sum += std::sqrt(dx * dx + dy * dy); // sets a cell size only: no need for hypot's care
             ++n;
         }
     }
@@ -291,12 +292,34 @@ std::vector<uint8_t> segments_in_reach(const ChainStore& store, double reach)
             });
         }
     }
+    // Most of the halo is far from every owned segment: whole chains, then
+    // segments, that miss the owned box grown by the reach and two cells (so
+    // every marked cell is inside) are out at once.
+    const double grow = reach + 2 * cell;
+    const GridBox near_box{static_cast<int64_t>(std::floor(double(box.min_x) - grow)) - 1,
+                           static_cast<int64_t>(std::floor(double(box.min_y) - grow)) - 1,
+                           static_cast<int64_t>(std::ceil(double(box.max_x) + grow)) + 1,
+                           static_cast<int64_t>(std::ceil(double(box.max_y) + grow)) + 1};
+    auto misses = [&](GridPoint a, GridPoint b) {
+        return std::max(a.x, b.x) < near_box.min_x || std::min(a.x, b.x) > near_box.max_x ||
+               std::max(a.y, b.y) < near_box.min_y || std::min(a.y, b.y) > near_box.max_y;
+    };
     for (const auto& c : store.chains) {
         if (!(c.flags & chains::chain_halo)) {
             continue;
         }
         const auto pts = store.chain_points(c);
+        GridBox chain_box;
+        for (const GridPoint p : pts) {
+            chain_box.extend(p);
+        }
+        if (chain_box.empty() || !chain_box.intersects(near_box)) {
+            continue; // keep stays 0
+        }
         for (size_t i = 0; i + 1 < pts.size(); ++i) {
+            if (misses(pts[i], pts[i + 1])) {
+                continue;
+            }
             bool hit = false;
             cover_cells(pts[i].x, pts[i].y, pts[i + 1].x, pts[i + 1].y, 0.0, cell, ox, oy, [&](int64_t x, int64_t y) {
                 const uint8_t* n = at(x, y);
