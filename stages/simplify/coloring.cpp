@@ -80,10 +80,14 @@ std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> cha
         const double dx = s.bx - s.ax, dy = s.by - s.ay;
         length += std::sqrt(dx * dx + dy * dy); // sets a cell size only: no need for hypot's care
     }
-    // At least the mean segment: small tolerances made 2 x reach cells a
-    // fraction of a segment, each segment filling dozens. The graph does not
-    // depend on the size (a pair within r_s + r_t shares a cell).
-    const double cell = std::max({2 * rmax, segs.empty() ? 0.0 : length / double(segs.size()), 1.0});
+    // At least four mean segments: small tolerances made 2 x reach cells a
+    // fraction of a segment, each segment filling dozens, and sorting the
+    // entries took half the graph's time; the chains' boxes below keep large
+    // cells cheap where many chains share one (tract level at 16 m: graph
+    // 0.63 -> 0.31 s; contours 0.27 -> 0.16 s). The graph does not depend on
+    // the size (a pair within r_s + r_t shares a cell).
+    const double mean = segs.empty() ? 0.0 : length / double(segs.size());
+    const double cell = std::max({2 * rmax, 4 * mean, 1.0});
     double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
     for (const auto& s : segs) {
         x0 = std::min({x0, s.ax - s.r, s.bx - s.r});
@@ -102,6 +106,18 @@ std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> cha
     std::unordered_set<uint64_t> known;
     std::vector<std::pair<uint32_t, uint32_t>> edges;
     std::vector<size_t> run; // where each chain's entries start in the cell, and its end
+    struct Box {
+        double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
+        void add(const Seg& s)
+        {
+            x0 = std::min({x0, s.ax - s.r, s.bx - s.r});
+            y0 = std::min({y0, s.ay - s.r, s.by - s.r});
+            x1 = std::max({x1, s.ax + s.r, s.bx + s.r});
+            y1 = std::max({y1, s.ay + s.r, s.by + s.r});
+        }
+        bool meets(const Box& o) const { return x0 <= o.x1 && o.x0 <= x1 && y0 <= o.y1 && o.y0 <= y1; }
+    };
+    std::vector<Box> boxes;
     for (size_t b = 0; b < entries.size();) {
         size_t e = b;
         run.clear();
@@ -112,11 +128,25 @@ std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> cha
             ++e;
         }
         run.push_back(e);
+        // Each chain's segments in the cell as a box grown by their reach: two
+        // chains whose boxes miss each other have no close pair there (dense
+        // maps, contours, put dozens of chains in a cell).
+        boxes.clear();
+        for (size_t p = 0; p + 1 < run.size(); ++p) {
+            Box bx;
+            for (size_t i = run[p]; i < run[p + 1]; ++i) {
+                bx.add(segs[entries[i].second]);
+            }
+            boxes.push_back(bx);
+        }
         // Each pair of chains in the cell once: the first close pair of
         // their segments makes the edge.
         for (size_t p = 0; p + 1 < run.size(); ++p) {
             const uint32_t lo = segs[entries[run[p]].second].chain;
             for (size_t q = p + 1; q + 1 < run.size(); ++q) {
+                if (!boxes[p].meets(boxes[q])) {
+                    continue;
+                }
                 const uint32_t hi = segs[entries[run[q]].second].chain;
                 const uint64_t key = (uint64_t{lo} << 32) | hi;
                 if (known.count(key)) {
@@ -125,6 +155,11 @@ std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> cha
                 bool close = false;
                 for (size_t i = run[p]; i < run[p + 1] && !close; ++i) {
                     const Seg& s = segs[entries[i].second];
+                    Box sb;
+                    sb.add(s);
+                    if (!sb.meets(boxes[q])) {
+                        continue;
+                    }
                     for (size_t j = run[q]; j < run[q + 1] && !close; ++j) {
                         const Seg& t = segs[entries[j].second];
                         close = seg_seg_distance(s, t) < s.r + t.r;
