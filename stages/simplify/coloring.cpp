@@ -162,7 +162,9 @@ std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> cha
                     }
                     for (size_t j = run[q]; j < run[q + 1] && !close; ++j) {
                         const Seg& t = segs[entries[j].second];
-                        close = seg_seg_distance(s, t) < s.r + t.r;
+                        Box tb;
+                        tb.add(t);
+                        close = sb.meets(tb) && seg_seg_distance(s, t) < s.r + t.r;
                     }
                 }
                 if (close) {

@@ -532,12 +532,17 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
                     continue;
                 }
                 const auto p = store.chain_points(store.chains[gs.chain]);
-                if (segment_distance(a, b, p[gs.index], p[gs.index + 1]) > reach) {
+                const GridPoint c = p[gs.index], d = p[gs.index + 1];
+                // Boxes farther apart than the reach on an axis first (dense
+                // maps put dozens of segments in a query's cells).
+                if (double(std::min(c.x, d.x)) - std::max(a.x, b.x) > reach ||
+                    double(std::min(a.x, b.x)) - std::max(c.x, d.x) > reach ||
+                    double(std::min(c.y, d.y)) - std::max(a.y, b.y) > reach ||
+                    double(std::min(a.y, b.y)) - std::max(c.y, d.y) > reach || segment_distance(a, b, c, d) > reach) {
                     continue;
                 }
                 // Within reach: the part of ab near it; all of ab when ab is a point.
-                const auto iv = a == b ? std::optional{std::pair{0.0, 1.0}}
-                                       : capsule_interval(a, b, p[gs.index], p[gs.index + 1], reach);
+                const auto iv = a == b ? std::optional{std::pair{0.0, 1.0}} : capsule_interval(a, b, c, d, reach);
                 const auto part = iv ? *iv : std::pair{0.0, 1.0}; // rounding: take all of it
                 near = near ? std::pair{std::min(near->first, part.first), std::max(near->second, part.second)} : part;
             }
