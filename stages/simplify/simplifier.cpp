@@ -133,12 +133,15 @@ template <class At> int128 signed_area2(std::span<const GridPoint> pts, size_t n
 }
 
 /// Fewest-vertex path 0 -> n-1 over original edges and the candidates not
-/// banned, with at least `min_edges` edges; among shortest paths, the
-/// lexicographically largest vertex sequence (a total order, so lazy and
-/// exhaustive testing choose the same path).
+/// banned, with at least R edges (a ring 3, so it keeps three vertices);
+/// among shortest paths, the lexicographically largest vertex sequence (a
+/// total order, so lazy and exhaustive testing choose the same path).
 void shortest_path(Work& w, size_t n)
 {
-    const uint32_t R = w.ring ? 3 : 1;
+    // Layer r holds the fewest edges to n-1 using at least r of them. An
+    // open chain needs no layer beyond 0: every path from 0 to n-1 > 0 has
+    // an edge (a second layer computed the same values again).
+    const uint32_t R = w.ring ? 3 : 0;
     constexpr uint32_t inf = UINT32_MAX / 2;
     std::vector<uint32_t> f((R + 1) * n, inf), next((R + 1) * n, 0), via((R + 1) * n, UINT32_MAX);
     auto at = [n](uint32_t r, size_t v) { return r * n + v; };
