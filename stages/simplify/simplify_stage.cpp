@@ -277,7 +277,12 @@ int SimplifyStage::run(const StageContext& ctx)
     // threads; the GL context stays on this thread, which runs the workers'
     // raster batches one at a time (SerialQueue). Each store's result depends on
     // nothing else, and the totals are summed in store order afterwards.
-    const auto workers = static_cast<unsigned>(std::max<size_t>(1, std::min<size_t>(o.threads, stores.size())));
+    // A worker waits while the GL thread draws its tiles; with llvmpipe
+    // drawing on that thread, one worker more than the threads keeps the
+    // cores busy meanwhile (tract level at 16 m on 2 cores: 3.04-3.09 s with
+    // two workers, 2.75-2.83 s with three, 2.76-2.87 s with four).
+    const unsigned want = o.threads + (llvmpipe_inline ? 1U : 0U);
+    const auto workers = static_cast<unsigned>(std::max<size_t>(1, std::min<size_t>(want, stores.size())));
     SimplifyOptions per_store = o;
     per_store.threads = std::max(1U, o.threads / workers);
     SerialQueue gl_queue;
