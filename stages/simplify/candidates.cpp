@@ -89,35 +89,35 @@ Arc arc_around(double ux, double uy, double sin_h, double cos_h) noexcept
 
 void Candidates::finish(uint32_t n)
 {
-    runs_.shrink_to_fit();
-    base_.assign(runs_.size() + 1, 0);
-    for (size_t r = 0; r < runs_.size(); ++r) {
-        base_[r + 1] = base_[r] + (runs_[r].hi - runs_[r].lo + 1);
+    m_runs.shrink_to_fit();
+    m_base.assign(m_runs.size() + 1, 0);
+    for (size_t r = 0; r < m_runs.size(); ++r) {
+        m_base[r + 1] = m_base[r] + (m_runs[r].hi - m_runs[r].lo + 1);
     }
-    run_first_.clear();
-    if (runs_.empty()) {
+    m_run_first.clear();
+    if (m_runs.empty()) {
         return;
     }
-    run_first_.assign(size_t{n} + 1, 0);
-    for (const Run& r : runs_) {
-        ++run_first_[r.from + 1];
+    m_run_first.assign(size_t{n} + 1, 0);
+    for (const Run& r : m_runs) {
+        ++m_run_first[r.from + 1];
     }
     for (uint32_t v = 0; v < n; ++v) {
-        run_first_[v + 1] += run_first_[v];
+        m_run_first[v + 1] += m_run_first[v];
     }
 }
 
 Shortcut Candidates::at(uint32_t id) const noexcept
 {
-    const auto r = static_cast<size_t>(std::upper_bound(base_.begin(), base_.end(), id) - base_.begin()) - 1;
-    return {runs_[r].from, runs_[r].lo + (id - base_[r])};
+    const auto r = static_cast<size_t>(std::upper_bound(m_base.begin(), m_base.end(), id) - m_base.begin()) - 1;
+    return {m_runs[r].from, m_runs[r].lo + (id - m_base[r])};
 }
 
 std::vector<Shortcut> Candidates::list() const
 {
     std::vector<Shortcut> out;
     out.reserve(size());
-    for (const Run& r : runs_) {
+    for (const Run& r : m_runs) {
         for (uint32_t k = r.lo; k <= r.hi; ++k) {
             out.push_back({r.from, k});
         }

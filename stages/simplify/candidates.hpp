@@ -33,43 +33,43 @@ class Candidates {
     /// Appends shortcut from -> to; calls come in (from, to) order.
     void add(uint32_t from, uint32_t to)
     {
-        if (!runs_.empty() && runs_.back().from == from && runs_.back().hi + 1 == to) {
-            ++runs_.back().hi;
+        if (!m_runs.empty() && m_runs.back().from == from && m_runs.back().hi + 1 == to) {
+            ++m_runs.back().hi;
         } else {
-            runs_.push_back({from, to, to});
+            m_runs.push_back({from, to, to});
         }
     }
     /// Ends the list for a chain of `n` vertices; add() may not follow.
     void finish(uint32_t n);
 
     /// Shortcuts in all.
-    uint32_t size() const noexcept { return base_.empty() ? 0 : base_.back(); }
+    uint32_t size() const noexcept { return m_base.empty() ? 0 : m_base.back(); }
     bool empty() const noexcept { return size() == 0; }
-    std::span<const Run> runs() const noexcept { return runs_; }
+    std::span<const Run> runs() const noexcept { return m_runs; }
     /// The runs from vertex v.
     std::span<const Run> runs_from(uint32_t v) const noexcept
     {
-        return run_first_.empty()
+        return m_run_first.empty()
                    ? std::span<const Run>{}
-                   : std::span<const Run>(runs_).subspan(run_first_[v], run_first_[v + 1] - run_first_[v]);
+                   : std::span<const Run>(m_runs).subspan(m_run_first[v], m_run_first[v + 1] - m_run_first[v]);
     }
     /// Id of the first shortcut of run `r` (an index into runs()); the run's
     /// shortcut to k has id run_id(r) + k - lo. run_id(runs().size()) == size().
-    uint32_t run_id(size_t r) const noexcept { return base_[r]; }
+    uint32_t run_id(size_t r) const noexcept { return m_base[r]; }
     /// Index in runs() of the first run from v.
-    uint32_t first_run(uint32_t v) const noexcept { return run_first_.empty() ? 0 : run_first_[v]; }
+    uint32_t first_run(uint32_t v) const noexcept { return m_run_first.empty() ? 0 : m_run_first[v]; }
     /// The ids of the shortcuts from v: [first_id(v), first_id(v + 1)).
-    uint32_t first_id(uint32_t v) const noexcept { return run_first_.empty() ? 0 : base_[run_first_[v]]; }
+    uint32_t first_id(uint32_t v) const noexcept { return m_run_first.empty() ? 0 : m_base[m_run_first[v]]; }
     /// The shortcut with id `id` (< size()).
     Shortcut at(uint32_t id) const noexcept;
     /// Every shortcut, in id order.
     std::vector<Shortcut> list() const;
 
   private:
-    std::vector<Run> runs_;
-    std::vector<uint32_t> run_first_; ///< n + 1 entries once finished with shortcuts, else none
-    std::vector<uint32_t> base_;      ///< runs + 1 entries
-};
+    std::vector<Run> m_runs;
+    std::vector<uint32_t> m_run_first; ///< n + 1 entries once finished with shortcuts, else none
+    std::vector<uint32_t> m_base;      ///< runs + 1 entries
+};                                     // class Candidates
 
 /// Every proximate shortcut of `pts`: each original vertex strictly between
 /// the ends lies within `tol` of the segment (the segment, not its line, so

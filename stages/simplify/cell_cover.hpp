@@ -44,7 +44,7 @@ class CellGrid {
 
   private:
     int64_t m_x0 = 0, m_y0 = 0, m_x1 = -1, m_y1 = -1;
-};
+}; // class CellGrid
 
 /// Calls f(x, y) for every cell of a grid (side `cell`, origin ox, oy) that
 /// the r-neighbourhood of segment (ax, ay)-(bx, by) touches, row by row: the
@@ -154,6 +154,6 @@ template <class V> class CellBuckets {
     std::vector<Slot> m_slots;
     std::vector<V> m_values;
     int m_shift = 60;
-};
+}; // class CellBuckets
 
 } // namespace tigerlod::simplify
