@@ -67,9 +67,11 @@ class Candidates {
 
   private:
     std::vector<Run> m_runs;
-    std::vector<uint32_t> m_run_first; ///< n + 1 entries once finished with shortcuts, else none
-    std::vector<uint32_t> m_base;      ///< runs + 1 entries
-};                                     // class Candidates
+    /// Per vertex, its first run: n + 1 entries once finished with shortcuts, else none.
+    std::vector<uint32_t> m_run_first;
+    /// Per run, the id of its first shortcut, and the count in all: runs + 1 entries.
+    std::vector<uint32_t> m_base;
+}; // class Candidates
 
 /// Every proximate shortcut of `pts`: each original vertex strictly between
 /// the ends lies within `tol` of the segment (the segment, not its line, so

@@ -88,8 +88,10 @@ void cover_cells(double ax, double ay, double bx, double by, double r, double ce
 /// Values grouped by cell key, each cell's in the order they were added:
 /// a counting sort through an open-addressing table over the distinct keys
 /// (at most half full), so a cell's values are found in one probe or a few.
-/// Sorting the (key, value) pairs took a third of the conflict graph and
-/// std::unordered_map most of the far rule's lookups.
+/// The far rule's grid: a radix sort of its (key, value) pairs and then
+/// std::unordered_map lookups took 1.0 s of the tract level at 16 m, this
+/// 0.7 s (the conflict graph, which walks every cell once, stays faster with
+/// the radix sort).
 template <class V> class CellBuckets {
   public:
     /// Groups the values of `pairs` (cell key, value) by key.
