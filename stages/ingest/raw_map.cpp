@@ -46,6 +46,13 @@ class RawFile {
         put(static_cast<uint64_t>(s.size()));
         write(s.data(), s.size());
     }
+    void put_strs(const std::vector<std::string>& v)
+    {
+        put(static_cast<uint64_t>(v.size()));
+        for (const auto& s : v) {
+            put_str(s);
+        }
+    }
     template <class T> T get()
     {
         T v;
@@ -62,6 +69,13 @@ class RawFile {
         std::string s(get<uint64_t>(), '\0');
         read(s.data(), s.size());
         return s;
+    }
+    void get_strs(std::vector<std::string>& v)
+    {
+        v.resize(get<uint64_t>());
+        for (auto& s : v) {
+            s = get_str();
+        }
     }
     void close()
     {
@@ -97,24 +111,12 @@ void write_raw(const RawMap& raw, const std::filesystem::path& path)
 {
     RawFile f(path, "wb");
     f.put(static_cast<uint32_t>(raw.kind));
-    f.put(static_cast<uint64_t>(raw.level_names.size()));
-    for (const auto& s : raw.level_names) {
-        f.put_str(s);
-    }
-    f.put(static_cast<uint64_t>(raw.files.size()));
-    for (const auto& s : raw.files) {
-        f.put_str(s);
-    }
-    f.put(static_cast<uint64_t>(raw.classes.size()));
-    for (const auto& s : raw.classes) {
-        f.put_str(s);
-    }
+    f.put_strs(raw.level_names);
+    f.put_strs(raw.files);
+    f.put_strs(raw.classes);
     f.put(static_cast<uint64_t>(raw.units.size()));
     for (const auto& u : raw.units) {
-        f.put(static_cast<uint64_t>(u.codes.size()));
-        for (const auto& c : u.codes) {
-            f.put_str(c);
-        }
+        f.put_strs(u.codes);
         f.put(static_cast<uint8_t>(u.intpt.has_value()));
         f.put(u.intpt.value_or(LonLatE6{}));
         f.put(u.weight);
@@ -137,24 +139,12 @@ RawMap read_raw(const std::filesystem::path& path)
     RawFile f(path, "rb");
     RawMap raw;
     raw.kind = static_cast<RawMap::Kind>(f.get<uint32_t>());
-    raw.level_names.resize(f.get<uint64_t>());
-    for (auto& s : raw.level_names) {
-        s = f.get_str();
-    }
-    raw.files.resize(f.get<uint64_t>());
-    for (auto& s : raw.files) {
-        s = f.get_str();
-    }
-    raw.classes.resize(f.get<uint64_t>());
-    for (auto& s : raw.classes) {
-        s = f.get_str();
-    }
+    f.get_strs(raw.level_names);
+    f.get_strs(raw.files);
+    f.get_strs(raw.classes);
     raw.units.resize(f.get<uint64_t>());
     for (auto& u : raw.units) {
-        u.codes.resize(f.get<uint64_t>());
-        for (auto& c : u.codes) {
-            c = f.get_str();
-        }
+        f.get_strs(u.codes);
         const bool has = f.get<uint8_t>() != 0;
         const auto p = f.get<LonLatE6>();
         if (has) {

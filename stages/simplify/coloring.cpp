@@ -26,6 +26,20 @@ struct Seg {
     double r;
 };
 
+/// The box of segments grown by their reach.
+struct ReachBox {
+    double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
+    void add(const Seg& s) noexcept
+    {
+        x0 = std::min({x0, s.ax - s.r, s.bx - s.r});
+        y0 = std::min({y0, s.ay - s.r, s.by - s.r});
+        x1 = std::max({x1, s.ax + s.r, s.bx + s.r});
+        y1 = std::max({y1, s.ay + s.r, s.by + s.r});
+    }
+    bool empty() const noexcept { return !(x0 <= x1); }
+    bool meets(const ReachBox& o) const noexcept { return x0 <= o.x1 && o.x0 <= x1 && y0 <= o.y1 && o.y0 <= y1; }
+};
+
 double point_seg2(double px, double py, const Seg& s) noexcept
 {
     const double dx = s.bx - s.ax, dy = s.by - s.ay;
@@ -88,14 +102,11 @@ std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> cha
     // the size (a pair within r_s + r_t shares a cell).
     const double mean = segs.empty() ? 0.0 : length / double(segs.size());
     const double cell = std::max({2 * rmax, 4 * mean, 1.0});
-    double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
+    ReachBox all;
     for (const auto& s : segs) {
-        x0 = std::min({x0, s.ax - s.r, s.bx - s.r});
-        y0 = std::min({y0, s.ay - s.r, s.by - s.r});
-        x1 = std::max({x1, s.ax + s.r, s.bx + s.r});
-        y1 = std::max({y1, s.ay + s.r, s.by + s.r});
+        all.add(s);
     }
-    const CellGrid cells = segs.empty() ? CellGrid{} : CellGrid(x0, y0, x1, y1, cell);
+    const CellGrid cells = segs.empty() ? CellGrid{} : CellGrid(all.x0, all.y0, all.x1, all.y1, cell);
     std::vector<std::pair<uint64_t, uint32_t>> entries;
     for (uint32_t i = 0; i < segs.size(); ++i) {
         const Seg& s = segs[i];
@@ -106,18 +117,7 @@ std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> cha
     std::unordered_set<uint64_t> known;
     std::vector<std::pair<uint32_t, uint32_t>> edges;
     std::vector<size_t> run; // where each chain's entries start in the cell, and its end
-    struct Box {
-        double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
-        void add(const Seg& s)
-        {
-            x0 = std::min({x0, s.ax - s.r, s.bx - s.r});
-            y0 = std::min({y0, s.ay - s.r, s.by - s.r});
-            x1 = std::max({x1, s.ax + s.r, s.bx + s.r});
-            y1 = std::max({y1, s.ay + s.r, s.by + s.r});
-        }
-        bool meets(const Box& o) const { return x0 <= o.x1 && o.x0 <= x1 && y0 <= o.y1 && o.y0 <= y1; }
-    };
-    std::vector<Box> boxes;
+    std::vector<ReachBox> boxes;
     for (size_t b = 0; b < entries.size();) {
         size_t e = b;
         run.clear();
@@ -133,7 +133,7 @@ std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> cha
         // maps, contours, put dozens of chains in a cell).
         boxes.clear();
         for (size_t p = 0; p + 1 < run.size(); ++p) {
-            Box bx;
+            ReachBox bx;
             for (size_t i = run[p]; i < run[p + 1]; ++i) {
                 bx.add(segs[entries[i].second]);
             }
@@ -155,14 +155,14 @@ std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> cha
                 bool close = false;
                 for (size_t i = run[p]; i < run[p + 1] && !close; ++i) {
                     const Seg& s = segs[entries[i].second];
-                    Box sb;
+                    ReachBox sb;
                     sb.add(s);
                     if (!sb.meets(boxes[q])) {
                         continue;
                     }
                     for (size_t j = run[q]; j < run[q + 1] && !close; ++j) {
                         const Seg& t = segs[entries[j].second];
-                        Box tb;
+                        ReachBox tb;
                         tb.add(t);
                         close = sb.meets(tb) && seg_seg_distance(s, t) < s.r + t.r;
                     }
@@ -337,19 +337,16 @@ ColorResult color_tiles(std::span<const ChainGeom> chains, const ColorOptions& o
         tiler.seg_begin[c + 1] += tiler.seg_begin[c];
     }
     // The tile grid covers the owned chains' reach.
-    double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
+    ReachBox reach;
     for (const auto& s : segs) {
-        if (!chains[s.chain].owned) {
-            continue;
+        if (chains[s.chain].owned) {
+            reach.add(s);
         }
-        x0 = std::min({x0, s.ax - s.r, s.bx - s.r});
-        y0 = std::min({y0, s.ay - s.r, s.by - s.r});
-        x1 = std::max({x1, s.ax + s.r, s.bx + s.r});
-        y1 = std::max({y1, s.ay + s.r, s.by + s.r});
     }
-    if (!(x0 <= x1)) {
+    if (reach.empty()) {
         return out;
     }
+    const double x0 = reach.x0, y0 = reach.y0, x1 = reach.x1, y1 = reach.y1;
     const double size = opt.tile_pixels * out.pixel;
     const auto nx = static_cast<uint64_t>(std::ceil((x1 - x0) / size)) + (x1 == x0 ? 1 : 0);
     const auto ny = static_cast<uint64_t>(std::ceil((y1 - y0) / size)) + (y1 == y0 ? 1 : 0);

@@ -23,6 +23,21 @@ namespace {
 
 using Pts = std::vector<GridPoint>;
 
+/// A chain of n points from the origin, each step drawn from [lo, hi] in x
+/// and the same divided by y_div in y (mostly forward, turning back at times).
+Pts random_walk(std::mt19937& rng, int n, int lo, int hi, int y_div)
+{
+    Pts pts;
+    GridPoint p{0, 0};
+    std::uniform_int_distribution<int> step(lo, hi);
+    for (int i = 0; i < n; ++i) {
+        pts.push_back(p);
+        const int dx = step(rng);
+        p = {p.x + dx, p.y + step(rng) / y_div};
+    }
+    return pts;
+}
+
 /// A store in grid units (1 cm); every chain owned unless `halo`.
 struct MapBuilder {
     ChainStore s;
@@ -193,13 +208,7 @@ TEST(Candidates, MatchBruteForceOnRandomChains)
     std::mt19937 rng(11);
     for (Metric m : {Metric::l2, Metric::l1, Metric::linf}) {
         for (int trial = 0; trial < 200; ++trial) {
-            Pts pts;
-            GridPoint p{0, 0};
-            std::uniform_int_distribution<int> step(-60, 100);
-            for (int i = 0; i < 40; ++i) {
-                pts.push_back(p);
-                p = {p.x + step(rng), p.y + step(rng) / 2};
-            }
+            const Pts pts = random_walk(rng, 40, -60, 100, 2);
             const Tolerance tol(double(50 + trial % 7 * 20), m);
             const uint32_t reach = trial % 3 == 0 ? 5 : 0;
             std::vector<Shortcut> want;
@@ -255,13 +264,7 @@ TEST(Candidates, PointCullingMatchesTheRegionTestOnRandomChains)
     std::mt19937 rng(5);
     size_t culled = 0, kept = 0;
     for (int trial = 0; trial < 100; ++trial) {
-        Pts pts;
-        GridPoint p{0, 0};
-        std::uniform_int_distribution<int> step(-40, 100);
-        for (int i = 0; i < 30; ++i) {
-            pts.push_back(p);
-            p = {p.x + step(rng), p.y + step(rng) / 3};
-        }
+        const Pts pts = random_walk(rng, 30, -40, 100, 3);
         // Points near the chain, where the regions between shortcuts and subchains are.
         Pts points;
         std::uniform_int_distribution<size_t> at(0, pts.size() - 1);
