@@ -84,7 +84,8 @@ void IngestStage::add_args(ArgSet& args)
     args.add("threads", &m_threads, "worker threads, 0 for all cores (overrides ingest.threads)", "N");
     args.add("max-problem-samples", &m_max_problem_samples, "problems listed with their location in the report", "N");
     args.add("whole-map", &m_whole_map,
-             "build a polygons dataset of several files as one map in memory, not region by region\n"
+             "build a polygons dataset of several files, or a TIGER dataset of several counties, as one\n"
+             "      map in memory, not region by region\n"
              "      (the same output; memory then follows the dataset, not its largest region)");
 }
 
@@ -193,17 +194,27 @@ int IngestStage::run(const StageContext& ctx)
     double t_read = 0;
     uint64_t points_read = 0;
     BuildResult result;
-    if (cfg.dataset.kind == DatasetSpec::Kind::polygons && cfg.dataset.inputs.size() > 1 && !m_whole_map) {
+    const bool tiger = cfg.dataset.kind == DatasetSpec::Kind::tiger;
+    const bool by_parts =
+        !m_whole_map &&
+        ((cfg.dataset.kind == DatasetSpec::Kind::polygons && cfg.dataset.inputs.size() > 1) ||
+         (tiger && cfg.dataset.faces.size() > 1 && cfg.dataset.faces.size() == cfg.dataset.edges.size()));
+    if (by_parts) {
         // Region by region: each file read once and put aside on disk, inside
         // the output folder (removed before it is renamed into place).
         const fs::path aside = out.path() / ".parts";
         fs::create_directories(aside);
         auto part_path = [&](size_t i) { return aside / (std::to_string(i) + ".raw"); };
-        std::vector<PartSummary> parts(cfg.dataset.inputs.size());
-        read_polygon_parts(cfg, threads, ctx.log, [&](size_t i, RawMap&& part) {
+        std::vector<PartSummary> parts(tiger ? cfg.dataset.faces.size() : cfg.dataset.inputs.size());
+        const auto put_aside = [&](size_t i, RawMap&& part) {
             parts[i] = summarize_part(part);
             write_raw(part, part_path(i));
-        });
+        };
+        if (tiger) {
+            read_tiger_parts(cfg, threads, ctx.log, put_aside);
+        } else {
+            read_polygon_parts(cfg, threads, ctx.log, put_aside);
+        }
 #ifdef __GLIBC__
         malloc_trim(0);
 #endif
@@ -211,13 +222,17 @@ int IngestStage::run(const StageContext& ctx)
         for (const auto& p : parts) {
             points_read += p.points_read;
         }
-        ctx.log.info("read " + std::to_string(points_read) + " points from " + std::to_string(parts.size()) + " files");
+        ctx.log.info("read " + std::to_string(points_read) + " points from " + std::to_string(parts.size()) +
+                     (tiger ? " counties" : " files"));
         std::vector<std::string> level_names;
         for (const auto& l : cfg.levels) {
             level_names.push_back(l.name);
         }
         result = build_by_regions(
             parts, [&](size_t i) { return read_raw(part_path(i)); }, level_names, projection, options, sink);
+        // TIGER: an edge on a county border is in both counties' files; the
+        // build counts its points once, as a whole read does.
+        points_read = result.input_vertices;
         fs::remove_all(aside);
     } else {
         RawMap raw = read_dataset(cfg, threads, ctx.log);
@@ -301,6 +316,7 @@ int IngestStage::run(const StageContext& ctx)
     json timings = {{"read_s", t_read - t0},
                     {"build_s", t_build - t_read},
                     {"build_phases_s", phases},
+                    {"region_map_units", result.region_map_units},
                     {"total_s", seconds},
                     {"threads", threads},
                     {"vertices_per_s", seconds > 0 ? static_cast<double>(points_read) / seconds : 0.0},

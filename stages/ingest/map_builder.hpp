@@ -72,6 +72,10 @@ struct BuildResult {
     /// Edges of the cleaned graph: the TIGER edges, or for polygons and lines
     /// the runs between vertices where the sides change or other than two meet.
     uint64_t edges = 0;
+    /// Region by region: the units of every region's map, its own and its
+    /// neighbours' (their sum over the finest units is the work repeated).
+    /// 0 for a whole build.
+    uint64_t region_map_units = 0;
     /// Wall seconds of each phase, in order (for ingest-timings.json; varies by run).
     std::vector<std::pair<std::string, double>> seconds;
 };

@@ -121,6 +121,7 @@ void write_raw(const RawMap& raw, const std::filesystem::path& path)
         f.put(u.intpt.value_or(LonLatE6{}));
         f.put(u.weight);
         f.put(u.source);
+        f.put(u.sid);
     }
     f.put_vec(raw.coords);
     f.put_vec(raw.offsets);
@@ -129,6 +130,7 @@ void write_raw(const RawMap& raw, const std::filesystem::path& path)
     f.put_vec(raw.feature_class);
     f.put_vec(raw.source_id);
     f.put_vec(raw.source);
+    f.put_vec(raw.foreign);
     f.put(raw.points_read);
     f.put(raw.empty_geometries);
     f.close();
@@ -152,6 +154,7 @@ RawMap read_raw(const std::filesystem::path& path)
         }
         u.weight = f.get<double>();
         u.source = f.get<SourceRef>();
+        u.sid = f.get<uint64_t>();
     }
     f.get_vec(raw.coords);
     f.get_vec(raw.offsets);
@@ -160,6 +163,7 @@ RawMap read_raw(const std::filesystem::path& path)
     f.get_vec(raw.feature_class);
     f.get_vec(raw.source_id);
     f.get_vec(raw.source);
+    f.get_vec(raw.foreign);
     raw.points_read = f.get<uint64_t>();
     raw.empty_geometries = f.get<uint64_t>();
     return raw;
@@ -204,6 +208,10 @@ void RawMap::append(RawMap&& part)
     std::vector<uint32_t> cls(part.classes.size());
     for (size_t c = 0; c < part.classes.size(); ++c) {
         cls[c] = intern_class(part.classes[c]);
+    }
+    for (auto ff : part.foreign) {
+        ff.polyline += static_cast<uint32_t>(polyline_count());
+        foreign.push_back(ff);
     }
     const uint64_t coord0 = coords.size();
     coords.insert(coords.end(), part.coords.begin(), part.coords.end());

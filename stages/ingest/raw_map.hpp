@@ -50,6 +50,17 @@ struct RawUnit {
     std::optional<LonLatE6> intpt;  ///< given internal point, if any
     double weight = 0.0;            ///< area or similar: the largest unit's point represents a coarser unit
     SourceRef source;
+    uint64_t sid = 0; ///< a TIGER face's TFID, or 0
+};
+
+/// A side of a polyline whose unit another part holds: a TIGER county's EDGES
+/// name the faces across the county's border, which its FACES do not hold.
+/// Parts read one county at a time keep these; a region's map finds the faces
+/// in the neighbouring parts (stages/ingest/regions.hpp).
+struct ForeignFace {
+    uint32_t polyline = 0;
+    uint32_t right = 0; ///< 0: the left side, 1: the right side
+    uint64_t face = 0;  ///< the TFID
 };
 
 /// The whole input map.
@@ -71,8 +82,9 @@ struct RawMap {
     std::vector<uint32_t> feature_class;
     std::vector<uint64_t> source_id; ///< TLID, or 0
     std::vector<SourceRef> source;
-    uint64_t points_read = 0;      ///< input points, as the files hold them
-    uint64_t empty_geometries = 0; ///< features without geometry, skipped by the reader
+    std::vector<ForeignFace> foreign; ///< sides left as no_unit whose face another part holds (parts only)
+    uint64_t points_read = 0;         ///< input points, as the files hold them
+    uint64_t empty_geometries = 0;    ///< features without geometry, skipped by the reader
 
     size_t polyline_count() const noexcept { return left.size(); }
     void add_polyline(std::span<const LonLatE6> pts, uint32_t left_unit, uint32_t right_unit, uint32_t cls,

@@ -5,6 +5,7 @@
 #include "core/memory.hpp"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <map>
@@ -12,6 +13,9 @@
 #include <numbers>
 #include <numeric>
 #include <set>
+#include <span>
+#include <unordered_map>
+#include <unordered_set>
 
 namespace tigerlod::ingest {
 
@@ -28,26 +32,148 @@ GridBox grown(const GridBox& b, int64_t dx, int64_t dy) noexcept
     return b.empty() ? b : GridBox{b.min_x - dx, b.min_y - dy, b.max_x + dx, b.max_y + dy};
 }
 
-/// The unit of a polygon ring: the side that is not the outside.
-uint32_t unit_of(const RawMap& part, size_t p) noexcept
+/// The units on the two sides of polyline p (a polygon ring has one, the
+/// other side being no_unit).
+std::array<uint32_t, 2> sides(const RawMap& part, size_t p) noexcept
 {
-    return part.left[p] != no_unit ? part.left[p] : part.right[p];
+    return {part.left[p], part.right[p]};
 }
 
 std::vector<GridBox> unit_boxes(const RawMap& part)
 {
     std::vector<GridBox> boxes(part.units.size());
     for (size_t p = 0; p < part.polyline_count(); ++p) {
-        const uint32_t u = unit_of(part, p);
-        if (u == no_unit) {
-            continue;
-        }
-        for (uint64_t k = part.offsets[p]; k < part.offsets[p + 1]; ++k) {
-            boxes[u].extend(as_point(part.coords[k]));
+        for (const uint32_t u : sides(part, p)) {
+            if (u == no_unit) {
+                continue;
+            }
+            for (uint64_t k = part.offsets[p]; k < part.offsets[p + 1]; ++k) {
+                boxes[u].extend(as_point(part.coords[k]));
+            }
         }
     }
     return boxes;
 }
+
+/// A region's map (or the whole map), put together from parts added in file
+/// order, numbered as a whole read numbers units, polylines, files and classes.
+class Assembly {
+  public:
+    /// `meta` gives kind, level names, files and classes; `class_of[i]` maps
+    /// part i's classes to meta's.
+    Assembly(const RawMap& meta, const std::vector<std::vector<uint32_t>>& class_of)
+        : m_class_of(class_of), m_edges(meta.kind == RawMap::Kind::edges)
+    {
+        m_raw.kind = meta.kind;
+        m_raw.level_names = meta.level_names;
+        m_raw.files = meta.files;
+        m_raw.classes = meta.classes;
+    }
+
+    /// Add part i: its units where `take`, and its polylines with a taken unit
+    /// on a side (all of them for an own part). TIGER parts: a face or an edge
+    /// that an earlier part gave is not added again, and an edge's sides are
+    /// kept as TFIDs until finish().
+    void add(size_t i, RawMap&& part, const std::vector<uint8_t>& take, bool own)
+    {
+        const size_t nparts = m_class_of.size();
+        auto file_of = [&](uint32_t f) { return static_cast<uint32_t>(f * nparts + i); };
+        std::vector<uint64_t> face(part.units.size());
+        std::vector<uint32_t> new_id(part.units.size(), no_unit);
+        for (size_t u = 0; u < part.units.size(); ++u) {
+            face[u] = part.units[u].sid;
+            if (!take[u]) {
+                continue;
+            }
+            const auto id = static_cast<uint32_t>(m_raw.units.size());
+            if (m_edges) {
+                // A face that two counties' files list: the first file's, as a whole read keeps.
+                auto [it, added] = m_face_unit.try_emplace(face[u], id);
+                if (!added) {
+                    new_id[u] = it->second;
+                    continue;
+                }
+            }
+            new_id[u] = id;
+            RawUnit unit = std::move(part.units[u]);
+            unit.source.file = file_of(unit.source.file);
+            m_raw.units.push_back(std::move(unit));
+        }
+        size_t k = 0; // part.foreign, in polyline order
+        for (size_t p = 0; p < part.polyline_count(); ++p) {
+            const auto [l, r] = sides(part, p);
+            const auto first = static_cast<std::ptrdiff_t>(part.offsets[p]);
+            const auto last = static_cast<std::ptrdiff_t>(part.offsets[p + 1]);
+            const std::span<const LonLatE6> pts(part.coords.begin() + first, part.coords.begin() + last);
+            const uint32_t cls = m_class_of[i][part.feature_class[p]];
+            const SourceRef src{file_of(part.source[p].file), part.source[p].feature};
+            if (!m_edges) {
+                const uint32_t u = l != no_unit ? l : r;
+                if (u != no_unit && take[u]) {
+                    m_raw.add_polyline(pts, l == no_unit ? no_unit : new_id[l], r == no_unit ? no_unit : new_id[r], cls,
+                                       part.source_id[p], src);
+                }
+                continue;
+            }
+            std::array<uint64_t, 2> faces{l == no_unit ? 0 : face[l], r == no_unit ? 0 : face[r]};
+            for (; k < part.foreign.size() && part.foreign[k].polyline <= p; ++k) {
+                if (part.foreign[k].polyline == p) {
+                    faces[part.foreign[k].right != 0 ? 1 : 0] = part.foreign[k].face;
+                }
+            }
+            const uint64_t tlid = part.source_id[p];
+            if (m_seen.insert(tlid).second && own) {
+                m_own_points += pts.size(); // the first file's copy of an edge counts
+            }
+            if (!own && !(l != no_unit && take[l]) && !(r != no_unit && take[r])) {
+                continue;
+            }
+            if (auto it = m_edge.find(tlid); it != m_edge.end()) {
+                // Another county's copy: it may know a side the first left open.
+                auto& f = m_faces[it->second];
+                f[0] = f[0] != 0 ? f[0] : faces[0];
+                f[1] = f[1] != 0 ? f[1] : faces[1];
+                continue;
+            }
+            m_edge.emplace(tlid, static_cast<uint32_t>(m_raw.polyline_count()));
+            m_faces.push_back(faces);
+            m_raw.add_polyline(pts, no_unit, no_unit, cls, tlid, src);
+        }
+        if (own && !m_edges) {
+            m_own_points += part.points_read;
+        }
+        part = RawMap();
+    }
+
+    /// The map, TIGER edges' sides resolved to the faces added (no_unit for
+    /// a face not taken, as for one no file holds).
+    RawMap finish()
+    {
+        for (size_t p = 0; p < m_faces.size(); ++p) {
+            uint32_t* side[2] = {&m_raw.left[p], &m_raw.right[p]};
+            for (size_t s = 0; s < 2; ++s) {
+                auto it = m_faces[p][s] == 0 ? m_face_unit.end() : m_face_unit.find(m_faces[p][s]);
+                *side[s] = it == m_face_unit.end() ? no_unit : it->second;
+            }
+        }
+        return std::move(m_raw);
+    }
+
+    size_t units() const noexcept { return m_raw.units.size(); }
+    /// Input points of the own parts' polylines (TIGER: each edge once).
+    uint64_t own_points() const noexcept { return m_own_points; }
+
+  private:
+    const std::vector<std::vector<uint32_t>>& m_class_of;
+    bool m_edges;
+    RawMap m_raw;
+    uint64_t m_own_points = 0;
+    // TIGER parts (TFIDs and TLIDs are never 0 there; 0 stands for "none").
+    std::unordered_map<uint64_t, uint32_t> m_face_unit; ///< TFID -> unit
+    std::unordered_map<uint64_t, uint32_t> m_edge;      ///< TLID -> polyline
+    std::vector<std::array<uint64_t, 2>> m_faces;       ///< each polyline's TFIDs, left and right
+    std::unordered_set<uint64_t> m_seen;                ///< TLIDs of every part added
+};
 
 /// Coarse cells over lon/lat, for "does this box come near the region's units".
 class CellSet {
@@ -155,8 +281,14 @@ PartSummary summarize_part(const RawMap& part, size_t max_codes)
     }
     s.points_read = part.points_read;
     s.empty_geometries = part.empty_geometries;
-    s.file = part.files.empty() ? std::string() : part.files.front();
+    s.kind = part.kind;
+    s.files = part.files;
     s.classes = part.classes;
+    if (part.kind == RawMap::Kind::edges) {
+        for (size_t p = 0; p < part.polyline_count(); ++p) {
+            s.unpaired_edges += part.left[p] == no_unit && part.right[p] == no_unit ? 1 : 0;
+        }
+    }
     return s;
 }
 
@@ -191,7 +323,10 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
     // Files that share a region-level code make one region.
     std::vector<size_t> parent(nparts);
     std::iota(parent.begin(), parent.end(), size_t{0});
-    bool separable = R < nlev && nparts > 1;
+    // TIGER parts whose EDGES are not their FACES' county's are not separable.
+    bool separable = R < nlev && nparts > 1 && std::all_of(parts.begin(), parts.end(), [](const PartSummary& p) {
+                         return p.unpaired_edges == 0;
+                     });
     if (separable) {
         std::map<std::string, size_t> first_part;
         for (size_t i = 0; i < nparts && separable; ++i) {
@@ -213,17 +348,36 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
             options.log->info(what);
         }
     };
+    // What every region's map shares: files and classes, numbered as a whole
+    // read numbers them (TIGER: every FACES file, then every EDGES file).
+    RawMap meta;
+    meta.kind = nparts > 0 ? parts[0].kind : RawMap::Kind::polygon_rings;
+    meta.level_names = level_names;
+    std::vector<std::vector<uint32_t>> class_of(nparts);
+    const size_t files_per_part = nparts > 0 ? parts[0].files.size() : 0;
+    for (size_t f = 0; f < files_per_part; ++f) {
+        for (size_t i = 0; i < nparts; ++i) {
+            meta.files.push_back(f < parts[i].files.size() ? parts[i].files[f] : std::string());
+        }
+    }
+    for (size_t i = 0; i < nparts; ++i) {
+        for (const auto& c : parts[i].classes) {
+            class_of[i].push_back(meta.intern_class(c));
+        }
+    }
     if (!separable || groups.size() < 2) {
         // One region: the whole map at once.
-        RawMap raw;
+        Assembly whole(meta, class_of);
+        uint64_t empty = 0;
         for (size_t i = 0; i < nparts; ++i) {
             RawMap part = load(i);
-            if (i == 0) {
-                raw.kind = part.kind;
-                raw.level_names = part.level_names;
-            }
-            raw.append(std::move(part));
+            empty += part.empty_geometries;
+            const std::vector<uint8_t> all(part.units.size(), 1);
+            whole.add(i, std::move(part), all, true);
         }
+        RawMap raw = whole.finish();
+        raw.points_read = whole.own_points();
+        raw.empty_geometries = empty;
         log("building the map whole (one region)");
         return build_map(std::move(raw), projection, options, sink);
     }
@@ -246,18 +400,6 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
         }
     }
     std::sort(regions.begin(), regions.end(), [](const Region& a, const Region& b) { return a.own < b.own; });
-
-    // What every region's map shares: files and classes, numbered as a whole map numbers them.
-    RawMap meta;
-    meta.kind = RawMap::Kind::polygon_rings;
-    meta.level_names = level_names;
-    std::vector<std::vector<uint32_t>> class_of(nparts);
-    for (size_t i = 0; i < nparts; ++i) {
-        meta.files.push_back(parts[i].file);
-        for (const auto& c : parts[i].classes) {
-            class_of[i].push_back(meta.intern_class(c));
-        }
-    }
 
     BuildResult total;
     total.levels.resize(nlev);
@@ -282,6 +424,7 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
     // smallest scale of the projection over the region.
     const double reach_m = 3.0 * std::max(options.halo_m, 100.0) + 100.0;
     const bool halos = R + 1 < nlev;
+    uint64_t own_points = 0;
     RegionOutput coarse_in;
     const auto t_start = std::chrono::steady_clock::now();
     double build_s = 0;
@@ -375,8 +518,8 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
                 flags[u] = band.count(part.units[u].codes[R + 1]) != 0 ? 1 : 0;
             }
             for (size_t p = 0; p < part.polyline_count(); ++p) {
-                const uint32_t u = unit_of(part, p);
-                if (u != no_unit && flags[u]) {
+                const auto [l, r] = sides(part, p);
+                if ((l != no_unit && flags[l]) || (r != no_unit && flags[r])) {
                     for (uint64_t k = part.offsets[p]; k < part.offsets[p + 1]; ++k) {
                         keys.push_back(pack_key(part.coords[k]));
                     }
@@ -394,11 +537,7 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
 
         // The region's map, parts in file order: its own units, the near
         // whole units, and every unit that shares a point with one of those.
-        RawMap raw;
-        raw.kind = RawMap::Kind::polygon_rings;
-        raw.level_names = level_names;
-        raw.files = meta.files;
-        raw.classes = meta.classes;
+        Assembly assembly(meta, class_of);
         std::vector<size_t> order = region.parts;
         order.insert(order.end(), near.begin(), near.end());
         std::sort(order.begin(), order.end());
@@ -428,13 +567,21 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
                     maybe[u] = !boxes[u].empty() && key_cells.meets(boxes[u]) ? 1 : 0;
                 }
                 for (size_t p = 0; p < part.polyline_count(); ++p) {
-                    const uint32_t u = unit_of(part, p);
-                    if (u == no_unit || take[u] || !maybe[u]) {
+                    // The sides not yet taken that may share a point.
+                    auto open = sides(part, p);
+                    for (uint32_t& u : open) {
+                        u = u == no_unit || take[u] || !maybe[u] ? no_unit : u;
+                    }
+                    if (open[0] == no_unit && open[1] == no_unit) {
                         continue;
                     }
                     for (uint64_t k = part.offsets[p]; k < part.offsets[p + 1]; ++k) {
                         if (std::binary_search(keys.begin(), keys.end(), pack_key(part.coords[k]))) {
-                            take[u] = 1;
+                            for (const uint32_t u : open) {
+                                if (u != no_unit) {
+                                    take[u] = 1;
+                                }
+                            }
                             break;
                         }
                     }
@@ -442,29 +589,11 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
             } else {
                 own_units += part.units.size();
             }
-            std::vector<uint32_t> new_id(part.units.size(), no_unit);
-            for (size_t u = 0; u < part.units.size(); ++u) {
-                if (take[u]) {
-                    new_id[u] = static_cast<uint32_t>(raw.units.size());
-                    RawUnit unit = std::move(part.units[u]);
-                    unit.source.file = static_cast<uint32_t>(i);
-                    raw.units.push_back(std::move(unit));
-                }
-            }
-            for (size_t p = 0; p < part.polyline_count(); ++p) {
-                const uint32_t u = unit_of(part, p);
-                if (u == no_unit || !take[u]) {
-                    continue;
-                }
-                const auto first = static_cast<std::ptrdiff_t>(part.offsets[p]);
-                const auto last = static_cast<std::ptrdiff_t>(part.offsets[p + 1]);
-                raw.add_polyline({part.coords.begin() + first, part.coords.begin() + last},
-                                 part.left[p] == no_unit ? no_unit : new_id[part.left[p]],
-                                 part.right[p] == no_unit ? no_unit : new_id[part.right[p]],
-                                 class_of[i][part.feature_class[p]], part.source_id[p],
-                                 {static_cast<uint32_t>(i), part.source[p].feature});
-            }
+            assembly.add(i, std::move(part), take, is_own[i] != 0);
         }
+        own_points += assembly.own_points();
+        RawMap raw = assembly.finish();
+        total.region_map_units += raw.units.size();
         release(keys);
         log("region " + region.own.front() + (region.own.size() > 1 ? "..." : "") + ": " + std::to_string(own_units) +
             " own units, " + std::to_string(raw.units.size() - own_units) + " neighbouring, " +
@@ -492,8 +621,8 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
     total.seconds.emplace_back("coarse_levels",
                                std::chrono::duration<double>(std::chrono::steady_clock::now() - t_coarse).count());
     total.seconds.emplace_back("regions_load", regions_s - build_s);
+    total.input_vertices = own_points;
     for (const auto& p : parts) {
-        total.input_vertices += p.points_read;
         total.problems["empty_geometries"] += p.empty_geometries;
     }
     return total;

@@ -1,10 +1,10 @@
 #pragma once
 /// @file regions.hpp
-/// Building a polygon map region by region, so that memory follows the
-/// largest region, not the dataset.
+/// Building a polygon map or a TIGER EDGES + FACES map region by region, so
+/// that memory follows the largest region, not the dataset.
 ///
-/// Method. The inputs are read once, one part per file, and put aside (the
-/// ingest stage writes them to disk). The region level is the first level
+/// Method. The inputs are read once, one part per file (per county's FACES
+/// and EDGES for TIGER), and put aside (the ingest stage writes them to disk). The region level is the first level
 /// with more than one code (the states of a nation > state > county > tract
 /// map); the files that share a code there form one region. Each region is
 /// built alone from its own units plus, read-only, the neighbouring units
@@ -17,7 +17,19 @@
 /// what it owns (map_builder.hpp, RegionScope); the region level and the
 /// coarser ones are then built from the edges between region-level codes that
 /// the regions hand on. The output is the one a whole build gives, byte for
-/// byte: the tests compare them. Two limits: codes must nest across regions
+/// byte: the tests compare them.
+///
+/// TIGER parts. A county's EDGES name the faces across its border by TFID;
+/// the part lists those sides (RawMap::foreign) and the region's map finds
+/// them among the units it takes from the neighbouring parts, as a whole read
+/// finds them among every county's faces. An edge on a county border is in
+/// both counties' files: the region's map keeps the first file's copy, as the
+/// whole read does (TLID), and counts its points once. A part must hold the
+/// faces of its edges (each edge has one of its faces on a side): where one
+/// does not, the FACES and EDGES files do not pair county by county and the
+/// map is built as one region.
+///
+/// Two limits: codes must nest across regions
 /// (a partition under two region-level codes is an error here, named), and a
 /// repair at a vertex on the outer edge of a region's neighbourhood could see
 /// fewer segments than the whole map's check.
@@ -41,15 +53,23 @@ struct PartSummary {
     std::vector<uint8_t> many;
     LonLatE6 lo{INT32_MAX, INT32_MAX}, hi{INT32_MIN, INT32_MIN}; ///< box of the points
     uint64_t points_read = 0, empty_geometries = 0;
-    std::string file; ///< the part's file, for messages
+    RawMap::Kind kind = RawMap::Kind::polygon_rings;
+    std::vector<std::string> files; ///< the part's files, for messages
     std::vector<std::string> classes;
+    /// TIGER: edges with none of the part's faces on either side (0 where the
+    /// part's EDGES and FACES are one county's).
+    uint64_t unpaired_edges = 0;
 };
 
-/// The summary of a part read from one file (its files holds that one name).
+/// The summary of a part: read from one polygon file, or from one county's
+/// FACES and EDGES files (read_tiger_parts).
 PartSummary summarize_part(const RawMap& part, size_t max_codes = 4096);
 
-/// Build a polygon map from its parts (each read from one file, file index 0
-/// in it), region by region when there are two regions or more, else whole.
+/// Build a map from its parts, region by region when there are two regions or
+/// more, else whole: polygon parts each read from one file (file index 0 in
+/// it), or TIGER parts each from one county's FACES (file 0) and EDGES (file 1),
+/// numbered in the result as a whole read numbers them (every FACES file, then
+/// every EDGES file).
 /// `load(i)` reads part i again; it is called from this thread only.
 /// Throws as build_map does, and input_error where codes do not nest across
 /// regions.

@@ -296,66 +296,98 @@ LineLayer open_lines(const IngestConfig& cfg, const fs::path& path)
     return {std::move(src), cls};
 }
 
+/// One FACES file's faces into `raw` as units (file index: the next in
+/// raw.files), each face once: a TFID already in `face_unit` is skipped.
+void read_faces_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw,
+                     std::unordered_map<int64_t, uint32_t>& face_unit)
+{
+    auto [src, tfid, lat_i, lon_i, area_i, fields] = open_faces(cfg, path);
+    OGR_L_SetIgnoredFields(src.layer(), std::array<const char*, 2>{"OGR_GEOMETRY", nullptr}.data());
+    const auto file = static_cast<uint32_t>(raw.files.size());
+    raw.files.push_back(src.name());
+    src.for_each([&](OGRFeatureH f, int64_t index) {
+        const int64_t id = OGR_F_GetFieldAsInteger64(f, tfid);
+        if (face_unit.contains(id)) {
+            return; // a face listed by two counties' files
+        }
+        RawUnit u;
+        for (size_t L = 0; L < cfg.levels.size(); ++L) {
+            u.codes.push_back(level_code(cfg.levels[L], f, fields[L], ""));
+        }
+        u.intpt = intpt(f, lat_i, lon_i);
+        u.weight = area_i >= 0 ? OGR_F_GetFieldAsDouble(f, area_i) : 0.0;
+        u.source = {file, index};
+        u.sid = static_cast<uint64_t>(id);
+        face_unit.emplace(id, static_cast<uint32_t>(raw.units.size()));
+        raw.units.push_back(std::move(u));
+    });
+}
+
+/// One EDGES file's edges into `raw` (file index: the next in raw.files),
+/// their sides the faces of `face_unit`. An edge whose TLID is in `seen_tlid`
+/// (a neighbouring county's file had it) only fills the sides that copy left
+/// without a face. With `keep_foreign`, a side whose TFID is not in
+/// `face_unit` is listed in raw.foreign for another part to resolve.
+void read_edges_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw,
+                     const std::unordered_map<int64_t, uint32_t>& face_unit,
+                     std::unordered_map<int64_t, uint32_t>& seen_tlid, bool keep_foreign)
+{
+    auto [src, tlid, tfidl, tfidr, cls] = open_edges(cfg, path);
+    const auto file = static_cast<uint32_t>(raw.files.size());
+    raw.files.push_back(src.name());
+    std::vector<LonLatE6> pts;
+    // The unit of a side, and its TFID where the face is not one of ours (else 0).
+    auto side = [&](OGRFeatureH f, int i) -> std::pair<uint32_t, uint64_t> {
+        if (!OGR_F_IsFieldSetAndNotNull(f, i)) {
+            return {no_unit, 0};
+        }
+        const int64_t id = OGR_F_GetFieldAsInteger64(f, i);
+        auto it = face_unit.find(id);
+        return it == face_unit.end() ? std::pair{no_unit, static_cast<uint64_t>(id)}
+                                     : std::pair{it->second, uint64_t{0}};
+    };
+    src.for_each([&](OGRFeatureH f, int64_t index) {
+        const int64_t id = OGR_F_GetFieldAsInteger64(f, tlid);
+        const auto [l, l_foreign] = side(f, tfidl);
+        const auto [r, r_foreign] = side(f, tfidr);
+        if (auto it = seen_tlid.find(id); it != seen_tlid.end()) {
+            // The same edge from a neighbouring county: it may know the other side's face.
+            auto& pl = raw.left[it->second];
+            auto& pr = raw.right[it->second];
+            pl = pl == no_unit ? l : pl;
+            pr = pr == no_unit ? r : pr;
+            return;
+        }
+        OGRGeometryH g = OGR_F_GetGeometryRef(f);
+        const std::string where = src.name() + ":" + std::to_string(index);
+        if (g == nullptr || wkbFlatten(OGR_G_GetGeometryType(g)) != wkbLineString) {
+            throw input_error(where + ": TLID " + std::to_string(id) + " has no line string geometry");
+        }
+        snap_points(g, pts, where);
+        raw.points_read += pts.size();
+        const uint32_t c = cls >= 0 ? raw.intern_class(OGR_F_GetFieldAsString(f, cls)) : 0;
+        const auto p = static_cast<uint32_t>(raw.polyline_count());
+        seen_tlid.emplace(id, p);
+        raw.add_polyline(pts, l, r, c, static_cast<uint64_t>(id), {file, index});
+        if (keep_foreign && l_foreign != 0) {
+            raw.foreign.push_back({p, 0, l_foreign});
+        }
+        if (keep_foreign && r_foreign != 0) {
+            raw.foreign.push_back({p, 1, r_foreign});
+        }
+    });
+}
+
 void read_tiger(const IngestConfig& cfg, RawMap& raw, const Log& log)
 {
     std::unordered_map<int64_t, uint32_t> face_unit;
     for (const auto& path : cfg.dataset.faces) {
-        auto [src, tfid, lat_i, lon_i, area_i, fields] = open_faces(cfg, path);
-        OGR_L_SetIgnoredFields(src.layer(), std::array<const char*, 2>{"OGR_GEOMETRY", nullptr}.data());
-        const auto file = static_cast<uint32_t>(raw.files.size());
-        raw.files.push_back(src.name());
-        src.for_each([&](OGRFeatureH f, int64_t index) {
-            const int64_t id = OGR_F_GetFieldAsInteger64(f, tfid);
-            if (face_unit.contains(id)) {
-                return; // a face listed by two counties' files
-            }
-            RawUnit u;
-            for (size_t L = 0; L < cfg.levels.size(); ++L) {
-                u.codes.push_back(level_code(cfg.levels[L], f, fields[L], ""));
-            }
-            u.intpt = intpt(f, lat_i, lon_i);
-            u.weight = area_i >= 0 ? OGR_F_GetFieldAsDouble(f, area_i) : 0.0;
-            u.source = {file, index};
-            face_unit.emplace(id, static_cast<uint32_t>(raw.units.size()));
-            raw.units.push_back(std::move(u));
-        });
+        read_faces_file(cfg, path, raw, face_unit);
         log.info("read " + path.string() + ": " + std::to_string(raw.units.size()) + " faces so far");
     }
     std::unordered_map<int64_t, uint32_t> seen_tlid;
-    std::vector<LonLatE6> pts;
     for (const auto& path : cfg.dataset.edges) {
-        auto [src, tlid, tfidl, tfidr, cls] = open_edges(cfg, path);
-        const auto file = static_cast<uint32_t>(raw.files.size());
-        raw.files.push_back(src.name());
-        auto unit_of = [&](OGRFeatureH f, int i) {
-            if (!OGR_F_IsFieldSetAndNotNull(f, i)) {
-                return no_unit;
-            }
-            auto it = face_unit.find(OGR_F_GetFieldAsInteger64(f, i));
-            return it == face_unit.end() ? no_unit : it->second;
-        };
-        src.for_each([&](OGRFeatureH f, int64_t index) {
-            const int64_t id = OGR_F_GetFieldAsInteger64(f, tlid);
-            const uint32_t l = unit_of(f, tfidl), r = unit_of(f, tfidr);
-            if (auto it = seen_tlid.find(id); it != seen_tlid.end()) {
-                // The same edge from a neighbouring county: it may know the other side's face.
-                auto& pl = raw.left[it->second];
-                auto& pr = raw.right[it->second];
-                pl = pl == no_unit ? l : pl;
-                pr = pr == no_unit ? r : pr;
-                return;
-            }
-            OGRGeometryH g = OGR_F_GetGeometryRef(f);
-            const std::string where = src.name() + ":" + std::to_string(index);
-            if (g == nullptr || wkbFlatten(OGR_G_GetGeometryType(g)) != wkbLineString) {
-                throw input_error(where + ": TLID " + std::to_string(id) + " has no line string geometry");
-            }
-            snap_points(g, pts, where);
-            raw.points_read += pts.size();
-            const uint32_t c = cls >= 0 ? raw.intern_class(OGR_F_GetFieldAsString(f, cls)) : 0;
-            seen_tlid.emplace(id, static_cast<uint32_t>(raw.polyline_count()));
-            raw.add_polyline(pts, l, r, c, static_cast<uint64_t>(id), {file, index});
-        });
+        read_edges_file(cfg, path, raw, face_unit, seen_tlid, false);
         log.info("read " + path.string() + ": " + std::to_string(raw.polyline_count()) + " edges so far");
     }
 }
@@ -467,9 +499,9 @@ void read_line_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw)
     }
 }
 
-/// Read every file with `read_one` on up to `threads` threads, each into a part
-/// of its own, handed to `take` on the thread that read it. The first error in
-/// file order is the one thrown, whatever the thread count.
+/// Read every file with `read_one(i, part)` on up to `threads` threads, each
+/// into a part of its own, handed to `take` on the thread that read it. The
+/// first error in file order is the one thrown, whatever the thread count.
 template <class F>
 void read_each(const std::vector<fs::path>& files, unsigned threads, const Log& log, F&& read_one,
                const std::function<void(size_t, RawMap&&)>& take)
@@ -480,7 +512,7 @@ void read_each(const std::vector<fs::path>& files, unsigned threads, const Log& 
         for (size_t i = next++; i < files.size(); i = next++) {
             try {
                 RawMap part;
-                read_one(files[i], part);
+                read_one(i, part);
                 log.info("read " + files[i].string() + ": " + std::to_string(part.units.size()) + " units, " +
                          std::to_string(part.points_read) + " points");
                 take(i, std::move(part));
@@ -509,8 +541,9 @@ template <class F>
 void read_files(const std::vector<fs::path>& files, unsigned threads, RawMap& raw, const Log& log, F&& read_one)
 {
     std::vector<RawMap> parts(files.size());
-    read_each(files, threads, log, std::forward<F>(read_one),
-              [&](size_t i, RawMap&& part) { parts[i] = std::move(part); });
+    read_each(
+        files, threads, log, [&](size_t i, RawMap& part) { read_one(files[i], part); },
+        [&](size_t i, RawMap&& part) { parts[i] = std::move(part); });
     size_t points = raw.coords.size(), lines = raw.polyline_count();
     for (const auto& part : parts) {
         points += part.coords.size();
@@ -554,12 +587,32 @@ void read_polygon_parts(const IngestConfig& cfg, unsigned threads, const Log& lo
 {
     read_each(
         cfg.dataset.inputs, threads, log,
-        [&](const fs::path& p, RawMap& part) {
+        [&](size_t i, RawMap& part) {
             part.kind = RawMap::Kind::polygon_rings;
             for (const auto& l : cfg.levels) {
                 part.level_names.push_back(l.name);
             }
-            read_polygon_file(cfg, p, part);
+            read_polygon_file(cfg, cfg.dataset.inputs[i], part);
+        },
+        take);
+}
+
+void read_tiger_parts(const IngestConfig& cfg, unsigned threads, const Log& log,
+                      const std::function<void(size_t, RawMap&&)>& take)
+{
+    if (cfg.dataset.faces.size() != cfg.dataset.edges.size()) {
+        throw std::logic_error("read_tiger_parts: FACES and EDGES files do not pair");
+    }
+    read_each(
+        cfg.dataset.faces, threads, log,
+        [&](size_t i, RawMap& part) {
+            part.kind = RawMap::Kind::edges;
+            for (const auto& l : cfg.levels) {
+                part.level_names.push_back(l.name);
+            }
+            std::unordered_map<int64_t, uint32_t> face_unit, seen_tlid;
+            read_faces_file(cfg, cfg.dataset.faces[i], part, face_unit);
+            read_edges_file(cfg, cfg.dataset.edges[i], part, face_unit, seen_tlid, true);
         },
         take);
 }

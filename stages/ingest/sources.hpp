@@ -23,6 +23,14 @@ RawMap read_dataset(const IngestConfig& cfg, unsigned threads, const Log& log);
 void read_polygon_parts(const IngestConfig& cfg, unsigned threads, const Log& log,
                         const std::function<void(size_t, RawMap&&)>& take);
 
+/// Read a TIGER dataset county by county on up to `threads` threads: part i
+/// holds FACES file i (file index 0 in it) and EDGES file i (file index 1),
+/// the sides whose faces it does not hold listed in RawMap::foreign. Handed to
+/// `take` as read_polygon_parts does. The config must list as many FACES
+/// files as EDGES files (the region build checks that they pair).
+void read_tiger_parts(const IngestConfig& cfg, unsigned threads, const Log& log,
+                      const std::function<void(size_t, RawMap&&)>& take);
+
 /// Open every input of `cfg` and check its layer, geometry type and fields,
 /// reading no features. Throws input_error as read_dataset would.
 void validate_dataset(const IngestConfig& cfg);

@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -191,24 +192,33 @@ TEST(IngestReal, TwentyStateTracts)
     expect_points_inside(r);
 }
 
-TEST(IngestReal, TwentyStateTractsRegionByRegionAreTheWholeBuild)
+namespace {
+
+/// A build region by region, as the stage does it: each part read once and
+/// put aside on disk, read back by the regions that need it.
+struct Regional {
+    BuildResult result;
+    std::map<std::string, std::string> stores; // level/partition -> encoded
+};
+
+Regional run_by_regions(const fs::path& config)
 {
-    if (!fs::exists(shared_data / "tiger" / "tracts2010")) {
-        GTEST_SKIP() << "../shared/data/tiger/tracts2010 is absent: the 20-state tract test needs it";
-    }
-    const fs::path config = source_dir / "configs" / "tracts2010.yaml";
-    const Ingested whole = run_ingest(config);
-    // As the stage does it: each file read once and put aside on disk.
     const IngestConfig cfg = load_config(config);
     const fs::path aside = fs::temp_directory_path() / ("tigerlod-regions-test-" + std::to_string(::getpid()));
     fs::create_directories(aside);
     auto part_path = [&](size_t i) { return aside / (std::to_string(i) + ".raw"); };
-    std::vector<PartSummary> parts(cfg.dataset.inputs.size());
-    Log log;
-    read_polygon_parts(cfg, 2, log, [&](size_t i, RawMap&& part) {
+    const bool tiger = cfg.dataset.kind == DatasetSpec::Kind::tiger;
+    std::vector<PartSummary> parts(tiger ? cfg.dataset.faces.size() : cfg.dataset.inputs.size());
+    const auto put_aside = [&](size_t i, RawMap&& part) {
         parts[i] = summarize_part(part);
         write_raw(part, part_path(i));
-    });
+    };
+    Log log;
+    if (tiger) {
+        read_tiger_parts(cfg, 2, log, put_aside);
+    } else {
+        read_polygon_parts(cfg, 2, log, put_aside);
+    }
     std::vector<std::string> names;
     for (const auto& l : cfg.levels) {
         names.push_back(l.name);
@@ -217,19 +227,26 @@ TEST(IngestReal, TwentyStateTractsRegionByRegionAreTheWholeBuild)
     o.halo_m = cfg.halo_m;
     o.threads = 2;
     std::mutex m;
-    std::map<std::string, std::string> stores;
-    const BuildResult r = build_by_regions(
+    Regional out;
+    out.result = build_by_regions(
         parts, [&](size_t i) { return read_raw(part_path(i)); }, names, Projection(cfg.projection), o,
         [&](const chains::ChainStore& s) {
             const std::lock_guard lock(m);
-            stores[s.level_name + "/" + s.partition] = chains::encode(s);
+            out.stores[s.level_name + "/" + s.partition] = chains::encode(s);
         });
     fs::remove_all(aside);
-    ASSERT_EQ(stores.size(), whole.stores.size());
+    return out;
+}
+
+/// The same stores byte for byte, the same report.
+void expect_same(const Regional& got, const Ingested& whole)
+{
+    const BuildResult& r = got.result;
+    ASSERT_EQ(got.stores.size(), whole.stores.size());
     for (const auto& s : whole.stores) {
         const std::string name = s.level_name + "/" + s.partition;
-        ASSERT_TRUE(stores.count(name)) << name;
-        EXPECT_TRUE(stores.at(name) == chains::encode(s)) << name;
+        ASSERT_TRUE(got.stores.count(name)) << name;
+        EXPECT_TRUE(got.stores.at(name) == chains::encode(s)) << name;
     }
     EXPECT_EQ(r.problems, whole.result.problems);
     ASSERT_EQ(r.samples.size(), whole.result.samples.size());
@@ -249,6 +266,193 @@ TEST(IngestReal, TwentyStateTractsRegionByRegionAreTheWholeBuild)
                            b.constraint_points, b.computed_internal_points))
             << a.name;
     }
+}
+
+bool built_by_regions(const BuildResult& r)
+{
+    return std::any_of(r.seconds.begin(), r.seconds.end(), [](const auto& p) { return p.first == "regions_load"; });
+}
+
+/// Floyd County's FACES and EDGES split into made-up counties as TIGER splits
+/// a state: tract t's faces go to county 901 + t % 3 (COUNTYFP20 rewritten),
+/// and each edge to the file of every county with a face on one of its sides,
+/// so an edge on a county border is in both files. Shapefiles in `dir`; the
+/// config lists the counties' FACES in order and their EDGES in `edge_order`.
+/// With `blocks`, the config's levels are state > county > block and its halo
+/// 100 m: a region then takes only part of its neighbours (the blocks near its
+/// own and those that share a point with them), not every tract of theirs.
+fs::path split_floyd(const fs::path& dir, const std::vector<int>& edge_order, bool blocks = false)
+{
+    GDALAllRegister();
+    fs::create_directories(dir);
+    auto open = [](const fs::path& zip) {
+        GDALDatasetH ds = GDALOpenEx(("/vsizip/" + zip.string()).c_str(), GDAL_OF_VECTOR, nullptr, nullptr, nullptr);
+        EXPECT_NE(ds, nullptr) << zip;
+        return ds;
+    };
+    GDALDriverH shp = GDALGetDriverByName("ESRI Shapefile");
+    // One output layer per county with the input's fields.
+    auto create = [&](OGRLayerH in, const std::string& name, std::vector<GDALDatasetH>& out) {
+        std::vector<OGRLayerH> layers;
+        for (int c = 0; c < 3; ++c) {
+            const fs::path path = dir / (name + "_" + std::to_string(901 + c) + ".shp");
+            GDALDatasetH ds = GDALCreate(shp, path.c_str(), 0, 0, 0, GDT_Unknown, nullptr);
+            OGRLayerH l = GDALDatasetCreateLayer(ds, path.stem().c_str(), OGR_L_GetSpatialRef(in),
+                                                 OGR_FD_GetGeomType(OGR_L_GetLayerDefn(in)), nullptr);
+            OGRFeatureDefnH defn = OGR_L_GetLayerDefn(in);
+            for (int i = 0; i < OGR_FD_GetFieldCount(defn); ++i) {
+                OGR_L_CreateField(l, OGR_FD_GetFieldDefn(defn, i), 1);
+            }
+            out.push_back(ds);
+            layers.push_back(l);
+        }
+        return layers;
+    };
+    auto copy_to = [](OGRLayerH to, OGRFeatureH f) {
+        OGRFeatureH g = OGR_F_Create(OGR_L_GetLayerDefn(to));
+        OGR_F_SetFrom(g, f, 1);
+        EXPECT_EQ(OGR_L_CreateFeature(to, g), OGRERR_NONE);
+        OGR_F_Destroy(g);
+    };
+    std::map<int64_t, int> county_of_face;
+    std::vector<GDALDatasetH> outs;
+    {
+        GDALDatasetH in = open(shared_data / "tiger" / "tl_2020_51063_faces.zip");
+        OGRLayerH layer = GDALDatasetGetLayer(in, 0);
+        const auto out = create(layer, "faces", outs);
+        OGRFeatureDefnH defn = OGR_L_GetLayerDefn(layer);
+        const int tfid = OGR_FD_GetFieldIndex(defn, "TFID");
+        const int county = OGR_FD_GetFieldIndex(defn, "COUNTYFP20");
+        const int tract = OGR_FD_GetFieldIndex(defn, "TRACTCE20");
+        std::map<std::string, int> tract_index;
+        OGRFeatureH f;
+        while ((f = OGR_L_GetNextFeature(layer)) != nullptr) {
+            const std::string t = OGR_F_GetFieldAsString(f, tract);
+            const int c = tract_index.emplace(t, static_cast<int>(tract_index.size())).first->second % 3;
+            county_of_face[OGR_F_GetFieldAsInteger64(f, tfid)] = c;
+            OGR_F_SetFieldString(f, county, std::to_string(901 + c).c_str());
+            copy_to(out[static_cast<size_t>(c)], f);
+            OGR_F_Destroy(f);
+        }
+        EXPECT_EQ(tract_index.size(), 5U);
+        GDALClose(in);
+    }
+    {
+        GDALDatasetH in = open(shared_data / "tiger" / "tl_2020_51063_edges.zip");
+        OGRLayerH layer = GDALDatasetGetLayer(in, 0);
+        const auto out = create(layer, "edges", outs);
+        OGRFeatureDefnH defn = OGR_L_GetLayerDefn(layer);
+        const int sides[2] = {OGR_FD_GetFieldIndex(defn, "TFIDL"), OGR_FD_GetFieldIndex(defn, "TFIDR")};
+        OGRFeatureH f;
+        while ((f = OGR_L_GetNextFeature(layer)) != nullptr) {
+            std::set<int> counties;
+            for (int i : sides) {
+                if (auto it = county_of_face.find(OGR_F_GetFieldAsInteger64(f, i)); it != county_of_face.end()) {
+                    counties.insert(it->second);
+                }
+            }
+            EXPECT_FALSE(counties.empty());
+            for (int c : counties) {
+                copy_to(out[static_cast<size_t>(c)], f);
+            }
+            OGR_F_Destroy(f);
+        }
+        GDALClose(in);
+    }
+    for (GDALDatasetH ds : outs) {
+        GDALClose(ds);
+    }
+    std::ifstream floyd(source_dir / "configs" / "floyd.yaml");
+    std::string line, yaml;
+    while (std::getline(floyd, line)) {
+        if (line.rfind("  edges:", 0) == 0) {
+            yaml += "  edges: [";
+            for (size_t k = 0; k < edge_order.size(); ++k) {
+                yaml += (k ? ", " : "") + (dir / ("edges_" + std::to_string(901 + edge_order[k]) + ".shp")).string();
+            }
+            yaml += "]\n";
+        } else if (line.rfind("  faces:", 0) == 0) {
+            yaml += "  faces: [" + (dir / "faces_901.shp").string() + ", " + (dir / "faces_902.shp").string() + ", " +
+                    (dir / "faces_903.shp").string() + "]\n";
+        } else if (blocks && line.rfind("  halo_m:", 0) == 0) {
+            yaml += "  halo_m: 100\n";
+        } else if (!blocks || (line.find("name: tract") == std::string::npos &&
+                               line.find("name: block_group") == std::string::npos)) {
+            yaml += line + "\n";
+        }
+    }
+    const fs::path config = dir / "split.yaml";
+    std::ofstream(config) << yaml;
+    return config;
+}
+
+} // namespace
+
+TEST(IngestReal, TwentyStateTractsRegionByRegionAreTheWholeBuild)
+{
+    if (!fs::exists(shared_data / "tiger" / "tracts2010")) {
+        GTEST_SKIP() << "../shared/data/tiger/tracts2010 is absent: the 20-state tract test needs it";
+    }
+    const fs::path config = source_dir / "configs" / "tracts2010.yaml";
+    const Regional r = run_by_regions(config);
+    EXPECT_TRUE(built_by_regions(r.result));
+    expect_same(r, run_ingest(config));
+}
+
+TEST(IngestReal, TigerCountiesRegionByRegionAreTheWholeBuild)
+{
+    if (!fs::exists(shared_data / "tiger" / "tl_2020_51063_edges.zip")) {
+        GTEST_SKIP() << "../shared/data/tiger is absent: Floyd County tests need it";
+    }
+    const fs::path dir = fs::temp_directory_path() / ("tigerlod-split-test-" + std::to_string(::getpid()));
+    const fs::path config = split_floyd(dir, {0, 1, 2});
+    const Ingested whole = run_ingest(config);
+    // Three counties of the made-up split: the region level is the county.
+    EXPECT_EQ(units_per_level(whole),
+              (std::map<std::string, uint64_t>{
+                  {"state", 1}, {"county", 3}, {"tract", 5}, {"block_group", 12}, {"block", 709}}));
+    EXPECT_EQ(whole.finest_units, 3086U);
+    EXPECT_EQ(whole.result.input_vertices, 209304U); // each border edge once
+    expect_no_topology_problems(whole);
+    expect_points_inside(whole);
+    const Regional r = run_by_regions(config);
+    EXPECT_TRUE(built_by_regions(r.result));
+    // Each county's neighbours come whole (their tracts are within reach).
+    EXPECT_EQ(r.result.region_map_units, 3 * whole.finest_units);
+    expect_same(r, whole);
+    fs::remove_all(dir);
+}
+
+TEST(IngestReal, TigerCountiesRegionByRegionTakePartOfTheirNeighboursAndAreTheWholeBuild)
+{
+    if (!fs::exists(shared_data / "tiger" / "tl_2020_51063_edges.zip")) {
+        GTEST_SKIP() << "../shared/data/tiger is absent: Floyd County tests need it";
+    }
+    const fs::path dir = fs::temp_directory_path() / ("tigerlod-split-blocks-test-" + std::to_string(::getpid()));
+    const fs::path config = split_floyd(dir, {0, 1, 2}, true);
+    const Ingested whole = run_ingest(config);
+    EXPECT_EQ(units_per_level(whole), (std::map<std::string, uint64_t>{{"state", 1}, {"county", 3}, {"block", 709}}));
+    expect_no_topology_problems(whole);
+    const Regional r = run_by_regions(config);
+    EXPECT_TRUE(built_by_regions(r.result));
+    EXPECT_GT(r.result.region_map_units, whole.finest_units);
+    EXPECT_LT(r.result.region_map_units, 3 * whole.finest_units - 500);
+    expect_same(r, whole);
+    fs::remove_all(dir);
+}
+
+TEST(IngestReal, TigerEdgesNotPairedWithTheirFacesAreBuiltWhole)
+{
+    if (!fs::exists(shared_data / "tiger" / "tl_2020_51063_edges.zip")) {
+        GTEST_SKIP() << "../shared/data/tiger is absent: Floyd County tests need it";
+    }
+    // County 903's EDGES listed first: no part holds the faces of all its edges.
+    const fs::path dir = fs::temp_directory_path() / ("tigerlod-unpaired-test-" + std::to_string(::getpid()));
+    const fs::path config = split_floyd(dir, {2, 0, 1});
+    const Regional r = run_by_regions(config);
+    EXPECT_FALSE(built_by_regions(r.result));
+    expect_same(r, run_ingest(config));
+    fs::remove_all(dir);
 }
 
 TEST(IngestReal, DefaultDatasetUsAtlas)
