@@ -4,9 +4,10 @@
 /// that memory follows the largest region, not the dataset.
 ///
 /// Method. The inputs are read once, one part per file (per county's FACES
-/// and EDGES for TIGER), and put aside (the ingest stage writes them to disk). The region level is the first level
-/// with more than one code (the states of a nation > state > county > tract
-/// map); the files that share a code there form one region. Each region is
+/// and EDGES for TIGER), and put aside (the ingest stage writes them to
+/// disk). The region level is the first level with more than one code (the
+/// states of a nation > state > county > tract map, the counties of one
+/// state's TIGER files); the parts that share a code there form one region. Each region is
 /// built alone from its own units plus, read-only, the neighbouring units
 /// that its results depend on:
 /// - the whole finer-level units (counties) of other regions that come within
@@ -29,10 +30,10 @@
 /// does not, the FACES and EDGES files do not pair county by county and the
 /// map is built as one region.
 ///
-/// Two limits: codes must nest across regions
-/// (a partition under two region-level codes is an error here, named), and a
-/// repair at a vertex on the outer edge of a region's neighbourhood could see
-/// fewer segments than the whole map's check.
+/// Two limits: codes must nest across regions (a partition under two
+/// region-level codes is an error here, named), and a repair at a vertex on
+/// the outer edge of a region's neighbourhood could see fewer segments than
+/// the whole map's check.
 
 #include "core/log.hpp"
 #include "core/projection.hpp"

@@ -499,6 +499,17 @@ void read_line_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw)
     }
 }
 
+/// A map of `kind` with the config's levels and nothing in it yet.
+RawMap empty_map(const IngestConfig& cfg, RawMap::Kind kind)
+{
+    RawMap raw;
+    raw.kind = kind;
+    for (const auto& l : cfg.levels) {
+        raw.level_names.push_back(l.name);
+    }
+    return raw;
+}
+
 /// Read every file with `read_one(i, part)` on up to `threads` threads, each
 /// into a part of its own, handed to `take` on the thread that read it. The
 /// first error in file order is the one thrown, whatever the thread count.
@@ -560,21 +571,18 @@ void read_files(const std::vector<fs::path>& files, unsigned threads, RawMap& ra
 RawMap read_dataset(const IngestConfig& cfg, unsigned threads, const Log& log)
 {
     RawMap raw;
-    for (const auto& l : cfg.levels) {
-        raw.level_names.push_back(l.name);
-    }
     switch (cfg.dataset.kind) {
     case DatasetSpec::Kind::tiger:
-        raw.kind = RawMap::Kind::edges;
+        raw = empty_map(cfg, RawMap::Kind::edges);
         read_tiger(cfg, raw, log);
         break;
     case DatasetSpec::Kind::polygons:
-        raw.kind = RawMap::Kind::polygon_rings;
+        raw = empty_map(cfg, RawMap::Kind::polygon_rings);
         read_files(cfg.dataset.inputs, threads, raw, log,
                    [&](const fs::path& p, RawMap& part) { read_polygon_file(cfg, p, part); });
         break;
     case DatasetSpec::Kind::lines:
-        raw.kind = RawMap::Kind::lines;
+        raw = empty_map(cfg, RawMap::Kind::lines);
         read_files(cfg.dataset.inputs, threads, raw, log,
                    [&](const fs::path& p, RawMap& part) { read_line_file(cfg, p, part); });
         break;
@@ -588,10 +596,7 @@ void read_polygon_parts(const IngestConfig& cfg, unsigned threads, const Log& lo
     read_each(
         cfg.dataset.inputs, threads, log,
         [&](size_t i, RawMap& part) {
-            part.kind = RawMap::Kind::polygon_rings;
-            for (const auto& l : cfg.levels) {
-                part.level_names.push_back(l.name);
-            }
+            part = empty_map(cfg, RawMap::Kind::polygon_rings);
             read_polygon_file(cfg, cfg.dataset.inputs[i], part);
         },
         take);
@@ -606,10 +611,7 @@ void read_tiger_parts(const IngestConfig& cfg, unsigned threads, const Log& log,
     read_each(
         cfg.dataset.faces, threads, log,
         [&](size_t i, RawMap& part) {
-            part.kind = RawMap::Kind::edges;
-            for (const auto& l : cfg.levels) {
-                part.level_names.push_back(l.name);
-            }
+            part = empty_map(cfg, RawMap::Kind::edges);
             std::unordered_map<int64_t, uint32_t> face_unit, seen_tlid;
             read_faces_file(cfg, cfg.dataset.faces[i], part, face_unit);
             read_edges_file(cfg, cfg.dataset.edges[i], part, face_unit, seen_tlid, true);
