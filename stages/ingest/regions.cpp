@@ -130,9 +130,7 @@ class Assembly {
             }
             if (auto it = m_edge.find(tlid); it != m_edge.end()) {
                 // Another county's copy: it may know a side the first left open.
-                auto& f = m_faces[it->second];
-                f[0] = f[0] != 0 ? f[0] : faces[0];
-                f[1] = f[1] != 0 ? f[1] : faces[1];
+                m_copies.emplace_back(it->second, faces);
                 continue;
             }
             m_edge.emplace(tlid, static_cast<uint32_t>(m_raw.polyline_count()));
@@ -149,12 +147,19 @@ class Assembly {
     /// a face not taken, as for one no file holds).
     RawMap finish()
     {
+        auto unit = [&](uint64_t face) {
+            auto it = face == 0 ? m_face_unit.end() : m_face_unit.find(face);
+            return it == m_face_unit.end() ? no_unit : it->second;
+        };
         for (size_t p = 0; p < m_faces.size(); ++p) {
-            uint32_t* side[2] = {&m_raw.left[p], &m_raw.right[p]};
-            for (size_t s = 0; s < 2; ++s) {
-                auto it = m_faces[p][s] == 0 ? m_face_unit.end() : m_face_unit.find(m_faces[p][s]);
-                *side[s] = it == m_face_unit.end() ? no_unit : it->second;
-            }
+            m_raw.left[p] = unit(m_faces[p][0]);
+            m_raw.right[p] = unit(m_faces[p][1]);
+        }
+        // A side still open takes the first later copy's face that is known,
+        // as the whole read fills it (read_edges_file).
+        for (const auto& [p, faces] : m_copies) {
+            m_raw.left[p] = m_raw.left[p] == no_unit ? unit(faces[0]) : m_raw.left[p];
+            m_raw.right[p] = m_raw.right[p] == no_unit ? unit(faces[1]) : m_raw.right[p];
         }
         return std::move(m_raw);
     }
@@ -169,10 +174,11 @@ class Assembly {
     RawMap m_raw;
     uint64_t m_own_points = 0;
     // TIGER parts (TFIDs and TLIDs are never 0 there; 0 stands for "none").
-    std::unordered_map<uint64_t, uint32_t> m_face_unit; ///< TFID -> unit
-    std::unordered_map<uint64_t, uint32_t> m_edge;      ///< TLID -> polyline
-    std::vector<std::array<uint64_t, 2>> m_faces;       ///< each polyline's TFIDs, left and right
-    std::unordered_set<uint64_t> m_seen;                ///< TLIDs of every part added
+    std::unordered_map<uint64_t, uint32_t> m_face_unit;                 ///< TFID -> unit
+    std::unordered_map<uint64_t, uint32_t> m_edge;                      ///< TLID -> polyline
+    std::vector<std::array<uint64_t, 2>> m_faces;                       ///< each polyline's TFIDs, left and right
+    std::vector<std::pair<uint32_t, std::array<uint64_t, 2>>> m_copies; ///< later copies' TFIDs, in file order
+    std::unordered_set<uint64_t> m_seen;                                ///< TLIDs of every part added
 };
 
 /// Coarse cells over lon/lat, for "does this box come near the region's units".

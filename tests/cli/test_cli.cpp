@@ -137,16 +137,14 @@ class Cli : public ::testing::Test {
                    {line({{0, 2}, {0, 0}}), "7", "101", "900", "F"}, {line({{1, 0}, {1, 1}}), "8", "101", "103", "F"},
                    {line({{1, 1}, {1, 2}}), "9", "101", "102", "F"}, {line({{1, 1}, {2, 1}}), "10", "102", "103", "F"}};
         write_shp(m_dir / ("edges" + tag + ".shp"), wkbLineString, ef, m_edges);
-        const std::vector<std::string> ff = {"TFID",      "STATEFP20", "COUNTYFP20", "TRACTCE20", "BLKGRPCE20",
-                                             "BLOCKCE20", "INTPTLAT",  "INTPTLON",   "ATOTAL"};
         auto poly = [&](double x0, double y0, double x1, double y1) {
             return "POLYGON ((" + p(x0, y0) + "," + p(x0, y1) + "," + p(x1, y1) + "," + p(x1, y0) + "," + p(x0, y0) +
                    "))";
         };
-        write_shp(m_dir / ("faces" + tag + ".shp"), wkbPolygon, ff,
-                  {{poly(0, 0, 1, 2), "101", "51", "063", "920100", "1", "1000", "+40.0010", "-095.9995", "5"},
+        m_faces = {{poly(0, 0, 1, 2), "101", "51", "063", "920100", "1", "1000", "+40.0010", "-095.9995", "5"},
                    {poly(1, 1, 2, 2), "102", "51", "063", "920200", "1", "1001", "+40.0015", "-095.9985", "5"},
-                   {poly(1, 0, 2, 1), "103", "51", "063", "920200", "2", "2000", "+40.0005", "-095.9985", "5"}});
+                   {poly(1, 0, 2, 1), "103", "51", "063", "920200", "2", "2000", "+40.0005", "-095.9985", "5"}};
+        write_shp(m_dir / ("faces" + tag + ".shp"), wkbPolygon, m_face_fields, m_faces);
         zip(m_dir / ("edges" + tag + ".zip"), shp_files(m_dir / ("edges" + tag + ".shp")));
         zip(m_dir / ("faces" + tag + ".zip"), shp_files(m_dir / ("faces" + tag + ".shp")));
     }
@@ -178,6 +176,9 @@ class Cli : public ::testing::Test {
 
     fs::path m_dir;
     std::vector<std::vector<std::string>> m_edges; ///< WKT, TLID, TFIDL, TFIDR, MTFCC
+    std::vector<std::vector<std::string>> m_faces; ///< WKT, then m_face_fields
+    const std::vector<std::string> m_face_fields = {"TFID",      "STATEFP20", "COUNTYFP20", "TRACTCE20", "BLKGRPCE20",
+                                                    "BLOCKCE20", "INTPTLAT",  "INTPTLON",   "ATOTAL"};
 };
 
 } // namespace
@@ -352,12 +353,27 @@ TEST_F(Cli, EdgesSharedByTwoCountyFilesAreDeduplicatedByTlid)
     write_shp(m_dir / "east.shp", wkbLineString, ef, east);
     const Result r = run("ingest", tiger_config("west.shp, east.shp").string() + " " + (m_dir / "split").string());
     ASSERT_EQ(r.code, 0) << r.err;
+    // The faces split the same way too, one FACES file per EDGES file: built
+    // region by region (the tracts 920100 and 920200), each file's unknown
+    // face (999999) found in the other file's copy, as the whole read finds it.
+    write_shp(m_dir / "west_faces.shp", wkbPolygon, m_face_fields, {m_faces[0]});
+    write_shp(m_dir / "east_faces.shp", wkbPolygon, m_face_fields, {m_faces[1], m_faces[2]});
+    const Result by_county =
+        run("ingest", tiger_config("west.shp, east.shp", "west_faces.shp, east_faces.shp").string() + " " +
+                          (m_dir / "counties").string() + " --verbose");
+    ASSERT_EQ(by_county.code, 0) << by_county.err;
+    EXPECT_NE(by_county.err.find("region 51063920100"), std::string::npos) << by_county.err;
+    size_t stores = 0;
     for (const auto& e : fs::recursive_directory_iterator(m_dir / "out")) {
         if (e.path().extension() == ".tlc") {
             const auto rel = fs::relative(e.path(), m_dir / "out");
             EXPECT_EQ(slurp(e.path()), slurp(m_dir / "split" / rel)) << rel;
+            EXPECT_EQ(slurp(e.path()), slurp(m_dir / "counties" / rel)) << rel;
+            ++stores;
         }
     }
+    EXPECT_GT(stores, 0U);
+    EXPECT_EQ(slurp(m_dir / "out" / "ingest-report.json"), slurp(m_dir / "counties" / "ingest-report.json"));
 }
 
 TEST_F(Cli, ValidateChecksInputsAndWritesNothing)
