@@ -164,7 +164,6 @@ class Assembly {
         return std::move(m_raw);
     }
 
-    size_t units() const noexcept { return m_raw.units.size(); }
     /// Input points of the own parts' polylines (TIGER: each edge once).
     uint64_t own_points() const noexcept { return m_own_points; }
 
