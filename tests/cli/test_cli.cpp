@@ -485,6 +485,23 @@ TEST_F(Cli, PolygonFilesWithABadOneLeaveNothingBehind)
         1, "edges.zip layer 'edges': geometry type is Line String, a polygons dataset needs polygons");
 }
 
+TEST_F(Cli, TigerCountiesWithABadOneLeaveNothingBehind)
+{
+    // One FACES file per EDGES file goes county by county: the good first
+    // county is put aside inside the temporary output before the second fails.
+    make_tiger();
+    make_tiger("b");
+    const auto size = fs::file_size(m_dir / "edgesb.shp");
+    fs::resize_file(m_dir / "edgesb.shp", size - 30);
+    expect_failure(run("ingest", tiger_config("edges.zip, edgesb.shp", "faces.zip, facesb.zip").string() + " " + out() +
+                                     " --threads 1"),
+                   1, "edgesb.shp:9: Error in fread()");
+    const auto dbf = fs::file_size(m_dir / "facesb.dbf");
+    fs::resize_file(m_dir / "facesb.dbf", dbf - 40);
+    expect_failure(run("ingest", tiger_config("edges.zip, edges.zip", "faces.zip, facesb.shp").string() + " " + out()),
+                   1, "failed on DBF file");
+}
+
 TEST_F(Cli, ColorAndSimplifyRunTheLadderDeterministically)
 {
     make_tiger();
