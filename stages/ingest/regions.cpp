@@ -86,15 +86,12 @@ class Assembly {
                 continue;
             }
             const auto id = static_cast<uint32_t>(m_raw.units.size());
-            if (m_edges) {
-                // A face that two counties' files list: the first file's, as a whole read keeps.
-                auto [it, added] = m_face_unit.try_emplace(face[u], id);
-                if (!added) {
-                    new_id[u] = it->second;
-                    continue;
-                }
+            // TIGER: a face that two counties' files list is the first file's,
+            // as a whole read keeps it; edges find their faces by TFID in finish().
+            if (m_edges && !m_face_unit.try_emplace(face[u], id).second) {
+                continue;
             }
-            new_id[u] = id;
+            new_id[u] = id; // polygon rings: the unit's id in the map
             RawUnit unit = std::move(part.units[u]);
             unit.source.file = file_of(unit.source.file);
             m_raw.units.push_back(std::move(unit));
