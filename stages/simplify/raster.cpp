@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <stdexcept>
 #include <string>
 
 namespace tigerlod::simplify {
@@ -49,13 +50,14 @@ layout(location = 1) in float a_eps; // pixels
 layout(location = 2) in vec2 a_clip; // the part of the segment whose quad is drawn: t0, t1
 layout(location = 3) in float a_corner; // 0, 1 at a; 2, 3 at b; even: left
 uniform vec2 u_size;
+uniform vec2 u_origin; // the window's corner in tile pixels (integers)
 uniform float u_reach;
 uniform float u_pad;
 uniform float u_z; // 0 for the tents (their fragments set the depth); 1 to reset
 flat out vec4 v_seg;
 flat out float v_eps;
 void main() {
-    vec2 a = a_seg.xy, b = a_seg.zw, d = b - a;
+    vec2 a = a_seg.xy - u_origin, b = a_seg.zw - u_origin, d = b - a;
     float len = length(d);
     vec2 u = len > 0.0 ? d / len : vec2(1.0, 0.0);
     vec2 n = vec2(-u.y, u.x);
@@ -66,7 +68,7 @@ void main() {
     // the same depth from any quad that covers it.
     vec2 p = (c < 2 ? mix(a, b, a_clip.x) - u * r : mix(a, b, a_clip.y) + u * r) + ((c & 1) == 0 ? n * r : -n * r);
     gl_Position = vec4(p / u_size * 2.0 - 1.0, u_z, 1.0);
-    v_seg = a_seg;
+    v_seg = vec4(a, b);
     v_eps = a_eps;
 }
 )";
@@ -101,11 +103,12 @@ layout(location = 1) in uint a_id;
 layout(location = 2) in vec2 a_clip; // the part drawn: t0, t1 along a_seg
 layout(location = 3) in float a_corner; // 0, 1 at a; 2, 3 at b; even: left
 uniform vec2 u_size;
+uniform vec2 u_origin;
 uniform float u_half_width;
 flat out vec4 v_seg;
 flat out uint v_id;
 void main() {
-    vec2 a = a_seg.xy, b = a_seg.zw, d = b - a;
+    vec2 a = a_seg.xy - u_origin, b = a_seg.zw - u_origin, d = b - a;
     float len = length(d);
     vec2 u = len > 0.0 ? d / len : vec2(1.0, 0.0);
     vec2 n = vec2(-u.y, u.x) * u_half_width;
@@ -114,7 +117,7 @@ void main() {
     // Depth 0.9995 under GL_GREATER: only where a tent was drawn (tents'
     // depths are below 1 / 1.001, the background is 1).
     gl_Position = vec4(p / u_size * 2.0 - 1.0, 0.999, 1.0);
-    v_seg = a_seg;
+    v_seg = vec4(a, b);
     v_id = a_id;
 }
 )";
@@ -217,7 +220,15 @@ struct Raster::Impl {
                       GL_STREAM_DRAW);
         ensure_indices(items.size());
     }
-    GLuint fbo = 0, rb_depth = 0, rb_color = 0;
+    /// A framebuffer: depth-stencil, and colour for the read-back compliance.
+    struct Target {
+        GLuint fbo = 0, rb_depth = 0, rb_color = 0;
+        GLsizei size = 0; ///< width and height
+    };
+    /// The small framebuffer (window_pixels), then the large one
+    /// (max_tile_pixels) if larger: a tile's box is drawn in the smallest
+    /// that holds it.
+    std::vector<Target> targets;
     std::vector<uint8_t> near; ///< per cell of a tile: a tested part may have fragments there
     std::vector<QuadVertex<TentInstance>> tent_vertices;
     bool batching = false;           ///< between begin_batch and end_batch
@@ -320,36 +331,46 @@ Raster::Raster(gl::Context& ctx, const RasterOptions& opt)
     gl.BindVertexArray(0);
     gl.GenBuffers(1, &I.ssbo);
 
-    const auto s = static_cast<GLsizei>(opt.max_tile_pixels);
-    gl.GenFramebuffers(1, &I.fbo);
-    gl.BindFramebuffer(GL_FRAMEBUFFER, I.fbo);
-    gl.GenRenderbuffers(1, &I.rb_depth);
-    gl.BindRenderbuffer(GL_RENDERBUFFER, I.rb_depth);
-    gl.RenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH24_STENCIL8, s, s);
-    gl.FramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_STENCIL_ATTACHMENT, GL_RENDERBUFFER, I.rb_depth);
-    if (opt.compliance == Compliance::readback) {
-        gl.GenRenderbuffers(1, &I.rb_color);
-        gl.BindRenderbuffer(GL_RENDERBUFFER, I.rb_color);
-        gl.RenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, s, s);
-        gl.FramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, I.rb_color);
-        const GLenum buf = GL_COLOR_ATTACHMENT0;
-        gl.DrawBuffers(1, &buf);
-        gl.ReadBuffer(GL_COLOR_ATTACHMENT0);
-    } else {
-        const GLenum none = GL_NONE;
-        gl.DrawBuffers(1, &none);
-        gl.ReadBuffer(GL_NONE);
+    if (opt.max_tile_pixels < 8 || opt.max_tile_pixels > 16384 || opt.window_pixels < 8) {
+        throw std::invalid_argument("RasterOptions: framebuffer sizes outside 8..16384");
     }
-    if (gl.CheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
-        throw environment_error("OpenGL: a " + std::to_string(s) + "x" + std::to_string(s) +
-                                " depth-stencil framebuffer is not supported by " + ctx.describe());
+    // The small framebuffer, then the large one when tiles can be larger.
+    for (const uint32_t size : {std::min(opt.window_pixels, opt.max_tile_pixels), opt.max_tile_pixels}) {
+        if (!I.targets.empty() && I.targets.back().size == GLsizei(size)) {
+            break;
+        }
+        auto& t = I.targets.emplace_back();
+        const auto s = t.size = static_cast<GLsizei>(size);
+        gl.GenFramebuffers(1, &t.fbo);
+        gl.BindFramebuffer(GL_FRAMEBUFFER, t.fbo);
+        gl.GenRenderbuffers(1, &t.rb_depth);
+        gl.BindRenderbuffer(GL_RENDERBUFFER, t.rb_depth);
+        gl.RenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH24_STENCIL8, s, s);
+        gl.FramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_STENCIL_ATTACHMENT, GL_RENDERBUFFER, t.rb_depth);
+        if (opt.compliance == Compliance::readback) {
+            gl.GenRenderbuffers(1, &t.rb_color);
+            gl.BindRenderbuffer(GL_RENDERBUFFER, t.rb_color);
+            gl.RenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, s, s);
+            gl.FramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, t.rb_color);
+            const GLenum buf = GL_COLOR_ATTACHMENT0;
+            gl.DrawBuffers(1, &buf);
+            gl.ReadBuffer(GL_COLOR_ATTACHMENT0);
+        } else {
+            const GLenum none = GL_NONE;
+            gl.DrawBuffers(1, &none);
+            gl.ReadBuffer(GL_NONE);
+        }
+        if (gl.CheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
+            throw environment_error("OpenGL: a " + std::to_string(s) + "x" + std::to_string(s) +
+                                    " depth-stencil framebuffer is not supported by " + ctx.describe());
+        }
+        gl.Viewport(0, 0, s, s);
+        gl.Disable(GL_SCISSOR_TEST); // the whole buffer; tiles clip to their box
+        gl.ClearDepth(1.0);
+        gl.ClearStencil(0);
+        gl.ClearColor(0, 0, 0, 0);
+        gl.Clear(GL_DEPTH_BUFFER_BIT | GL_STENCIL_BUFFER_BIT | GL_COLOR_BUFFER_BIT);
     }
-    gl.Viewport(0, 0, s, s);
-    gl.Disable(GL_SCISSOR_TEST); // the whole buffer; tiles clip to their box
-    gl.ClearDepth(1.0);
-    gl.ClearStencil(0);
-    gl.ClearColor(0, 0, 0, 0);
-    gl.Clear(GL_DEPTH_BUFFER_BIT | GL_STENCIL_BUFFER_BIT | GL_COLOR_BUFFER_BIT);
     gl.Enable(GL_STENCIL_TEST);
     if (gl.GetError() != GL_NO_ERROR) {
         throw environment_error("OpenGL: setting up the raster engine failed on " + ctx.describe());
@@ -369,10 +390,12 @@ Raster::~Raster()
     gl.DeleteBuffers(1, &I.vbo_test);
     gl.DeleteBuffers(1, &I.ibo);
     gl.DeleteBuffers(1, &I.ssbo);
-    gl.DeleteFramebuffers(1, &I.fbo);
-    gl.DeleteRenderbuffers(1, &I.rb_depth);
-    if (I.rb_color) {
-        gl.DeleteRenderbuffers(1, &I.rb_color);
+    for (const auto& t : I.targets) {
+        gl.DeleteFramebuffers(1, &t.fbo);
+        gl.DeleteRenderbuffers(1, &t.rb_depth);
+        if (t.rb_color) {
+            gl.DeleteRenderbuffers(1, &t.rb_color);
+        }
     }
 }
 
@@ -381,9 +404,6 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
 {
     auto& I = *m_impl;
     const auto& gl = I.gl;
-    if (tile.width > m_opt.max_tile_pixels || tile.height > m_opt.max_tile_pixels) {
-        throw std::logic_error("tile larger than the framebuffer");
-    }
     ++m_stats.tiles;
     // Outside a batch, the tile is a batch of its own.
     const bool own_batch = !I.batching;
@@ -518,52 +538,19 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         }
     }
     m_stats.tent_segments += inst.size();
-    const auto w = static_cast<GLsizei>(tile.width), h = static_cast<GLsizei>(tile.height);
-    gl.Viewport(0, 0, w, h);
+    const auto w = static_cast<int64_t>(tile.width), h = static_cast<int64_t>(tile.height);
     // Every pass is clipped to the box of the marked cells: no tested
     // fragment falls outside it, so what is drawn there cannot change a
     // result. llvmpipe's work per tile grows with the area it rasterizes,
     // not with what is drawn: at 1 m on the tract set (178 k tiles of 4096
     // pixels, most with a few short shortcuts) the compliance step took 9.1 s
     // of CPU without the box and 4.3 s with it.
-    const auto clip = [](int64_t v, GLsizei hi) { return static_cast<GLsizei>(std::clamp<int64_t>(v, 0, hi)); };
-    const GLsizei sx0 = clip(near_x0 * static_cast<int64_t>(kCell), w),
-                  sy0 = clip(near_y0 * static_cast<int64_t>(kCell), h);
-    const GLsizei sx1 = std::max(sx0, clip((near_x1 + 1) * static_cast<int64_t>(kCell), w));
-    const GLsizei sy1 = std::max(sy0, clip((near_y1 + 1) * static_cast<int64_t>(kCell), h));
-    gl.Enable(GL_SCISSOR_TEST); // off again at the end: the context may serve other engines
-    gl.Scissor(sx0, sy0, sx1 - sx0, sy1 - sy0);
+    const int64_t sx0 = std::clamp<int64_t>(near_x0 * int64_t(kCell), 0, w),
+                  sy0 = std::clamp<int64_t>(near_y0 * int64_t(kCell), 0, h);
+    const int64_t sx1 = std::max(sx0, std::clamp<int64_t>((near_x1 + 1) * int64_t(kCell), 0, w));
+    const int64_t sy1 = std::max(sy0, std::clamp<int64_t>((near_y1 + 1) * int64_t(kCell), 0, h));
 
-    // The tents' quads, as tent_vs places them: the tent pass and the reset
-    // pass share it, so both cover the same pixels.
-    auto use_tent_quads = [&](GLuint prog, float z) {
-        gl.UseProgram(prog);
-        gl.Uniform2f(I.loc(prog, "u_size"), float(w), float(h));
-        gl.Uniform1f(I.loc(prog, "u_reach"), float(l2_reach(m_opt.metric)));
-        gl.Uniform1f(I.loc(prog, "u_pad"), float(m_opt.margin_px));
-        gl.Uniform1f(I.loc(prog, "u_z"), z);
-    };
-
-    // Step 1: lower envelope of the distance tents; the stencil gets the class.
-    use_tent_quads(I.tent_prog, 0.0f);
-    gl.Uniform1f(I.loc(I.tent_prog, "u_depth_scale"), float(eps_max * 1.001 + 1e-6));
-    gl.BindVertexArray(I.vao_tent);
-    gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_tent);
-    I.upload_quads(inst, I.tent_vertices);
-    gl.Enable(GL_DEPTH_TEST);
-    gl.DepthFunc(GL_LESS);
-    gl.DepthMask(GL_TRUE);
-    gl.ColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
-    gl.StencilMask(0xFF);
-    gl.StencilOp(GL_KEEP, GL_KEEP, GL_REPLACE);
-    for (const auto& [cls, range] : ranges) {
-        gl.StencilFunc(GL_ALWAYS, cls, 0xFF);
-        draw_quads(gl, range.first, size_t(range.second));
-    }
-    m_stats.voronoi_seconds += seconds_since(t0);
-
-    // Step 2: shortcuts under stencil != class.
-    const auto t1 = std::chrono::steady_clock::now();
+    // Tent instances and test instances, uploaded once for all windows.
     std::vector<uint32_t> sorder(segs.size());
     for (uint32_t i = 0; i < sorder.size(); ++i) {
         sorder[i] = i;
@@ -587,93 +574,166 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         }
     }
     m_stats.drawn_segments += segs.size();
-    // A fragment fails where another class's region is: stencil != class,
-    // and a tent was drawn there (depth below the background's 1). Pixels
-    // outside every band are no one's region: a shortcut's half-pixel quad
-    // grazing the edge of its own band is not a failure.
-    gl.Enable(GL_DEPTH_TEST);
-    gl.DepthFunc(GL_GREATER);
-    gl.DepthMask(GL_FALSE);
-    gl.StencilMask(0);
-    gl.StencilOp(GL_KEEP, GL_KEEP, GL_KEEP);
-    gl.UseProgram(I.test_prog);
-    gl.Uniform2f(I.loc(I.test_prog, "u_size"), float(w), float(h));
-    gl.Uniform1f(I.loc(I.test_prog, "u_half_width"), 0.5f);
-    gl.Uniform1f(I.loc(I.test_prog, "u_end_margin"), float(m_opt.endpoint_margin_px));
-    gl.BindVertexArray(I.vao_test);
-    gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_test);
-    I.upload_quads(sorted, I.test_vertices);
-    if (!segs.empty() && ssbo) {
+    if (ssbo) {
         // The flags land in the batch's buffer, read back once by end_batch:
         // no wait per tile.
         for (uint32_t k = 0; k < sorder.size(); ++k) {
             I.batch_ids.push_back(segs[sorder[k]].id);
         }
-        for (const auto& [cls, range] : sranges) {
-            gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
+    }
+    gl.BindVertexArray(I.vao_tent);
+    gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_tent);
+    I.upload_quads(inst, I.tent_vertices);
+    gl.BindVertexArray(I.vao_test);
+    gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_test);
+    I.upload_quads(sorted, I.test_vertices);
+    std::vector<uint8_t> removed; // Algorithm 5.1: the segments seen failing
+    std::vector<uint8_t> pixels;
+    if (!ssbo) {
+        removed.assign(segs.size(), 0);
+    }
+    m_stats.voronoi_seconds += seconds_since(t0);
+
+    // The box is drawn with its corner at the framebuffer's, in the smallest
+    // framebuffer that holds it. The shift is an integer number of pixels,
+    // so the pixel centres keep their places, and the shaders subtract it
+    // from coordinates within the tile exactly. llvmpipe's cost per flush
+    // grows with the framebuffer's area (it walks every 64-pixel bin of it
+    // under a lock), and the batches of small boxes that most tiles have
+    // are flushed often.
+    if (sx1 > sx0 && sy1 > sy0) {
+        const int64_t ox = sx0, oy = sy0, ex = sx1, ey = sy1;
+        size_t target = 0;
+        while (target + 1 < I.targets.size() &&
+               (ex - ox > I.targets[target].size || ey - oy > I.targets[target].size)) {
+            ++target;
+        }
+        if (ex - ox > I.targets[target].size || ey - oy > I.targets[target].size) {
+            throw std::logic_error("tile larger than the framebuffer");
+        }
+        m_stats.small_boxes += target == 0 && I.targets.size() > 1;
+        // Bound each time: engines may share a context (Mesa skips a
+        // binding that changes nothing).
+        gl.BindFramebuffer(GL_FRAMEBUFFER, I.targets[target].fbo);
+        gl.Viewport(0, 0, I.targets[target].size, I.targets[target].size);
+        const auto ws = static_cast<float>(I.targets[target].size);
+        const auto tw = std::chrono::steady_clock::now();
+        gl.Enable(GL_SCISSOR_TEST); // off again at the end: the context may serve other engines
+        gl.Scissor(0, 0, static_cast<GLsizei>(ex - ox), static_cast<GLsizei>(ey - oy));
+        const auto fx = static_cast<float>(ox), fy = static_cast<float>(oy);
+
+        // The tents' quads, as tent_vs places them: the tent pass and the
+        // reset pass share it, so both cover the same pixels.
+        auto use_tent_quads = [&](GLuint prog, float z) {
+            gl.UseProgram(prog);
+            gl.Uniform2f(I.loc(prog, "u_size"), ws, ws);
+            gl.Uniform2f(I.loc(prog, "u_origin"), fx, fy);
+            gl.Uniform1f(I.loc(prog, "u_reach"), float(l2_reach(m_opt.metric)));
+            gl.Uniform1f(I.loc(prog, "u_pad"), float(m_opt.margin_px));
+            gl.Uniform1f(I.loc(prog, "u_z"), z);
+        };
+
+        // Step 1: lower envelope of the distance tents; the stencil gets the class.
+        use_tent_quads(I.tent_prog, 0.0f);
+        gl.Uniform1f(I.loc(I.tent_prog, "u_depth_scale"), float(eps_max * 1.001 + 1e-6));
+        gl.BindVertexArray(I.vao_tent);
+        gl.Enable(GL_DEPTH_TEST);
+        gl.DepthFunc(GL_LESS);
+        gl.DepthMask(GL_TRUE);
+        gl.ColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
+        gl.StencilMask(0xFF);
+        gl.StencilOp(GL_KEEP, GL_KEEP, GL_REPLACE);
+        for (const auto& [cls, range] : ranges) {
+            gl.StencilFunc(GL_ALWAYS, cls, 0xFF);
             draw_quads(gl, range.first, size_t(range.second));
         }
-    } else if (!segs.empty()) {
-        // Algorithm 5.1: unique colours, read back, drop the colours seen,
-        // repeat until nothing changes (a segment may hide another).
-        gl.ColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
-        std::vector<uint8_t> removed(segs.size(), 0);
-        std::vector<uint8_t> pixels(size_t(sx1 - sx0) * size_t(sy1 - sy0) * 4);
-        for (;;) {
-            ++m_stats.readback_rounds;
-            gl.Clear(GL_COLOR_BUFFER_BIT);
+        m_stats.voronoi_seconds += seconds_since(tw);
+
+        // Step 2: shortcuts under stencil != class. A fragment fails
+        // where another class's region is: stencil != class, and a tent
+        // was drawn there (depth below the background's 1). Pixels
+        // outside every band are no one's region: a shortcut's
+        // half-pixel quad grazing the edge of its own band is not a
+        // failure.
+        const auto t1 = std::chrono::steady_clock::now();
+        gl.Enable(GL_DEPTH_TEST);
+        gl.DepthFunc(GL_GREATER);
+        gl.DepthMask(GL_FALSE);
+        gl.StencilMask(0);
+        gl.StencilOp(GL_KEEP, GL_KEEP, GL_KEEP);
+        gl.UseProgram(I.test_prog);
+        gl.Uniform2f(I.loc(I.test_prog, "u_size"), ws, ws);
+        gl.Uniform2f(I.loc(I.test_prog, "u_origin"), fx, fy);
+        gl.Uniform1f(I.loc(I.test_prog, "u_half_width"), 0.5f);
+        gl.Uniform1f(I.loc(I.test_prog, "u_end_margin"), float(m_opt.endpoint_margin_px));
+        gl.BindVertexArray(I.vao_test);
+        if (!segs.empty() && ssbo) {
             for (const auto& [cls, range] : sranges) {
                 gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
-                for (GLuint k = range.first; k < range.first + GLuint(range.second); ++k) {
-                    if (!removed[k]) {
-                        draw_quads(gl, k, 1);
+                draw_quads(gl, range.first, size_t(range.second));
+            }
+        } else if (!segs.empty()) {
+            // Algorithm 5.1: unique colours, read back, drop the colours
+            // seen, repeat until nothing changes (a segment may hide another).
+            gl.ColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+            pixels.resize(size_t(ex - ox) * size_t(ey - oy) * 4);
+            for (;;) {
+                ++m_stats.readback_rounds;
+                gl.Clear(GL_COLOR_BUFFER_BIT);
+                for (const auto& [cls, range] : sranges) {
+                    gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
+                    for (GLuint k = range.first; k < range.first + GLuint(range.second); ++k) {
+                        if (!removed[k]) {
+                            draw_quads(gl, k, 1);
+                        }
                     }
                 }
-            }
-            gl.PixelStorei(GL_PACK_ALIGNMENT, 1);
-            gl.ReadPixels(sx0, sy0, sx1 - sx0, sy1 - sy0, GL_RGBA, GL_UNSIGNED_BYTE, pixels.data());
-            bool changed = false;
-            for (size_t i = 0; i < pixels.size(); i += 4) {
-                const uint32_t c =
-                    uint32_t(pixels[i]) | (uint32_t(pixels[i + 1]) << 8) | (uint32_t(pixels[i + 2]) << 16);
-                if (c != 0 && c <= removed.size() && !removed[c - 1]) {
-                    removed[c - 1] = 1;
-                    changed = true;
+                gl.PixelStorei(GL_PACK_ALIGNMENT, 1);
+                gl.ReadPixels(0, 0, static_cast<GLsizei>(ex - ox), static_cast<GLsizei>(ey - oy), GL_RGBA,
+                              GL_UNSIGNED_BYTE, pixels.data());
+                bool changed = false;
+                for (size_t i = 0; i < pixels.size(); i += 4) {
+                    const uint32_t c =
+                        uint32_t(pixels[i]) | (uint32_t(pixels[i + 1]) << 8) | (uint32_t(pixels[i + 2]) << 16);
+                    if (c != 0 && c <= removed.size() && !removed[c - 1]) {
+                        removed[c - 1] = 1;
+                        changed = true;
+                    }
+                }
+                if (!changed) {
+                    break;
                 }
             }
-            if (!changed) {
-                break;
-            }
+            gl.ColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
         }
-        for (uint32_t k = 0; k < removed.size(); ++k) {
-            if (removed[k]) {
-                fails[segs[sorder[k]].id] = 1;
-            }
-        }
-        gl.ColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
-    }
-    m_stats.compliance_seconds += seconds_since(t1);
+        m_stats.compliance_seconds += seconds_since(t1);
 
-    // Restore the buffer where the tents were drawn: depth 1, stencil 0.
-    const auto t2 = std::chrono::steady_clock::now();
-    use_tent_quads(I.reset_prog, 1.0f);
-    gl.BindVertexArray(I.vao_tent);
-    gl.Enable(GL_DEPTH_TEST);
-    gl.DepthFunc(GL_ALWAYS);
-    gl.DepthMask(GL_TRUE);
-    gl.StencilMask(0xFF);
-    gl.StencilFunc(GL_ALWAYS, 0, 0xFF);
-    gl.StencilOp(GL_REPLACE, GL_REPLACE, GL_REPLACE);
-    if (!inst.empty()) {
-        draw_quads(gl, 0, inst.size());
+        // Restore the buffer where the tents were drawn: depth 1, stencil 0.
+        const auto t2 = std::chrono::steady_clock::now();
+        use_tent_quads(I.reset_prog, 1.0f);
+        gl.BindVertexArray(I.vao_tent);
+        gl.Enable(GL_DEPTH_TEST);
+        gl.DepthFunc(GL_ALWAYS);
+        gl.DepthMask(GL_TRUE);
+        gl.StencilMask(0xFF);
+        gl.StencilFunc(GL_ALWAYS, 0, 0xFF);
+        gl.StencilOp(GL_REPLACE, GL_REPLACE, GL_REPLACE);
+        if (!inst.empty()) {
+            draw_quads(gl, 0, inst.size());
+        }
+        m_stats.voronoi_seconds += seconds_since(t2);
     }
     gl.Disable(GL_SCISSOR_TEST);
+    for (uint32_t k = 0; k < removed.size(); ++k) {
+        if (removed[k]) {
+            fails[segs[sorder[k]].id] = 1;
+        }
+    }
     const GLenum err = gl.GetError();
     if (err != GL_NO_ERROR) {
         throw environment_error("OpenGL error " + std::to_string(err) + " while rendering a tile on " +
                                 m_ctx.describe());
     }
-    m_stats.voronoi_seconds += seconds_since(t2);
     if (own_batch) {
         end_batch(fails);
     }

@@ -24,7 +24,11 @@ enum class Compliance { ssbo, readback };
 struct RasterOptions {
     Metric metric = Metric::l2;
     Compliance compliance = Compliance::ssbo;
-    uint32_t max_tile_pixels = 4096; ///< framebuffer size
+    /// Two framebuffers: a tile's box (where its tested parts are) is drawn in
+    /// the small one when it fits, else in the large one. llvmpipe pays per
+    /// flush for every 64-pixel bin of the framebuffer, and most boxes are small.
+    uint32_t window_pixels = 1024;   ///< the small framebuffer's width and height
+    uint32_t max_tile_pixels = 4096; ///< the largest tile: the large framebuffer's size
     double margin_px = 1.0; ///< tents' quads reach this far beyond eps (pixels); the reset pass covers the same quads
     double endpoint_margin_px = 1.5; ///< fragments this close to a shortcut's ends are not tested
 };
@@ -50,6 +54,7 @@ struct TestSegment {
 
 struct RasterStats {
     size_t tiles = 0;
+    size_t small_boxes = 0;           ///< tiles whose tested parts fit in the small framebuffer
     size_t tent_segments = 0;         ///< drawn: those whose reach touches a tested part
     size_t tent_segments_skipped = 0; ///< of the tiles' chains, too far from every tested part
     size_t drawn_segments = 0;        ///< parts drawn

@@ -44,6 +44,10 @@ void SimplifyStage::add_args(ArgSet& args)
              "      unique-colour read-back loop (Algorithm 5.1)",
              "MODE");
     args.add("gl", &m_gl, "OpenGL backend: osmesa (llvmpipe, everywhere) or egl (a GPU, or Mesa's device)", "NAME");
+    args.add("window-pixels", &m_window_pixels,
+             "the small framebuffer's width and height (8..16384): a tile whose tested parts fit in it\n"
+             "      is drawn there, the others in one of --tile-pixels; the result does not depend on it",
+             "N");
     args.add("colors", &m_colors, "use the tiles and classes tigerlod-color wrote to DIR instead of computing them",
              "DIR");
 }
@@ -59,6 +63,9 @@ void SimplifyStage::initialize()
     }
     if (!gl::parse_backend(m_gl)) {
         throw usage_error("simplify: option '--gl' must be osmesa or egl, not '" + m_gl + "'");
+    }
+    if (m_window_pixels < 8 || m_window_pixels > 16384) {
+        throw usage_error("simplify: option '--window-pixels' must be in 8..16384");
     }
     auto& o = m_common.options;
     o.max_reach = static_cast<uint32_t>(m_max_reach);
@@ -220,6 +227,7 @@ int SimplifyStage::run(const StageContext& ctx)
     RasterOptions ropt;
     ropt.metric = o.metric;
     ropt.compliance = m_compliance == "ssbo" ? Compliance::ssbo : Compliance::readback;
+    ropt.window_pixels = static_cast<uint32_t>(m_window_pixels);
     ropt.max_tile_pixels = o.color.tile_pixels;
     ropt.margin_px = 1.0;
     Raster raster(*context, ropt);
@@ -342,6 +350,7 @@ int SimplifyStage::run(const StageContext& ctx)
                          {"compliance", m_compliance},
                          {"pixel_fraction", o.color.pixel_fraction},
                          {"tile_pixels", o.color.tile_pixels},
+                         {"window_pixels", m_window_pixels},
                          {"max_classes", o.color.max_classes},
                          {"threads", o.threads}};
     json tols = json::array();

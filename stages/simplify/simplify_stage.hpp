@@ -29,6 +29,7 @@ class SimplifyStage final : public Stage {
     bool m_exhaustive = false;
     bool m_no_point_constraints = false;
     int m_max_reach = 0;
+    int m_window_pixels = 1024;
 }; // class SimplifyStage
 
 /// Read user point constraints: GeoJSON (Point / MultiPoint features) or CSV

@@ -65,10 +65,16 @@ struct MapBuilder {
     }
 };
 
-/// One OSMesa context and raster engine per mode, shared by the tests.
-Raster& raster(Compliance mode = Compliance::ssbo, Metric metric = Metric::l2)
+/// The OSMesa context of the tests: one, current on the tests' thread.
+gl::Context& context()
 {
     static std::unique_ptr<gl::Context> ctx = gl::Context::create(gl::Backend::osmesa);
+    return *ctx;
+}
+
+/// One raster engine per mode, shared by the tests.
+Raster& raster(Compliance mode = Compliance::ssbo, Metric metric = Metric::l2)
+{
     static std::map<std::pair<int, int>, std::unique_ptr<Raster>> engines;
     auto& r = engines[{int(mode), int(metric)}];
     if (!r) {
@@ -76,7 +82,7 @@ Raster& raster(Compliance mode = Compliance::ssbo, Metric metric = Metric::l2)
         o.compliance = mode;
         o.metric = metric;
         o.max_tile_pixels = 1024;
-        r = std::make_unique<Raster>(*ctx, o);
+        r = std::make_unique<Raster>(context(), o);
     }
     return *r;
 }
@@ -737,6 +743,34 @@ TEST(Simplify, DrawingOnlyTheNearPartsChangesNothing)
         EXPECT_EQ(clipped.drawn_segments, full.drawn_segments) << "eps " << eps;
         EXPECT_LT(clipped.drawn_pixels, full.drawn_pixels) << "eps " << eps;
     }
+}
+
+TEST(Simplify, TheSmallFramebufferChangesNothing)
+{
+    // Tiles of 1024 pixels; with a small framebuffer of 64, the tiles whose
+    // tested parts fit in 64 x 64 pixels are drawn there, shifted (the
+    // star's), the others in the large one (the wiggly grid's, where the
+    // raster bans shortcuts).
+    RasterOptions one, two;
+    one.max_tile_pixels = two.max_tile_pixels = 1024;
+    one.window_pixels = 1024;
+    two.window_pixels = 64;
+    Raster large(context(), one), small(context(), two);
+    size_t banned = 0;
+    for (const auto& map : {star_map(), wiggly_map()}) {
+        for (double eps : {0.3, 0.6, 1.2}) {
+            ToleranceStats sa, sb;
+            const auto a = simplify_store(map, eps, plain(), large, nullptr, sa);
+            const auto b = simplify_store(map, eps, plain(), small, nullptr, sb);
+            EXPECT_EQ(chains::to_text(a), chains::to_text(b)) << "eps " << eps;
+            EXPECT_EQ(sa.banned_raster, sb.banned_raster) << "eps " << eps;
+            banned += sa.banned_raster;
+        }
+    }
+    EXPECT_GT(banned, 0U) << "the raster must have had something to find";
+    EXPECT_EQ(large.stats().small_boxes, 0U);
+    EXPECT_GT(small.stats().small_boxes, 0U) << "no tile was drawn in the small framebuffer";
+    EXPECT_LT(small.stats().small_boxes, small.stats().tiles) << "every tile fit: the large one went untested";
 }
 
 TEST(Color, DsaturColoursAnOddCycleWithThreeAndFailsWithTwo)

@@ -147,7 +147,11 @@ TEST(SimplifyReal, FloydIsByteIdenticalAcrossThreadCountsAndModes)
     const auto stores = ingest_floyd();
     auto ctx = gl::Context::create(gl::Backend::osmesa);
     Raster raster(*ctx, RasterOptions{});
-    auto all = [&](unsigned threads, bool lazy, bool clip = true) {
+    RasterOptions one_framebuffer, tiny;
+    one_framebuffer.window_pixels = one_framebuffer.max_tile_pixels;
+    tiny.window_pixels = 64;
+    Raster raster_one(*ctx, one_framebuffer), raster_tiny(*ctx, tiny);
+    auto all = [&](unsigned threads, bool lazy, bool clip = true, Raster* engine = nullptr) {
         SimplifyOptions opt;
         opt.threads = threads;
         opt.lazy = lazy;
@@ -158,7 +162,7 @@ TEST(SimplifyReal, FloydIsByteIdenticalAcrossThreadCountsAndModes)
                 continue;
             }
             ToleranceStats st;
-            bytes += chains::encode(simplify_store(s, 16.0, opt, raster, nullptr, st));
+            bytes += chains::encode(simplify_store(s, 16.0, opt, engine ? *engine : raster, nullptr, st));
         }
         return bytes;
     };
@@ -166,4 +170,9 @@ TEST(SimplifyReal, FloydIsByteIdenticalAcrossThreadCountsAndModes)
     EXPECT_EQ(one, all(2, false));
     EXPECT_EQ(one, all(2, true));
     EXPECT_EQ(one, all(2, false, false)) << "drawing whole shortcuts, not their near parts";
+    EXPECT_EQ(one, all(2, true, true, &raster_one)) << "every tile in the large framebuffer";
+    EXPECT_EQ(one, all(2, true, true, &raster_tiny)) << "a small framebuffer of 64 pixels";
+    EXPECT_GT(raster.stats().small_boxes, 0U);
+    EXPECT_GT(raster_tiny.stats().small_boxes, 0U);
+    EXPECT_EQ(raster_one.stats().small_boxes, 0U);
 }
