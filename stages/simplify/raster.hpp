@@ -29,7 +29,13 @@ struct RasterOptions {
     /// flush for every 64-pixel bin of the framebuffer, and most boxes are small.
     uint32_t window_pixels = 1024;   ///< the small framebuffer's width and height
     uint32_t max_tile_pixels = 4096; ///< the largest tile: the large framebuffer's size
-    double margin_px = 1.0; ///< tents' quads reach this far beyond eps (pixels); the reset pass covers the same quads
+    /// Tents' quads reach this far beyond eps (pixels): every pixel centre
+    /// within eps is inside, with room for the float rounding of the
+    /// corners (a few units in the last place: under 0.1 pixel for endpoints
+    /// 2^17 pixels away, a 33 km segment at eps 1 m). The reset pass covers
+    /// the same quads. It was 1 pixel: 0.25 left every store of the tract
+    /// and contour ladders the same, and both ran 5-6% faster.
+    double margin_px = 0.25;
     double endpoint_margin_px = 1.5; ///< fragments this close to a shortcut's ends are not tested
 };
 

@@ -229,7 +229,6 @@ int SimplifyStage::run(const StageContext& ctx)
     ropt.compliance = m_compliance == "ssbo" ? Compliance::ssbo : Compliance::readback;
     ropt.window_pixels = static_cast<uint32_t>(m_window_pixels);
     ropt.max_tile_pixels = o.color.tile_pixels;
-    ropt.margin_px = 1.0;
     Raster raster(*context, ropt);
     ctx.log.info("simplify: " + std::to_string(stores.size()) + " stores, " + context->describe() +
                  (llvmpipe_inline ? " (LP_NUM_THREADS=0: every core has a worker)" : ""));
