@@ -104,6 +104,7 @@ layout(location = 2) in vec2 a_clip; // the part drawn: t0, t1 along a_seg
 layout(location = 3) in float a_corner; // 0, 1 at a; 2, 3 at b; even: left
 uniform vec2 u_size;
 uniform vec2 u_origin;
+uniform uint u_id_base; // the tile's first flag in the batch
 uniform float u_half_width;
 flat out vec4 v_seg;
 flat out uint v_id;
@@ -118,7 +119,7 @@ void main() {
     // depths are below 1 / 1.001, the background is 1).
     gl_Position = vec4(p / u_size * 2.0 - 1.0, 0.999, 1.0);
     v_seg = vec4(a, b);
-    v_id = a_id;
+    v_id = a_id + u_id_base;
 }
 )";
 
@@ -162,6 +163,31 @@ struct TestInstance {
     uint32_t id;
     float t0, t1;
 };
+
+} // namespace
+
+/// What Raster::draw uploads and draws for a tile.
+struct PreparedTile::Data {
+    std::vector<TentInstance> inst;                                              ///< tents, by class
+    std::vector<std::pair<uint8_t, std::pair<GLuint, GLsizei>>> ranges, sranges; ///< class -> (first, count)
+    std::vector<TestInstance> sorted;           ///< test parts by class, id = their index
+    std::vector<uint32_t> ids;                  ///< the caller's id of each of them
+    int64_t sx0 = 0, sy0 = 0, sx1 = 0, sy1 = 0; ///< the box of the tested parts' cells, in tile pixels
+    double eps_max = 0;                         ///< pixels
+    size_t tent_segments = 0, tent_skipped = 0;
+    double drawn_pixels = 0;
+};
+
+PreparedTile::PreparedTile() : m(std::make_unique<Data>()) {}
+PreparedTile::~PreparedTile() = default;
+PreparedTile::PreparedTile(PreparedTile&&) noexcept = default;
+PreparedTile& PreparedTile::operator=(PreparedTile&&) noexcept = default;
+size_t PreparedTile::parts() const noexcept
+{
+    return m ? m->ids.size() : 0;
+}
+
+namespace {
 
 /// A quad is four vertices that carry the item and their corner, drawn as
 /// two indexed triangles: one non-instanced draw, which Mesa's draw module
@@ -229,7 +255,6 @@ struct Raster::Impl {
     /// (max_tile_pixels) if larger: a tile's box is drawn in the smallest
     /// that holds it.
     std::vector<Target> targets;
-    std::vector<uint8_t> near; ///< per cell of a tile: a tested part may have fragments there
     std::vector<QuadVertex<TentInstance>> tent_vertices;
     bool batching = false;           ///< between begin_batch and end_batch
     size_t batch_capacity = 0;       ///< flags allocated for the batch
@@ -399,23 +424,16 @@ Raster::~Raster()
     }
 }
 
-void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, std::span<const TestSegment> segs,
-                      std::vector<uint8_t>& fails)
+PreparedTile Raster::prepare(const TileSpec& tile, std::span<const TentChain> tents,
+                             std::span<const TestSegment> segs) const
 {
-    auto& I = *m_impl;
-    const auto& gl = I.gl;
-    ++m_stats.tiles;
-    // Outside a batch, the tile is a batch of its own.
-    const bool own_batch = !I.batching;
-    if (own_batch) {
-        begin_batch(segs.size());
-    }
+    PreparedTile out;
+    auto& d = *out.m;
     const double inv = 1.0 / tile.pixel;
     auto px = [&](GridPoint p, float& x, float& y) {
         x = static_cast<float>((double(p.x) - tile.x0) * inv);
         y = static_cast<float>((double(p.y) - tile.y0) * inv);
     };
-    const auto t0 = std::chrono::steady_clock::now();
 
     // Cells (of kCell pixels) that a tested part's fragments can fall in.
     // Only the tents reaching one of them are drawn: every tent covering a
@@ -424,7 +442,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     constexpr double kCell = 8;
     const auto cw = static_cast<int64_t>(std::ceil(tile.width / kCell)),
                ch = static_cast<int64_t>(std::ceil(tile.height / kCell));
-    I.near.assign(size_t(cw * ch), 0);
+    std::vector<uint8_t> near(size_t(cw * ch), 0);
     auto in_grid = [&](int64_t x, int64_t y) { return x >= 0 && y >= 0 && x < cw && y < ch; };
     std::vector<TestInstance> tinst(segs.size());
     int64_t near_x0 = cw, near_y0 = ch, near_x1 = -1, near_y1 = -1; // the marked cells' box
@@ -436,7 +454,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         ti.t0 = sg.t0;
         ti.t1 = sg.t1;
         const double dx = double(ti.bx) - ti.ax, dy = double(ti.by) - ti.ay;
-        m_stats.drawn_pixels += std::hypot(dx, dy) * (double(sg.t1) - sg.t0);
+        d.drawn_pixels += std::hypot(dx, dy) * (double(sg.t1) - sg.t0);
         cover_cells(ti.ax + sg.t0 * dx, ti.ay + sg.t0 * dy, ti.ax + sg.t1 * dx, ti.ay + sg.t1 * dy, 2.0, kCell, 0.0,
                     0.0, [&](int64_t x, int64_t y) {
                         if (in_grid(x, y)) {
@@ -444,7 +462,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
                             near_y0 = std::min(near_y0, y);
                             near_x1 = std::max(near_x1, x);
                             near_y1 = std::max(near_y1, y);
-                            I.near[size_t(y * cw + x)] = 1;
+                            near[size_t(y * cw + x)] = 1;
                         }
                     });
     }
@@ -466,7 +484,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         const double ux = len > 0 ? dx / len : 1.0, uy = len > 0 ? dy / len : 0.0;
         double s_min = INFINITY, s_max = -INFINITY; // along the segment from a, over the marked cells' corners
         cover_cells(ti.ax, ti.ay, ti.bx, ti.by, r, kCell, 0.0, 0.0, [&](int64_t x, int64_t y) {
-            if (!in_grid(x, y) || I.near[size_t(y * cw + x)] == 0) {
+            if (!in_grid(x, y) || near[size_t(y * cw + x)] == 0) {
                 return;
             }
             for (const int64_t cx : {x, x + 1}) {
@@ -502,19 +520,18 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         order[i] = i;
     }
     std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return tents[a].cls < tents[b].cls; });
-    std::vector<TentInstance> inst;
-    std::vector<std::pair<uint8_t, std::pair<GLuint, GLsizei>>> ranges; // class -> (first, count)
-    double eps_max = 0;
+    auto& inst = d.inst;
+    auto& ranges = d.ranges; // class -> (first, count)
     for (uint32_t i : order) {
         const auto& t = tents[i];
         const auto eps_px = static_cast<float>(t.eps * inv);
-        eps_max = std::max(eps_max, double(eps_px));
+        d.eps_max = std::max(d.eps_max, double(eps_px));
         const auto first = static_cast<GLuint>(inst.size());
         // The tent's quad reaches eps (times the metric's L2 reach) plus the margin.
         const double reach = double(eps_px) * l2_reach(m_opt.metric) + m_opt.margin_px + 1.0;
         for (size_t k = 0; k + 1 < t.points.size(); ++k) {
             if (!takes_part(t.keep, k)) {
-                ++m_stats.tent_segments_skipped;
+                ++d.tent_skipped;
                 continue;
             }
             TentInstance ti{};
@@ -524,7 +541,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
             if (reaches_test(ti, reach)) {
                 inst.push_back(ti);
             } else {
-                ++m_stats.tent_segments_skipped;
+                ++d.tent_skipped;
             }
         }
         if (inst.size() == first) {
@@ -537,7 +554,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
             ranges.push_back({t.cls, {first, count}});
         }
     }
-    m_stats.tent_segments += inst.size();
+    d.tent_segments = inst.size();
     const auto w = static_cast<int64_t>(tile.width), h = static_cast<int64_t>(tile.height);
     // Every pass is clipped to the box of the marked cells: no tested
     // fragment falls outside it, so what is drawn there cannot change a
@@ -545,52 +562,69 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     // not with what is drawn: at 1 m on the tract set (178 k tiles of 4096
     // pixels, most with a few short shortcuts) the compliance step took 9.1 s
     // of CPU without the box and 4.3 s with it.
-    const int64_t sx0 = std::clamp<int64_t>(near_x0 * int64_t(kCell), 0, w),
-                  sy0 = std::clamp<int64_t>(near_y0 * int64_t(kCell), 0, h);
-    const int64_t sx1 = std::max(sx0, std::clamp<int64_t>((near_x1 + 1) * int64_t(kCell), 0, w));
-    const int64_t sy1 = std::max(sy0, std::clamp<int64_t>((near_y1 + 1) * int64_t(kCell), 0, h));
+    d.sx0 = std::clamp<int64_t>(near_x0 * int64_t(kCell), 0, w);
+    d.sy0 = std::clamp<int64_t>(near_y0 * int64_t(kCell), 0, h);
+    d.sx1 = std::max(d.sx0, std::clamp<int64_t>((near_x1 + 1) * int64_t(kCell), 0, w));
+    d.sy1 = std::max(d.sy0, std::clamp<int64_t>((near_y1 + 1) * int64_t(kCell), 0, h));
 
-    // Tent instances and test instances, uploaded once for all windows.
+    // Test instances by class, numbered in drawing order.
     std::vector<uint32_t> sorder(segs.size());
     for (uint32_t i = 0; i < sorder.size(); ++i) {
         sorder[i] = i;
     }
     std::stable_sort(sorder.begin(), sorder.end(), [&](uint32_t a, uint32_t b) { return segs[a].cls < segs[b].cls; });
-    const bool ssbo = m_opt.compliance == Compliance::ssbo;
-    const size_t base = ssbo ? I.batch_ids.size() : 0;
-    if (ssbo && base + segs.size() > I.batch_capacity) {
-        throw std::logic_error("more shortcut parts than the batch was begun for");
-    }
-    std::vector<TestInstance> sorted(segs.size());
-    std::vector<std::pair<uint8_t, std::pair<GLuint, GLsizei>>> sranges;
+    d.sorted.resize(segs.size());
+    d.ids.resize(segs.size());
     for (uint32_t k = 0; k < sorder.size(); ++k) {
-        const auto& s = segs[sorder[k]];
-        sorted[k] = tinst[sorder[k]];
-        sorted[k].id = static_cast<uint32_t>(base + k); // flag index; mapped back below
-        if (!sranges.empty() && sranges.back().first == s.cls) {
-            ++sranges.back().second.second;
+        const auto& sg = segs[sorder[k]];
+        d.sorted[k] = tinst[sorder[k]];
+        d.sorted[k].id = k; // plus the batch's base: the flag's index
+        d.ids[k] = sg.id;
+        if (!d.sranges.empty() && d.sranges.back().first == sg.cls) {
+            ++d.sranges.back().second.second;
         } else {
-            sranges.push_back({s.cls, {k, 1}});
+            d.sranges.push_back({sg.cls, {k, 1}});
         }
     }
-    m_stats.drawn_segments += segs.size();
+    return out;
+}
+
+void Raster::draw(const PreparedTile& prepared, std::vector<uint8_t>& fails)
+{
+    auto& I = *m_impl;
+    const auto& gl = I.gl;
+    const auto& d = *prepared.m;
+    // Outside a batch, the tile is a batch of its own.
+    const bool own_batch = !I.batching;
+    if (own_batch) {
+        begin_batch(d.ids.size());
+    }
+    const bool ssbo = m_opt.compliance == Compliance::ssbo;
+    const size_t base = ssbo ? I.batch_ids.size() : 0;
+    if (ssbo && base + d.ids.size() > I.batch_capacity) {
+        throw std::logic_error("more shortcut parts than the batch was begun for");
+    }
+    ++m_stats.tiles;
+    m_stats.drawn_segments += d.ids.size();
+    m_stats.drawn_pixels += d.drawn_pixels;
+    m_stats.tent_segments += d.tent_segments;
+    m_stats.tent_segments_skipped += d.tent_skipped;
     if (ssbo) {
         // The flags land in the batch's buffer, read back once by end_batch:
         // no wait per tile.
-        for (uint32_t k = 0; k < sorder.size(); ++k) {
-            I.batch_ids.push_back(segs[sorder[k]].id);
-        }
+        I.batch_ids.insert(I.batch_ids.end(), d.ids.begin(), d.ids.end());
     }
+    const auto t0 = std::chrono::steady_clock::now();
     gl.BindVertexArray(I.vao_tent);
     gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_tent);
-    I.upload_quads(inst, I.tent_vertices);
+    I.upload_quads(d.inst, I.tent_vertices);
     gl.BindVertexArray(I.vao_test);
     gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_test);
-    I.upload_quads(sorted, I.test_vertices);
+    I.upload_quads(d.sorted, I.test_vertices);
     std::vector<uint8_t> removed; // Algorithm 5.1: the segments seen failing
     std::vector<uint8_t> pixels;
     if (!ssbo) {
-        removed.assign(segs.size(), 0);
+        removed.assign(d.ids.size(), 0);
     }
     m_stats.voronoi_seconds += seconds_since(t0);
 
@@ -601,8 +635,8 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     // grows with the framebuffer's area (it walks every 64-pixel bin of it
     // under a lock), and the batches of small boxes that most tiles have
     // are flushed often.
-    if (sx1 > sx0 && sy1 > sy0) {
-        const int64_t ox = sx0, oy = sy0, ex = sx1, ey = sy1;
+    if (d.sx1 > d.sx0 && d.sy1 > d.sy0) {
+        const int64_t ox = d.sx0, oy = d.sy0, ex = d.sx1, ey = d.sy1;
         size_t target = 0;
         while (target + 1 < I.targets.size() &&
                (ex - ox > I.targets[target].size || ey - oy > I.targets[target].size)) {
@@ -635,7 +669,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
 
         // Step 1: lower envelope of the distance tents; the stencil gets the class.
         use_tent_quads(I.tent_prog, 0.0f);
-        gl.Uniform1f(I.loc(I.tent_prog, "u_depth_scale"), float(eps_max * 1.001 + 1e-6));
+        gl.Uniform1f(I.loc(I.tent_prog, "u_depth_scale"), float(d.eps_max * 1.001 + 1e-6));
         gl.BindVertexArray(I.vao_tent);
         gl.Enable(GL_DEPTH_TEST);
         gl.DepthFunc(GL_LESS);
@@ -643,7 +677,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         gl.ColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
         gl.StencilMask(0xFF);
         gl.StencilOp(GL_KEEP, GL_KEEP, GL_REPLACE);
-        for (const auto& [cls, range] : ranges) {
+        for (const auto& [cls, range] : d.ranges) {
             gl.StencilFunc(GL_ALWAYS, cls, 0xFF);
             draw_quads(gl, range.first, size_t(range.second));
         }
@@ -666,13 +700,14 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         gl.Uniform2f(I.loc(I.test_prog, "u_origin"), fx, fy);
         gl.Uniform1f(I.loc(I.test_prog, "u_half_width"), 0.5f);
         gl.Uniform1f(I.loc(I.test_prog, "u_end_margin"), float(m_opt.endpoint_margin_px));
+        gl.Uniform1ui(I.loc(I.test_prog, "u_id_base"), static_cast<GLuint>(base));
         gl.BindVertexArray(I.vao_test);
-        if (!segs.empty() && ssbo) {
-            for (const auto& [cls, range] : sranges) {
+        if (!d.ids.empty() && ssbo) {
+            for (const auto& [cls, range] : d.sranges) {
                 gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
                 draw_quads(gl, range.first, size_t(range.second));
             }
-        } else if (!segs.empty()) {
+        } else if (!d.ids.empty()) {
             // Algorithm 5.1: unique colours, read back, drop the colours
             // seen, repeat until nothing changes (a segment may hide another).
             gl.ColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
@@ -680,7 +715,7 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
             for (;;) {
                 ++m_stats.readback_rounds;
                 gl.Clear(GL_COLOR_BUFFER_BIT);
-                for (const auto& [cls, range] : sranges) {
+                for (const auto& [cls, range] : d.sranges) {
                     gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
                     for (GLuint k = range.first; k < range.first + GLuint(range.second); ++k) {
                         if (!removed[k]) {
@@ -718,15 +753,15 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
         gl.StencilMask(0xFF);
         gl.StencilFunc(GL_ALWAYS, 0, 0xFF);
         gl.StencilOp(GL_REPLACE, GL_REPLACE, GL_REPLACE);
-        if (!inst.empty()) {
-            draw_quads(gl, 0, inst.size());
+        if (!d.inst.empty()) {
+            draw_quads(gl, 0, d.inst.size());
         }
         m_stats.voronoi_seconds += seconds_since(t2);
     }
     gl.Disable(GL_SCISSOR_TEST);
     for (uint32_t k = 0; k < removed.size(); ++k) {
         if (removed[k]) {
-            fails[segs[sorder[k]].id] = 1;
+            fails[d.ids[k]] = 1;
         }
     }
     const GLenum err = gl.GetError();
@@ -737,6 +772,12 @@ void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, st
     if (own_batch) {
         end_batch(fails);
     }
+}
+
+void Raster::run_tile(const TileSpec& tile, std::span<const TentChain> tents, std::span<const TestSegment> segs,
+                      std::vector<uint8_t>& fails)
+{
+    draw(prepare(tile, tents, segs), fails);
 }
 
 void Raster::begin_batch(size_t parts)

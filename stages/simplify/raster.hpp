@@ -14,6 +14,7 @@
 #include "stages/simplify/metric.hpp"
 
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <vector>
 
@@ -70,6 +71,22 @@ struct RasterStats {
     double compliance_seconds = 0;
 };
 
+/// A tile's geometry ready for the GPU, computed without OpenGL, so on any
+/// thread: Raster::prepare, then Raster::draw on the GL thread.
+class PreparedTile {
+  public:
+    PreparedTile();
+    ~PreparedTile();
+    PreparedTile(PreparedTile&&) noexcept;
+    PreparedTile& operator=(PreparedTile&&) noexcept;
+    size_t parts() const noexcept; ///< the test segments it holds
+
+  private:
+    friend class Raster;
+    struct Data;
+    std::unique_ptr<Data> m;
+}; // class PreparedTile
+
 class Raster {
   public:
     /// Compiles the shaders and makes the framebuffer. Throws environment_error.
@@ -85,6 +102,14 @@ class Raster {
     /// exact where it is read, and its cost follows the tested geometry.
     void run_tile(const TileSpec& tile, std::span<const TentChain> tents, std::span<const TestSegment> segs,
                   std::vector<uint8_t>& fails);
+    /// run_tile's work without OpenGL (the cells near the tested parts, the
+    /// tents that reach them, the instances by class): thread-safe, so the
+    /// GL thread is left only the drawing. run_tile = draw(prepare(...)).
+    PreparedTile prepare(const TileSpec& tile, std::span<const TentChain> tents,
+                         std::span<const TestSegment> segs) const;
+    /// Draws a prepared tile: sets fails[seg.id] = 1 for each failing segment
+    /// (inside a batch: at end_batch).
+    void draw(const PreparedTile& tile, std::vector<uint8_t>& fails);
 
     /// Batches the tiles run until end_batch, holding at most `parts` test
     /// segments in all: with the storage-buffer compliance their flags are

@@ -634,21 +634,30 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         for (const auto& p : per_tile) {
             parts_in_all += p.size();
         }
+        // What the tiles draw is worked out here, on this store's worker;
+        // the GL thread, which every worker shares, only draws it.
+        std::vector<uint32_t> drawn_tiles;
+        for (uint32_t t = 0; t < per_tile.size(); ++t) {
+            if (!per_tile[t].empty()) {
+                drawn_tiles.push_back(t);
+            }
+        }
+        std::vector<PreparedTile> prepared(drawn_tiles.size());
+        parallel_each(drawn_tiles.size(), opt.threads, [&](size_t i) {
+            const auto& tile = colors->tiles[drawn_tiles[i]];
+            std::vector<TentChain> tents(tile.chains.size());
+            for (size_t m = 0; m < tile.chains.size(); ++m) {
+                const auto& c = store.chains[tile.chains[m]];
+                tents[m] = {store.chain_points(c), eps[tile.chains[m]], tile.classes[m], keep_of(keep, c)};
+            }
+            prepared[i] = raster.prepare(tile.spec, tents, per_tile[drawn_tiles[i]]);
+        });
         RasterStats before, after;
         auto gl_work = [&] {
             before = raster.stats();
             raster.begin_batch(parts_in_all);
-            for (uint32_t t = 0; t < per_tile.size(); ++t) {
-                if (per_tile[t].empty()) {
-                    continue;
-                }
-                const auto& tile = colors->tiles[t];
-                std::vector<TentChain> tents(tile.chains.size());
-                for (size_t m = 0; m < tile.chains.size(); ++m) {
-                    const auto& c = store.chains[tile.chains[m]];
-                    tents[m] = {store.chain_points(c), eps[tile.chains[m]], tile.classes[m], keep_of(keep, c)};
-                }
-                raster.run_tile(tile.spec, tents, per_tile[t], fails);
+            for (const auto& p : prepared) {
+                raster.draw(p, fails);
             }
             raster.end_batch(fails);
             after = raster.stats();
