@@ -75,6 +75,9 @@ gl::Context& context()
 /// One raster engine per mode, shared by the tests.
 Raster& raster(Compliance mode = Compliance::ssbo, Metric metric = Metric::l2)
 {
+    // The context first: statics are destroyed in reverse order, so the
+    // engines go before the context they use.
+    gl::Context& ctx = context();
     static std::map<std::pair<int, int>, std::unique_ptr<Raster>> engines;
     auto& r = engines[{int(mode), int(metric)}];
     if (!r) {
@@ -82,7 +85,7 @@ Raster& raster(Compliance mode = Compliance::ssbo, Metric metric = Metric::l2)
         o.compliance = mode;
         o.metric = metric;
         o.max_tile_pixels = 1024;
-        r = std::make_unique<Raster>(context(), o);
+        r = std::make_unique<Raster>(ctx, o);
     }
     return *r;
 }
