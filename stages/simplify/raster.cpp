@@ -50,7 +50,7 @@ layout(location = 1) in float a_eps; // pixels
 layout(location = 2) in vec2 a_clip; // the part of the segment whose quad is drawn: t0, t1
 layout(location = 3) in float a_corner; // 0, 1 at a; 2, 3 at b; even: left
 uniform vec2 u_size;
-uniform vec2 u_origin; // the window's corner in tile pixels (integers)
+uniform vec2 u_origin; // the drawn box's corner in tile pixels (integers)
 uniform float u_reach;
 uniform float u_pad;
 uniform float u_z; // 0 for the tents (their fragments set the depth); 1 to reset
@@ -181,10 +181,6 @@ PreparedTile::PreparedTile() : m(std::make_unique<Data>()) {}
 PreparedTile::~PreparedTile() = default;
 PreparedTile::PreparedTile(PreparedTile&&) noexcept = default;
 PreparedTile& PreparedTile::operator=(PreparedTile&&) noexcept = default;
-size_t PreparedTile::parts() const noexcept
-{
-    return m ? m->ids.size() : 0;
-}
 
 namespace {
 

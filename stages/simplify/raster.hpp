@@ -79,7 +79,6 @@ class PreparedTile {
     ~PreparedTile();
     PreparedTile(PreparedTile&&) noexcept;
     PreparedTile& operator=(PreparedTile&&) noexcept;
-    size_t parts() const noexcept; ///< the test segments it holds
 
   private:
     friend class Raster;
@@ -89,7 +88,7 @@ class PreparedTile {
 
 class Raster {
   public:
-    /// Compiles the shaders and makes the framebuffer. Throws environment_error.
+    /// Compiles the shaders and makes the framebuffers. Throws environment_error.
     Raster(gl::Context& ctx, const RasterOptions& opt);
     ~Raster();
     Raster(const Raster&) = delete;
