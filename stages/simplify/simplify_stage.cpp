@@ -46,7 +46,8 @@ void SimplifyStage::add_args(ArgSet& args)
     args.add("gl", &m_gl, "OpenGL backend: osmesa (llvmpipe, everywhere) or egl (a GPU, or Mesa's device)", "NAME");
     args.add("window-pixels", &m_window_pixels,
              "the small framebuffer's width and height (8..16384): a tile whose tested parts fit in it\n"
-             "      is drawn there, the others in one of --tile-pixels; the result does not depend on it",
+             "      is drawn there, the others in one of --tile-pixels (stores measured identical from 64\n"
+             "      to 4096)",
              "N");
     args.add("colors", &m_colors, "use the tiles and classes tigerlod-color wrote to DIR instead of computing them",
              "DIR");
