@@ -258,7 +258,8 @@ struct Raster::Impl {
     /// to batch). llvmpipe flushes its scene when a buffer the scene writes
     /// is bound again, and Mesa binds the storage buffers again at every
     /// change of program: with one buffer for the batch, every tile's test
-    /// pass flushed (4,279 flushes for 805 batches on the tract level at 16 m).
+    /// pass flushed (tract level at 16 m, one framebuffer: 4,289 fences for
+    /// 4,279 tiles in 805 batches).
     std::vector<GLuint> flag_buffers;
     std::vector<size_t> tile_flags; ///< per tile of the batch, its first flag; then the count
     std::vector<uint32_t> zeros;
