@@ -39,6 +39,15 @@ class Candidates {
             m_runs.push_back({from, to, to});
         }
     }
+    /// Appends shortcuts from -> lo, ..., from -> hi; calls come in (from, to) order.
+    void add_run(uint32_t from, uint32_t lo, uint32_t hi)
+    {
+        if (!m_runs.empty() && m_runs.back().from == from && m_runs.back().hi + 1 == lo) {
+            m_runs.back().hi = hi;
+        } else {
+            m_runs.push_back({from, lo, hi});
+        }
+    }
     /// Ends the list for a chain of `n` vertices; add() may not follow.
     void finish(uint32_t n);
 
@@ -85,6 +94,17 @@ class Candidates {
 /// test runs only for ends near the wedge's edges or beyond the farthest
 /// intermediate vertex.
 Candidates proximate_shortcuts(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach);
+
+/// Which code proximate_shortcuts runs: `fastest` takes four starts at once
+/// on x86-64 processors with AVX2, for L2 where every coordinate difference
+/// of the chain is under 2^26, and the scalar scan elsewhere; `scalar`
+/// always the scalar scan. Both give the same shortcuts (the same IEEE
+/// operations in the same order); `scalar` is there so tests can compare.
+enum class ScanKernel { fastest, scalar };
+/// What `fastest` runs on this processor: "avx2" or "scalar".
+const char* fastest_scan_kernel() noexcept;
+Candidates proximate_shortcuts(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach,
+                               ScanKernel kernel);
 
 /// Point constraints (Algorithm 5.2, exact): the ids of the shortcuts whose
 /// region between them and the original subchain holds one of `points`

@@ -242,6 +242,56 @@ TEST(Candidates, MatchBruteForceOnRandomChains)
     }
 }
 
+TEST(Candidates, TheFastestKernelFindsWhatTheScalarScanFinds)
+{
+    // Four starts at once against one at a time, run for run: chains of every
+    // length around the lane count, long straight stretches (long runs),
+    // sharp turns and repeated points (gaps in runs, ends equal to the
+    // start), a ring, tolerances from tiny to wide, with and without a reach.
+    std::printf("fastest scan kernel here: %s\n", fastest_scan_kernel());
+    std::mt19937 rng(23);
+    size_t compared = 0, with_gaps = 0;
+    for (int trial = 0; trial < 600; ++trial) {
+        Pts pts;
+        const int n = trial < 40 ? trial % 10 + 1 : 10 + static_cast<int>(rng() % 300);
+        std::uniform_int_distribution<int> step(-40, 100), turn(0, 9);
+        GridPoint p{static_cast<int32_t>(rng() % 1000), static_cast<int32_t>(rng() % 1000)};
+        for (int i = 0; i < n; ++i) {
+            pts.push_back(p);
+            switch (turn(rng)) {
+            case 0:
+                break; // a repeated point
+            case 1:
+                p = {p.x - 3 * step(rng), p.y + step(rng)}; // back
+                break;
+            default:
+                p = {p.x + step(rng) + 60, p.y + step(rng) / 4};
+            }
+        }
+        if (trial % 7 == 0 && n > 3) {
+            pts.push_back(pts.front()); // a ring
+        }
+        const Tolerance tol(double(1 + trial % 9 * 15), Metric::l2);
+        const uint32_t reach = trial % 4 == 0 ? static_cast<uint32_t>(2 + trial % 11) : 0;
+        const auto fast = proximate_shortcuts(pts, tol, reach, ScanKernel::fastest);
+        const auto slow = proximate_shortcuts(pts, tol, reach, ScanKernel::scalar);
+        ASSERT_EQ(fast.runs().size(), slow.runs().size()) << "trial " << trial;
+        for (size_t r = 0; r < fast.runs().size(); ++r) {
+            EXPECT_EQ(fast.runs()[r].from, slow.runs()[r].from) << "trial " << trial << " run " << r;
+            EXPECT_EQ(fast.runs()[r].lo, slow.runs()[r].lo) << "trial " << trial << " run " << r;
+            EXPECT_EQ(fast.runs()[r].hi, slow.runs()[r].hi) << "trial " << trial << " run " << r;
+        }
+        EXPECT_EQ(fast.list(), slow.list()) << "trial " << trial;
+        for (size_t r = 1; r < slow.runs().size(); ++r) {
+            with_gaps += slow.runs()[r].from == slow.runs()[r - 1].from;
+        }
+        compared += slow.size();
+    }
+    // The cases above must have made what they are there for.
+    EXPECT_GT(compared, 20000U);
+    EXPECT_GT(with_gaps, 50U);
+}
+
 TEST(Candidates, RunsNumberTheShortcutsInOrder)
 {
     // A straight stretch 0..4 then a right-angle turn: from 0 every end up
