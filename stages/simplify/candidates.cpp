@@ -132,6 +132,20 @@ std::vector<Shortcut> Candidates::list() const
 
 namespace {
 
+/// The constants of the wedge, for both scans (scan<> and scan_lanes must
+/// compute alike). One wedge, without trigonometry: every constraint's
+/// half-angle widened by `slack` (outside it: surely not proximate; empty:
+/// stop). An end at least 2 x slack inside it is inside every exact
+/// constraint (its neighbourhood of that angle lies in the wedge, so in
+/// every widened arc): with no vertex beyond it, proximate without the exact test.
+struct WedgeConstants {
+    static constexpr double slack = 1e-9; // radians; far above the double error of the rotations
+    explicit WedgeConstants(int128 reps2) : r_eps(std::sqrt(double(reps2))) {}
+    double r_eps; ///< the L2 radius of the metric's ball
+    double cos_s = std::cos(slack), sin_s = std::sin(slack);
+    double deep2 = std::pow(std::sin(2 * slack), 2); ///< squared sine of 2 x slack
+};
+
 /// The scan of proximate_shortcuts with squared lengths in `Wide`: int64_t
 /// when every coordinate difference of the chain is under 2^31 (so a
 /// squared length fits; 21,000 km on a 1 cm grid), int128 otherwise. The
@@ -141,15 +155,8 @@ void scan(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_rea
 {
     const auto n = static_cast<uint32_t>(pts.size());
     const auto wide_reps2 = static_cast<Wide>(reps2); // fits: checked by the caller
-    const double r_eps = std::sqrt(double(reps2));
-    // One wedge, without trigonometry: every constraint's half-angle widened
-    // by `slack` (outside it: surely not proximate; empty: stop). An end at
-    // least 2 x slack inside it is inside every exact constraint (its
-    // neighbourhood of that angle lies in the wedge, so in every widened
-    // arc): with no vertex beyond it, proximate without the exact test.
-    constexpr double slack = 1e-9; // radians; far above the double error of the rotations
-    const double cos_s = std::cos(slack), sin_s = std::sin(slack);
-    const double deep2 = std::pow(std::sin(2 * slack), 2);
+    const WedgeConstants wc(reps2);
+    const double r_eps = wc.r_eps, cos_s = wc.cos_s, sin_s = wc.sin_s, deep2 = wc.deep2;
     for (uint32_t j = 0; j + 2 < n; ++j) {
         const GridPoint a = pts[j];
         Wedge wide;
@@ -271,10 +278,8 @@ __attribute__((target("avx2"))) void scan_lanes(std::span<const GridPoint> pts, 
         ys[i] = p.y;
     }
     const double reps2_d = double(reps2);
-    const double r_eps = std::sqrt(reps2_d);
-    constexpr double slack = 1e-9; // as in scan<>
-    const double cos_s = std::cos(slack), sin_s = std::sin(slack);
-    const double deep2 = std::pow(std::sin(2 * slack), 2);
+    const WedgeConstants wc(reps2);
+    const double r_eps = wc.r_eps, cos_s = wc.cos_s, sin_s = wc.sin_s, deep2 = wc.deep2;
     const double eps_cos = r_eps * cos_s, eps_sin = r_eps * sin_s; // scan<>'s products
     // Per lane, the runs it closed in this group.
     std::vector<Candidates::Run> closed[lanes];
