@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <stdexcept>
 #include <thread>
 
 namespace tigerlod {
@@ -71,22 +72,14 @@ template <class S> Grid make_grid(const std::vector<S>& segs, double min_cell)
 
 } // namespace
 
-std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, unsigned threads)
+namespace {
+
+/// The pairs that meet among the segments listed in `entries` (cell,
+/// segment) by cell; with `is_new`, only those with a new segment.
+std::vector<Intersection> meeting_pairs(const std::vector<Segment>& segs,
+                                        std::vector<std::pair<uint64_t, uint32_t>>& entries,
+                                        std::span<const uint8_t> is_new, unsigned threads)
 {
-    if (segs.size() < 2) {
-        return {};
-    }
-    const Grid grid = make_grid(segs, 1.0);
-    // Sized exactly (a counting pass): the entries are this check's peak memory.
-    size_t nentries = 0;
-    for (const auto& sg : segs) {
-        grid.cover(sg.a, sg.b, 0, [&](uint64_t) { ++nentries; });
-    }
-    std::vector<std::pair<uint64_t, uint32_t>> entries;
-    entries.reserve(nentries);
-    for (uint32_t i = 0; i < segs.size(); ++i) {
-        grid.cover(segs[i].a, segs[i].b, 0, [&](uint64_t k) { entries.emplace_back(k, i); });
-    }
     // Sorted by (cell, segment): each cell lists its segments in order. A segment enters a cell once, as the cover
     // never repeats one.
     radix_sort_pairs(entries, threads);
@@ -103,6 +96,9 @@ std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, u
                 const Segment& s = segs[entries[i].second];
                 for (size_t j = i + 1; j < run_end && entries[j].first == entries[i].first; ++j) {
                     const Segment& r = segs[entries[j].second];
+                    if (!is_new.empty() && !is_new[entries[i].second] && !is_new[entries[j].second]) {
+                        continue;
+                    }
                     if (std::max(s.a.x, s.b.x) < std::min(r.a.x, r.b.x) ||
                         std::max(r.a.x, r.b.x) < std::min(s.a.x, s.b.x) ||
                         std::max(s.a.y, s.b.y) < std::min(r.a.y, r.b.y) ||
@@ -166,6 +162,68 @@ std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, u
                           }),
               all.end());
     return all;
+}
+
+} // namespace
+
+std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, unsigned threads)
+{
+    if (segs.size() < 2) {
+        return {};
+    }
+    const Grid grid = make_grid(segs, 1.0);
+    // Sized exactly (a counting pass): the entries are this check's peak memory.
+    size_t nentries = 0;
+    for (const auto& sg : segs) {
+        grid.cover(sg.a, sg.b, 0, [&](uint64_t) { ++nentries; });
+    }
+    std::vector<std::pair<uint64_t, uint32_t>> entries;
+    entries.reserve(nentries);
+    for (uint32_t i = 0; i < segs.size(); ++i) {
+        grid.cover(segs[i].a, segs[i].b, 0, [&](uint64_t k) { entries.emplace_back(k, i); });
+    }
+    return meeting_pairs(segs, entries, {}, threads);
+}
+
+std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, std::span<const uint8_t> is_new,
+                                             unsigned threads)
+{
+    if (is_new.size() != segs.size()) {
+        throw std::invalid_argument("find_intersections: one flag per segment expected");
+    }
+    if (segs.size() < 2) {
+        return {};
+    }
+    // The same cells as the whole check: the pairs found cannot depend on
+    // which segments are new.
+    const Grid grid = make_grid(segs, 1.0);
+    std::vector<uint64_t> cells; // those a new segment passes through
+    for (uint32_t i = 0; i < segs.size(); ++i) {
+        if (is_new[i]) {
+            grid.cover(segs[i].a, segs[i].b, 0, [&](uint64_t k) { cells.push_back(k); });
+        }
+    }
+    if (cells.empty()) {
+        return {};
+    }
+    std::sort(cells.begin(), cells.end());
+    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+    // Old segments enter only those cells (a range test on the key first:
+    // most of the map is nowhere near).
+    const uint64_t first = cells.front(), last = cells.back();
+    std::vector<std::pair<uint64_t, uint32_t>> entries;
+    for (uint32_t i = 0; i < segs.size(); ++i) {
+        if (is_new[i]) {
+            grid.cover(segs[i].a, segs[i].b, 0, [&](uint64_t k) { entries.emplace_back(k, i); });
+            continue;
+        }
+        grid.cover(segs[i].a, segs[i].b, 0, [&](uint64_t k) {
+            if (k >= first && k <= last && std::binary_search(cells.begin(), cells.end(), k)) {
+                entries.emplace_back(k, i);
+            }
+        });
+    }
+    return meeting_pairs(segs, entries, is_new, threads);
 }
 
 std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRef>& segs, double distance,

@@ -8,6 +8,7 @@
 #include "core/geometry.hpp"
 
 #include <cstdint>
+#include <span>
 #include <utility>
 #include <vector>
 
@@ -29,6 +30,13 @@ struct Intersection {
 /// allowed. Exact (core/geometry.hpp). The result is sorted and does not
 /// depend on `threads`.
 std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, unsigned threads);
+
+/// The pairs of find_intersections(segs, threads) with at least one segment
+/// flagged in `is_new` (one flag per segment): after a change to a few
+/// segments of a map already checked, what the change brought. Its cost
+/// follows the cells the new segments pass through, not the whole map.
+std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, std::span<const uint8_t> is_new,
+                                             unsigned threads);
 
 struct SegmentRef {
     GridPoint a, b;

@@ -117,6 +117,7 @@ struct Work {
     std::vector<uint8_t> state;      ///< per shortcut id
     std::vector<uint32_t> path;      ///< vertex indices
     std::vector<uint32_t> path_cand; ///< candidate index of each path edge, UINT32_MAX for an original edge
+    std::vector<uint32_t> checked;   ///< the path the last exact check saw (empty before the first)
     uint32_t rounds = 0;             ///< lazy rounds that tested this chain
     bool dirty = true;               ///< path must be recomputed
 };
@@ -707,6 +708,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         raster_test(near);
     }
 
+    bool checked_once = false;
     for (;;) {
         // Step 4 for the chains whose candidates changed, then test what the
         // paths use and has not been tested (lazy), until every path is clean.
@@ -803,14 +805,36 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             uint32_t chain;
         };
         std::vector<Tag> tags;
+        // After the first check only the edges that are new in a path can
+        // meet anything new: a pair of edges both present at the last check
+        // was found then. So each meeting pair is found once, in the first
+        // check that has both, and a repair costs what it changed.
+        const bool first_check = !checked_once;
+        std::vector<uint8_t> is_new;
         for (uint32_t wi = 0; wi < work.size(); ++wi) {
             const auto pts = points_of(work[wi]);
-            const auto& w = work[wi];
+            auto& w = work[wi];
+            const bool same = w.path == w.checked;
             for (size_t e = 0; e + 1 < w.path.size(); ++e) {
                 segs.push_back({pts[w.path[e]], pts[w.path[e + 1]], static_cast<uint32_t>(tags.size())});
                 tags.push_back({wi, w.path_cand[e], w.chain});
+                if (first_check) {
+                    continue;
+                }
+                bool had = same;
+                if (!had) {
+                    // Paths rise through the vertices: the old edge from path[e], if any.
+                    const auto it = std::lower_bound(w.checked.begin(), w.checked.end(), w.path[e]);
+                    had = it != w.checked.end() && *it == w.path[e] && it + 1 != w.checked.end() &&
+                          it[1] == w.path[e + 1];
+                }
+                is_new.push_back(had ? 0 : 1);
+            }
+            if (!same) {
+                w.checked = w.path;
             }
         }
+        checked_once = true;
         for (uint32_t i = 0; i < store.chains.size(); ++i) {
             if (!(store.chains[i].flags & chains::chain_halo)) {
                 continue;
@@ -823,10 +847,15 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
                 }
                 segs.push_back({pts[e], pts[e + 1], static_cast<uint32_t>(tags.size())});
                 tags.push_back({UINT32_MAX, UINT32_MAX, i});
+                if (!first_check) {
+                    is_new.push_back(0);
+                }
             }
         }
         bool banned_any = false;
-        for (const auto& x : find_intersections(segs, opt.threads)) {
+        const auto meets =
+            first_check ? find_intersections(segs, opt.threads) : find_intersections(segs, is_new, opt.threads);
+        for (const auto& x : meets) {
             const Tag& a = tags[segs[x.first].tag];
             const Tag& b = tags[segs[x.second].tag];
             bool banned = false;

@@ -3,7 +3,9 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <random>
+#include <stdexcept>
 
 using namespace tigerlod;
 
@@ -51,6 +53,49 @@ TEST(SegmentGrid, MatchesBruteForceOnRandomSegments)
             }
         }
     }
+}
+
+TEST(SegmentGrid, NewSegmentsFindThePairsTheyAreIn)
+{
+    // With flags, exactly the whole check's pairs that have a flagged member.
+    std::mt19937 rng(777);
+    for (int round = 0; round < 20; ++round) {
+        std::uniform_int_distribution<int> coord(0, 60), len(1, round % 2 ? 50 : 5);
+        std::vector<Segment> segs;
+        for (uint32_t i = 0; i < 400; ++i) {
+            const GridPoint a{coord(rng), coord(rng)};
+            GridPoint b{a.x + len(rng) * (coord(rng) % 3 - 1), a.y + len(rng) * (coord(rng) % 3 - 1)};
+            if (a == b) {
+                b.y += 1;
+            }
+            segs.push_back({a, b, i});
+        }
+        // None, a few, or many flagged.
+        const int per_mille = std::array{0, 5, 50, 500}[round % 4];
+        std::vector<uint8_t> is_new(segs.size());
+        for (auto& f : is_new) {
+            f = static_cast<int>(rng() % 1000) < per_mille ? 1 : 0;
+        }
+        std::vector<std::tuple<uint32_t, uint32_t, SegmentRelation>> want;
+        for (const auto& [i, j, r] : brute_force(segs)) {
+            if (is_new[i] || is_new[j]) {
+                want.emplace_back(i, j, r);
+            }
+        }
+        if (per_mille >= 50) {
+            ASSERT_FALSE(want.empty()) << "round " << round << ": the case should have pairs to find";
+        }
+        for (unsigned threads : {1U, 3U}) {
+            const auto got = find_intersections(segs, is_new, threads);
+            ASSERT_EQ(got.size(), want.size()) << "round " << round;
+            for (size_t k = 0; k < got.size(); ++k) {
+                EXPECT_EQ(got[k].first, std::get<0>(want[k]));
+                EXPECT_EQ(got[k].second, std::get<1>(want[k]));
+                EXPECT_EQ(got[k].relation, std::get<2>(want[k]));
+            }
+        }
+    }
+    EXPECT_THROW(find_intersections(std::vector<Segment>(3), std::vector<uint8_t>(2), 1), std::invalid_argument);
 }
 
 TEST(SegmentGrid, LongDiagonalsAmongShortSegments)
