@@ -308,19 +308,28 @@ bool dsatur(const std::vector<std::vector<uint32_t>>& adj, uint32_t max_colors, 
     return true;
 }
 
+double tile_pixel(std::span<const double> eps, const ColorOptions& opt) noexcept
+{
+    double eps_min = 0;
+    for (const double e : eps) {
+        if (e > 0 && (eps_min == 0 || e < eps_min)) {
+            eps_min = e;
+        }
+    }
+    return eps_min * opt.pixel_fraction;
+}
+
 ColorResult color_tiles(std::span<const ChainGeom> chains, const ColorOptions& opt, unsigned /*threads*/)
 {
     ColorResult out;
-    double eps_min = 0;
-    for (const auto& c : chains) {
-        if (c.eps > 0 && (eps_min == 0 || c.eps < eps_min)) {
-            eps_min = c.eps;
-        }
+    std::vector<double> eps(chains.size());
+    for (size_t i = 0; i < chains.size(); ++i) {
+        eps[i] = chains[i].eps;
     }
-    if (eps_min <= 0) {
+    out.pixel = tile_pixel(eps, opt);
+    if (out.pixel <= 0) {
         return out;
     }
-    out.pixel = eps_min * opt.pixel_fraction;
     const auto segs = make_segments(chains, out.pixel, opt);
     const auto adj = conflict_graph(chains, segs);
     for (const auto& l : adj) {

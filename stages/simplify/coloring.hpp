@@ -65,6 +65,10 @@ struct ColorResult {
 /// its candidates can touch: eps in the metric, as an L2 distance, plus the margin.
 double reach_radius(double eps, double pixel, const ColorOptions& opt) noexcept;
 
+/// The pixel of the tiles color_tiles makes for chains of these tolerances:
+/// pixel_fraction x the smallest positive eps (0 when there is none).
+double tile_pixel(std::span<const double> eps, const ColorOptions& opt) noexcept;
+
 /// Tile the owned chains and colour each tile; split tiles that need more
 /// than max_classes. Deterministic. Throws input_error naming the place when
 /// a tile at min_tile_pixels still needs more classes.

@@ -258,14 +258,9 @@ int SimplifyStage::run(const StageContext& ctx)
             ColorResult given;
             const ColorResult* colors = nullptr;
             if (!m_colors.empty()) {
-                const auto eps = chain_tolerances(store, eps_m, so);
-                double eps_min = 0;
-                for (double e : eps) {
-                    eps_min = (eps_min == 0 || e < eps_min) ? e : eps_min;
-                }
-                given = colors_from_json(fs::path(m_colors) / tolerance_dir(eps_m) / sf.level /
-                                             (sf.partition + ".colors.json"),
-                                         store, eps_m, so.metric, eps_min * so.color.pixel_fraction);
+                given = colors_from_json(
+                    fs::path(m_colors) / tolerance_dir(eps_m) / sf.level / (sf.partition + ".colors.json"), store,
+                    eps_m, so.metric, tile_pixel(chain_tolerances(store, eps_m, so), so.color));
                 colors = &given;
             }
             chains::ChainStore result;
