@@ -25,32 +25,45 @@ std::vector<std::tuple<uint32_t, uint32_t, SegmentRelation>> brute_force(const s
     return out;
 }
 
+/// n segments on a small lattice with ends up to coord_max and lengths up to
+/// len_max along x, y or a diagonal, so that shared ends, touches and
+/// overlaps all occur.
+std::vector<Segment> random_segments(std::mt19937& rng, uint32_t n, int coord_max, int len_max)
+{
+    std::uniform_int_distribution<int> coord(0, coord_max), len(1, len_max);
+    std::vector<Segment> segs;
+    for (uint32_t i = 0; i < n; ++i) {
+        const GridPoint a{coord(rng), coord(rng)};
+        GridPoint b{a.x + len(rng) * (coord(rng) % 3 - 1), a.y + len(rng) * (coord(rng) % 3 - 1)};
+        if (a == b) {
+            b.x += 1;
+        }
+        segs.push_back({a, b, i});
+    }
+    return segs;
+}
+
+void expect_pairs(const std::vector<Intersection>& got,
+                  const std::vector<std::tuple<uint32_t, uint32_t, SegmentRelation>>& want, int round)
+{
+    ASSERT_EQ(got.size(), want.size()) << "round " << round;
+    for (size_t k = 0; k < got.size(); ++k) {
+        EXPECT_EQ(got[k].first, std::get<0>(want[k]));
+        EXPECT_EQ(got[k].second, std::get<1>(want[k]));
+        EXPECT_EQ(got[k].relation, std::get<2>(want[k]));
+    }
+}
+
 } // namespace
 
 TEST(SegmentGrid, MatchesBruteForceOnRandomSegments)
 {
     std::mt19937 rng(12345);
     for (int round = 0; round < 20; ++round) {
-        // Mixed lengths on a small lattice, so shared ends, touches and overlaps all occur.
-        std::uniform_int_distribution<int> coord(0, 40), len(1, round % 2 ? 40 : 4);
-        std::vector<Segment> segs;
-        for (uint32_t i = 0; i < 300; ++i) {
-            const GridPoint a{coord(rng), coord(rng)};
-            GridPoint b{a.x + len(rng) * (coord(rng) % 3 - 1), a.y + len(rng) * (coord(rng) % 3 - 1)};
-            if (a == b) {
-                b.x += 1;
-            }
-            segs.push_back({a, b, i});
-        }
+        const auto segs = random_segments(rng, 300, 40, round % 2 ? 40 : 4); // long and short in turn
         const auto want = brute_force(segs);
         for (unsigned threads : {1U, 3U}) {
-            const auto got = find_intersections(segs, threads);
-            ASSERT_EQ(got.size(), want.size()) << "round " << round;
-            for (size_t k = 0; k < got.size(); ++k) {
-                EXPECT_EQ(got[k].first, std::get<0>(want[k]));
-                EXPECT_EQ(got[k].second, std::get<1>(want[k]));
-                EXPECT_EQ(got[k].relation, std::get<2>(want[k]));
-            }
+            expect_pairs(find_intersections(segs, threads), want, round);
         }
     }
 }
@@ -60,16 +73,7 @@ TEST(SegmentGrid, NewSegmentsFindThePairsTheyAreIn)
     // With flags, exactly the whole check's pairs that have a flagged member.
     std::mt19937 rng(777);
     for (int round = 0; round < 20; ++round) {
-        std::uniform_int_distribution<int> coord(0, 60), len(1, round % 2 ? 50 : 5);
-        std::vector<Segment> segs;
-        for (uint32_t i = 0; i < 400; ++i) {
-            const GridPoint a{coord(rng), coord(rng)};
-            GridPoint b{a.x + len(rng) * (coord(rng) % 3 - 1), a.y + len(rng) * (coord(rng) % 3 - 1)};
-            if (a == b) {
-                b.y += 1;
-            }
-            segs.push_back({a, b, i});
-        }
+        const auto segs = random_segments(rng, 400, 60, round % 2 ? 50 : 5);
         // None, a few, or many flagged.
         const int per_mille = std::array{0, 5, 50, 500}[round % 4];
         std::vector<uint8_t> is_new(segs.size());
@@ -86,13 +90,7 @@ TEST(SegmentGrid, NewSegmentsFindThePairsTheyAreIn)
             ASSERT_FALSE(want.empty()) << "round " << round << ": the case should have pairs to find";
         }
         for (unsigned threads : {1U, 3U}) {
-            const auto got = find_intersections(segs, is_new, threads);
-            ASSERT_EQ(got.size(), want.size()) << "round " << round;
-            for (size_t k = 0; k < got.size(); ++k) {
-                EXPECT_EQ(got[k].first, std::get<0>(want[k]));
-                EXPECT_EQ(got[k].second, std::get<1>(want[k]));
-                EXPECT_EQ(got[k].relation, std::get<2>(want[k]));
-            }
+            expect_pairs(find_intersections(segs, is_new, threads), want, round);
         }
     }
     EXPECT_THROW(find_intersections(std::vector<Segment>(3), std::vector<uint8_t>(2), 1), std::invalid_argument);
