@@ -31,14 +31,7 @@ class Candidates {
     };
 
     /// Appends shortcut from -> to; calls come in (from, to) order.
-    void add(uint32_t from, uint32_t to)
-    {
-        if (!m_runs.empty() && m_runs.back().from == from && m_runs.back().hi + 1 == to) {
-            ++m_runs.back().hi;
-        } else {
-            m_runs.push_back({from, to, to});
-        }
-    }
+    void add(uint32_t from, uint32_t to) { add_run(from, to, to); }
     /// Appends shortcuts from -> lo, ..., from -> hi; calls come in (from, to) order.
     void add_run(uint32_t from, uint32_t lo, uint32_t hi)
     {
