@@ -6,14 +6,22 @@
 //   varint     per chain a varint count, then zigzag varint deltas from the previous point
 //   zstd-3/19  that, compressed with zstd per payload (random access, as ours)
 // and decoded again on one thread, REPEAT rounds (default 5), the fastest kept.
+// And per LOD, estimates of what lossless delta coding of the same points
+// could reach (DeltaModel): on the tree's grid, on TIGER's 1e-6 degree
+// lattice the points came from, and on that lattice with context.
 // Output: one JSON object on stdout.
 #include "core/bytes.hpp"
 #include "reader/reader.hpp"
+#include "stages/export/tree_view.hpp"
 
 #include <zstd.h>
 
+#include <array>
+#include <bit>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -79,6 +87,87 @@ datatree::Geometry varint_decode(const std::string& in, size_t chains, size_t ve
     return g;
 }
 
+/// The bytes a coder of differences could reach, estimated: each
+/// difference as the symbol (its bit length, its sign) entropy-coded under
+/// a context, and the bits below its leading one stored as they are (they
+/// are close to uniform). The symbols' cost is their empirical entropy over
+/// everything added: what an ideal adaptive coder would approach with one
+/// model for a whole LOD, so below what a coder of payloads one by one
+/// (random access) can do. Chains' first points are not counted.
+class DeltaModel {
+  public:
+    static uint32_t bit_length(int64_t v) noexcept
+    {
+        return static_cast<uint32_t>(std::bit_width(static_cast<uint64_t>(v < 0 ? -v : v)));
+    }
+    void add(uint32_t context, int64_t v)
+    {
+        const uint32_t b = bit_length(v);
+        ++m_counts[context][2 * b + (v < 0 ? 1 : 0)];
+        m_raw_bits += b > 1 ? b - 1 : 0;
+    }
+    double bits() const
+    {
+        double t = m_raw_bits;
+        for (const auto& [context, counts] : m_counts) {
+            uint64_t n = 0;
+            for (const uint64_t c : counts) {
+                n += c;
+            }
+            for (const uint64_t c : counts) {
+                if (c) {
+                    t -= double(c) * std::log2(double(c) / double(n));
+                }
+            }
+        }
+        return t;
+    }
+
+  private:
+    std::map<uint32_t, std::array<uint64_t, 130>> m_counts;
+    double m_raw_bits = 0;
+};
+
+/// The estimates for one LOD: x and y differences of consecutive points of
+/// a chain on the grid; on the 1e-6 degree lattice (each point mapped back
+/// to lon/lat and rounded; `off_lattice` counts points the lattice point
+/// does not project back onto exactly, for which the lattice figures would
+/// not be lossless); and on the lattice with the bit lengths of the chain's
+/// previous lattice difference as context.
+struct DeltaModels {
+    DeltaModel grid, lattice, lattice_context;
+    uint64_t off_lattice = 0;
+
+    void add(const datatree::Geometry& g, const Projection& proj)
+    {
+        for (size_t c = 0; c < g.chain_count(); ++c) {
+            const auto pts = g.chain(c);
+            int64_t plx = 0, ply = 0;
+            uint32_t context = 0;
+            for (size_t i = 0; i < pts.size(); ++i) {
+                double lon = 0, lat = 0;
+                proj.to_lonlat(pts[i].x, pts[i].y, lon, lat);
+                const int64_t lx = std::llround(lon * 1e6), ly = std::llround(lat * 1e6);
+                const auto back = proj.to_grid(double(lx) / 1e6, double(ly) / 1e6);
+                off_lattice += back && *back == pts[i] ? 0 : 1;
+                if (i > 0) {
+                    const int64_t gx = int64_t{pts[i].x} - pts[i - 1].x, gy = int64_t{pts[i].y} - pts[i - 1].y;
+                    const int64_t dx = lx - plx, dy = ly - ply;
+                    grid.add(0, gx);
+                    grid.add(0, gy);
+                    lattice.add(0, dx);
+                    lattice.add(0, dy);
+                    lattice_context.add(2 * context, dx);
+                    lattice_context.add(2 * context + 1, dy);
+                    context = 64 * DeltaModel::bit_length(dx) + DeltaModel::bit_length(dy);
+                }
+                plx = lx;
+                ply = ly;
+            }
+        }
+    }
+};
+
 double now()
 {
     return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
@@ -105,6 +194,8 @@ int main(int argc, char** argv)
         uint64_t vertices = 0, ours = 0, varint = 0, zstd3 = 0, zstd19 = 0, payloads = 0;
     };
     std::vector<Lod> lods(nlods);
+    std::vector<DeltaModels> models(nlods);
+    const Projection proj(view::projection_of(s));
     struct Item {
         uint32_t node, lod;
         std::string ours, z3;
@@ -128,6 +219,7 @@ int main(int argc, char** argv)
             it.z3 = z.substr(0, z3);
             const size_t z19 = ZSTD_compress(z.data(), z.size(), v.data(), v.size(), 19);
             auto& l = lods[k];
+            models[k].add(g, proj);
             l.vertices += g.points.size();
             l.ours += it.ours.size();
             l.varint += v.size();
@@ -171,25 +263,34 @@ int main(int argc, char** argv)
     }
     std::printf("{\n  \"tree\": \"%s\",\n  \"nodes\": %zu,\n  \"lods\": [\n", argv[1], s.nodes.size());
     uint64_t tv = 0, to = 0, tvar = 0, t3 = 0, t19 = 0;
+    double mg = 0, ml = 0, mc = 0;
     for (size_t k = 0; k < nlods; ++k) {
         const auto& l = lods[k];
         const double v = double(l.vertices);
         std::printf(
             "    {\"eps_m\": %g, \"payloads\": %llu, \"vertices\": %llu, \"tigerlod_bpv\": %.3f, \"raw_int32_bpv\": 8, "
-            "\"varint_bpv\": %.3f, \"varint_zstd3_bpv\": %.3f, \"varint_zstd19_bpv\": %.3f}%s\n",
+            "\"varint_bpv\": %.3f, \"varint_zstd3_bpv\": %.3f, \"varint_zstd19_bpv\": %.3f, "
+            "\"model_grid_bpv\": %.3f, \"model_lattice_bpv\": %.3f, \"model_lattice_context_bpv\": %.3f, "
+            "\"off_lattice\": %llu}%s\n",
             s.lod_eps_m[k], static_cast<unsigned long long>(l.payloads), static_cast<unsigned long long>(l.vertices),
             double(l.ours) / v, double(l.varint) / v, double(l.zstd3) / v, double(l.zstd19) / v,
-            k + 1 < nlods ? "," : "");
+            models[k].grid.bits() / 8 / v, models[k].lattice.bits() / 8 / v, models[k].lattice_context.bits() / 8 / v,
+            static_cast<unsigned long long>(models[k].off_lattice), k + 1 < nlods ? "," : "");
         tv += l.vertices;
         to += l.ours;
         tvar += l.varint;
         t3 += l.zstd3;
         t19 += l.zstd19;
+        mg += models[k].grid.bits();
+        ml += models[k].lattice.bits();
+        mc += models[k].lattice_context.bits();
     }
     std::printf("  ],\n  \"all\": {\"vertices\": %llu, \"tigerlod_bpv\": %.3f, \"varint_bpv\": %.3f, "
-                "\"varint_zstd3_bpv\": %.3f, \"varint_zstd19_bpv\": %.3f},\n",
+                "\"varint_zstd3_bpv\": %.3f, \"varint_zstd19_bpv\": %.3f, \"model_grid_bpv\": %.3f, "
+                "\"model_lattice_bpv\": %.3f, \"model_lattice_context_bpv\": %.3f},\n",
                 static_cast<unsigned long long>(tv), double(to) / double(tv), double(tvar) / double(tv),
-                double(t3) / double(tv), double(t19) / double(tv));
+                double(t3) / double(tv), double(t19) / double(tv), mg / 8 / double(tv), ml / 8 / double(tv),
+                mc / 8 / double(tv));
     std::printf("  \"decode_mvps\": {\"tigerlod\": %.2f, \"varint_zstd3\": %.2f},\n", double(vertices) / ours_s / 1e6,
                 double(vertices_z) / z_s / 1e6);
     std::printf("  \"skeleton_bytes\": %llu,\n  \"tree_bytes\": %llu,\n  \"skeleton_fraction\": %.5f\n}\n",
