@@ -197,24 +197,28 @@ std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, s
     // The same cells as the whole check: the pairs found cannot depend on
     // which segments are new.
     const Grid grid = make_grid(segs, 1.0);
-    std::vector<uint64_t> cells; // those a new segment passes through
-    for (uint32_t i = 0; i < segs.size(); ++i) {
-        if (is_new[i]) {
-            grid.cover(segs[i].a, segs[i].b, 0, [&](uint64_t k) { cells.push_back(k); });
-        }
-    }
-    if (cells.empty()) {
-        return {};
-    }
-    std::sort(cells.begin(), cells.end());
-    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
-    // Old segments enter only those cells (a range test on the key first:
-    // most of the map is nowhere near).
-    const uint64_t first = cells.front(), last = cells.back();
+    // The new segments' entries first; the cells they pass through follow from them.
     std::vector<std::pair<uint64_t, uint32_t>> entries;
     for (uint32_t i = 0; i < segs.size(); ++i) {
         if (is_new[i]) {
             grid.cover(segs[i].a, segs[i].b, 0, [&](uint64_t k) { entries.emplace_back(k, i); });
+        }
+    }
+    if (entries.empty()) {
+        return {};
+    }
+    std::vector<uint64_t> cells(entries.size());
+    for (size_t e = 0; e < entries.size(); ++e) {
+        cells[e] = entries[e].first;
+    }
+    std::sort(cells.begin(), cells.end());
+    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+    // Old segments enter only those cells (a range test on the key first:
+    // most of the map is nowhere near). The order of the entries does not
+    // matter: meeting_pairs sorts them by (cell, segment).
+    const uint64_t first = cells.front(), last = cells.back();
+    for (uint32_t i = 0; i < segs.size(); ++i) {
+        if (is_new[i]) {
             continue;
         }
         grid.cover(segs[i].a, segs[i].b, 0, [&](uint64_t k) {
