@@ -239,7 +239,7 @@ struct Tiler {
             msg << "a render tile of " << spec.width << "x" << spec.height << " pixels at grid ("
                 << std::llround(spec.x0) << ", " << std::llround(spec.y0) << ") needs more than " << opt.max_classes
                 << " stencil classes even after splitting (" << members.size() << " chains within reach)";
-            throw input_error(msg.str());
+            throw tile_overflow_error(msg.str(), spec);
         }
         ++out.splits;
         const uint32_t w0 = (spec.width + 1) / 2, h0 = (spec.height + 1) / 2;

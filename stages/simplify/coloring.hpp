@@ -5,11 +5,13 @@
 /// touch it into classes 1..max_classes such that chains whose tolerance
 /// neighbourhoods can overlap never share a class.
 
+#include "core/errors.hpp"
 #include "core/geometry.hpp"
 #include "stages/simplify/metric.hpp"
 
 #include <cstdint>
 #include <span>
+#include <string>
 #include <vector>
 
 namespace tigerlod::simplify {
@@ -34,6 +36,14 @@ inline bool takes_part(std::span<const uint8_t> keep, size_t i) noexcept
 struct TileSpec {
     double x0 = 0, y0 = 0, pixel = 1;
     uint32_t width = 0, height = 0;
+};
+
+/// What color_tiles throws when a tile at min_tile_pixels still needs more
+/// classes: the message names the tile in grid units, and `tile` lets a
+/// caller that knows the projection place it on the map.
+struct tile_overflow_error : input_error {
+    tile_overflow_error(const std::string& what, const TileSpec& where) : input_error(what), tile(where) {}
+    TileSpec tile;
 };
 
 struct ColoredTile {
@@ -70,8 +80,8 @@ double reach_radius(double eps, double pixel, const ColorOptions& opt) noexcept;
 double tile_pixel(std::span<const double> eps, const ColorOptions& opt) noexcept;
 
 /// Tile the owned chains and colour each tile; split tiles that need more
-/// than max_classes. Deterministic. Throws input_error naming the place when
-/// a tile at min_tile_pixels still needs more classes.
+/// than max_classes. Deterministic. Throws tile_overflow_error when a tile at
+/// min_tile_pixels still needs more classes.
 ColorResult color_tiles(std::span<const ChainGeom> chains, const ColorOptions& opt, unsigned threads);
 
 /// L2 distance between segments ab and cd (0 if they meet), in doubles.

@@ -11,7 +11,9 @@
 #include <chrono>
 #include <cmath>
 #include <future>
+#include <iomanip>
 #include <optional>
+#include <sstream>
 #include <stdexcept>
 
 namespace tigerlod::simplify {
@@ -348,7 +350,18 @@ ColorResult color_chains(const ChainStore& store, std::span<const double> eps, c
         const auto& c = store.chains[i];
         geoms[i] = {store.chain_points(c), eps[i], !(c.flags & chains::chain_halo), keep_of(keep, c)};
     }
-    return color_tiles(geoms, color_options(opt), opt.threads);
+    try {
+        return color_tiles(geoms, color_options(opt), opt.threads);
+    } catch (const tile_overflow_error& e) {
+        // The tile's centre in lon/lat too, to find it in a map viewer.
+        const TileSpec& t = e.tile;
+        double lon = 0, lat = 0;
+        Projection(store.projection)
+            .to_lonlat(t.x0 + 0.5 * t.width * t.pixel, t.y0 + 0.5 * t.height * t.pixel, lon, lat);
+        std::ostringstream msg;
+        msg << e.what() << ", centred at lon/lat (" << std::fixed << std::setprecision(6) << lon << ", " << lat << ")";
+        throw input_error(msg.str());
+    }
 }
 
 } // namespace

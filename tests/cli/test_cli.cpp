@@ -9,6 +9,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -592,7 +593,14 @@ TEST_F(Cli, ColorAndSimplifyRejectBadInput)
         expect_failure(run(tool, in + " --class-scale S1400"), 2, "expected CLASS=FACTOR");
         expect_failure(run(tool, (m_dir / "nothing").string() + " " + (m_dir / "res").string()), 2, "not a folder");
         // Three chains meet at every junction: two classes cannot separate them.
-        expect_failure(run(tool, in + " --max-classes 2"), 1, "needs more than 2 stencil classes");
+        const Result over = run(tool, in + " --max-classes 2");
+        expect_failure(over, 1, "needs more than 2 stencil classes");
+        // The tile is placed on the map too: its centre in lon/lat, on the hand-made map.
+        double lon = 0, lat = 0;
+        const auto at = over.err.find("centred at lon/lat (");
+        ASSERT_NE(at, std::string::npos) << over.err;
+        ASSERT_EQ(std::sscanf(over.err.c_str() + at, "centred at lon/lat (%lf, %lf)", &lon, &lat), 2) << over.err;
+        EXPECT_TRUE(lon > -96.0 && lon < -95.997 && lat > 40.0 && lat < 40.003) << over.err;
         EXPECT_FALSE(fs::exists(m_dir / "res"));
     }
     for (const char* tool : {"color", "simplify"}) {
