@@ -8,7 +8,10 @@
 // and decoded again on one thread, REPEAT rounds (default 5), the fastest kept.
 // And per LOD, estimates of what lossless delta coding of the same points
 // could reach (DeltaModel): on the tree's grid, on TIGER's 1e-6 degree
-// lattice the points came from, and on that lattice with context.
+// lattice the points came from, and on that lattice with context. And what
+// a reader of lattice-coded payloads would add to each decoded point:
+// projecting it onto the grid (Projection::to_grid, the points of every LOD
+// in tree order, one thread, the fastest of REPEAT rounds).
 // Output: one JSON object on stdout.
 #include "core/bytes.hpp"
 #include "reader/reader.hpp"
@@ -138,7 +141,8 @@ struct DeltaModels {
     DeltaModel grid, lattice, lattice_context;
     uint64_t off_lattice = 0;
 
-    void add(const datatree::Geometry& g, const Projection& proj)
+    /// Also appends each point's lattice coordinates to `lattice_points`.
+    void add(const datatree::Geometry& g, const Projection& proj, std::vector<std::array<int32_t, 2>>& lattice_points)
     {
         for (size_t c = 0; c < g.chain_count(); ++c) {
             const auto pts = g.chain(c);
@@ -150,6 +154,7 @@ struct DeltaModels {
                 const int64_t lx = std::llround(lon * 1e6), ly = std::llround(lat * 1e6);
                 const auto back = proj.to_grid(double(lx) / 1e6, double(ly) / 1e6);
                 off_lattice += back && *back == pts[i] ? 0 : 1;
+                lattice_points.push_back({static_cast<int32_t>(lx), static_cast<int32_t>(ly)});
                 if (i > 0) {
                     const int64_t gx = int64_t{pts[i].x} - pts[i - 1].x, gy = int64_t{pts[i].y} - pts[i - 1].y;
                     const int64_t dx = lx - plx, dy = ly - ply;
@@ -195,6 +200,7 @@ int main(int argc, char** argv)
     };
     std::vector<Lod> lods(nlods);
     std::vector<DeltaModels> models(nlods);
+    std::vector<std::array<int32_t, 2>> lattice_points;
     const Projection proj(view::projection_of(s));
     struct Item {
         uint32_t node, lod;
@@ -219,7 +225,7 @@ int main(int argc, char** argv)
             it.z3 = z.substr(0, z3);
             const size_t z19 = ZSTD_compress(z.data(), z.size(), v.data(), v.size(), 19);
             auto& l = lods[k];
-            models[k].add(g, proj);
+            models[k].add(g, proj, lattice_points);
             l.vertices += g.points.size();
             l.ours += it.ours.size();
             l.varint += v.size();
@@ -232,8 +238,8 @@ int main(int argc, char** argv)
     // Decode throughput, one thread, payloads already in memory. The two
     // decoders take turns round by round, and each keeps its fastest round:
     // this machine's speed drifts by tens of percent within a minute.
-    uint64_t vertices = 0, vertices_z = 0;
-    double ours_s = 0, z_s = 0;
+    uint64_t vertices = 0, vertices_z = 0, projected_sum = 0;
+    double ours_s = 0, z_s = 0, project_s = 0;
     std::string buf;
     // One round of `decode` over every item, kept when it is the fastest yet.
     auto round = [&](int r, double& best_s, uint64_t& best_v, auto&& decode) {
@@ -260,6 +266,17 @@ int main(int argc, char** argv)
             ZSTD_decompress(buf.data(), buf.size(), it.z3.data(), it.z3.size());
             return varint_decode(buf, node.chains, node.lods[it.lod].vertices);
         });
+        // The grid points a lattice-coded payload's reader would compute
+        // (a checksum of them, so that none is optimised away).
+        const double t0 = now();
+        uint64_t sum = 0;
+        for (const auto& q : lattice_points) {
+            const auto g = proj.to_grid(double(q[0]) / 1e6, double(q[1]) / 1e6);
+            sum += g ? uint64_t(uint32_t(g->x)) * 31 + uint32_t(g->y) : 1;
+        }
+        const double t = now() - t0;
+        project_s = r == 0 ? t : std::min(project_s, t);
+        projected_sum = sum;
     }
     std::printf("{\n  \"tree\": \"%s\",\n  \"nodes\": %zu,\n  \"lods\": [\n", argv[1], s.nodes.size());
     uint64_t tv = 0, to = 0, tvar = 0, t3 = 0, t19 = 0;
@@ -293,6 +310,8 @@ int main(int argc, char** argv)
                 mc / 8 / double(tv));
     std::printf("  \"decode_mvps\": {\"tigerlod\": %.2f, \"varint_zstd3\": %.2f},\n", double(vertices) / ours_s / 1e6,
                 double(vertices_z) / z_s / 1e6);
+    std::printf("  \"lattice_projection_mvps\": %.2f,\n  \"lattice_projection_checksum\": %llu,\n",
+                double(lattice_points.size()) / project_s / 1e6, static_cast<unsigned long long>(projected_sum));
     std::printf("  \"skeleton_bytes\": %llu,\n  \"tree_bytes\": %llu,\n  \"skeleton_fraction\": %.5f\n}\n",
                 static_cast<unsigned long long>(tree->skeleton_bytes()),
                 static_cast<unsigned long long>(tree->tree_bytes()),
