@@ -1,6 +1,7 @@
 #include "stages/simplify/candidates.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 
@@ -146,29 +147,87 @@ struct WedgeConstants {
     double deep2 = std::pow(std::sin(2 * slack), 2); ///< squared sine of 2 x slack
 };
 
+/// L1 and Linf: narrows `wide` to the directions from the origin that meet
+/// the metric's ball of radius t around q (its corners' cone, widened by
+/// the slack). No constraint when the origin is in the ball (every segment
+/// from it passes within t of q); a cone this close to a half-plane is left
+/// out (wider is safe) and clears `complete`. False once `wide` is empty.
+bool metric_cone(int64_t qx, int64_t qy, int64_t t, bool l1, double cos_s, double sin_s, Wedge& wide,
+                 bool& complete) noexcept
+{
+    const int64_t ax = qx < 0 ? -qx : qx, ay = qy < 0 ? -qy : qy;
+    if (l1 ? ax + ay <= t : std::max(ax, ay) <= t) {
+        return true;
+    }
+    using V = std::array<int64_t, 2>;
+    const std::array<V, 4> corners =
+        l1 ? std::array<V, 4>{{{qx + t, qy}, {qx, qy + t}, {qx - t, qy}, {qx, qy - t}}}
+           : std::array<V, 4>{{{qx + t, qy + t}, {qx - t, qy + t}, {qx - t, qy - t}, {qx + t, qy - t}}};
+    // The corners lie in an open half-plane through the origin (it is
+    // outside the ball), so "counter-clockwise of" orders them: exactly, in
+    // integers (|coordinates| < 2^33).
+    auto ccw = [](const V& u, const V& v) { return int128{u[0]} * v[1] - int128{u[1]} * v[0] > 0; };
+    V lo = corners[0], hi = corners[0];
+    for (size_t i = 1; i < corners.size(); ++i) {
+        if (ccw(corners[i], lo)) {
+            lo = corners[i];
+        }
+        if (ccw(hi, corners[i])) {
+            hi = corners[i];
+        }
+    }
+    const double lx = double(lo[0]), ly = double(lo[1]), hx = double(hi[0]), hy = double(hi[1]);
+    const Arc arc{lx * cos_s + ly * sin_s, ly * cos_s - lx * sin_s, hx * cos_s - hy * sin_s, hy * cos_s + hx * sin_s};
+    const double cross = arc.ax * arc.by - arc.ay * arc.bx, dot = arc.ax * arc.bx + arc.ay * arc.by;
+    if (cross <= 0 || (dot < 0 && cross <= 1e-6 * std::hypot(arc.ax, arc.ay) * std::hypot(arc.bx, arc.by))) {
+        complete = false;
+        return true;
+    }
+    return wide.narrow(arc);
+}
+
 /// The scan of proximate_shortcuts with squared lengths in `Wide`: int64_t
 /// when every coordinate difference of the chain is under 2^31 (so a
 /// squared length fits; 21,000 km on a 1 cm grid), int128 otherwise. The
 /// conversions to double round the same way, so both give the same answer.
+///
+/// In L1 and Linf each vertex's arc is the exact cone of directions from a
+/// that meet the metric's ball around it (a diamond or a square: the
+/// directions of its four corners span it), widened by the slack; an end
+/// deep inside the wedge is sure when it lies beyond every point of every
+/// intermediate vertex's ball (|q| + the ball's L2 radius), since the ray
+/// enters each ball before it. As that is far for an end a segment or two
+/// past the last vertex, a second wedge on the L2 disc inside the ball
+/// (its squared radius `rin2`, rounded down) makes an end sure as the one
+/// wedge does in L2: deep inside it and beyond every intermediate vertex,
+/// each vertex is within that disc of the segment, so within eps in the
+/// metric. The other ends in the wedge take the exact test.
 template <class Wide>
 void scan(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach, int128 reps2, Candidates& out)
 {
     const auto n = static_cast<uint32_t>(pts.size());
     const auto wide_reps2 = static_cast<Wide>(reps2); // fits: checked by the caller
+    const bool l2 = tol.metric == Metric::l2, l1 = tol.metric == Metric::l1;
+    const int128 rin2 = l2 ? reps2 : reps2 / 2; // t^2 / 2 (L1) or t^2 (Linf), rounded down
+    // The disc whose arcs the scan takes: the metric's ball (L2), the inner disc (L1, Linf).
+    const auto disc2 = static_cast<Wide>(rin2);
+    const double r_in = std::sqrt(double(rin2));
+    const auto t = static_cast<int64_t>(tol.threshold); // L1, Linf: at most sqrt(reps2) < 2^31
     const WedgeConstants wc(reps2);
     const double r_eps = wc.r_eps, cos_s = wc.cos_s, sin_s = wc.sin_s, deep2 = wc.deep2;
     for (uint32_t j = 0; j + 2 < n; ++j) {
         const GridPoint a = pts[j];
-        Wedge wide;
-        bool complete = true; // every constraint is in the wedge (none left out near pi / 2)
-        double far2 = 0;      // max squared distance of an intermediate vertex from a
+        Wedge wide, inner;
+        bool complete = true;  // every constraint is in the wedge (none left out near pi / 2)
+        bool inner_sure = !l2; // the inner wedge can still make an end sure (L1, Linf)
+        double far2 = 0;       // max squared distance of an intermediate vertex from a
         const auto last = static_cast<uint32_t>(max_reach ? std::min<uint64_t>(n - 1, uint64_t{j} + max_reach) : n - 1);
         // Each vertex's squared distance from a and its root are taken one
         // step ahead, so the root's latency overlaps the step before.
         auto dist = [&](GridPoint q, Wide& r2, double& c) {
             const int64_t qx = int64_t{q.x} - a.x, qy = int64_t{q.y} - a.y;
             r2 = Wide{qx} * qx + Wide{qy} * qy;
-            c = std::sqrt(std::fabs(double(r2 - wide_reps2))); // used only when r2 > reps2
+            c = std::sqrt(std::fabs(double(r2 - disc2))); // used only when r2 > disc2
         };
         Wide r2_next;
         double c_next;
@@ -181,7 +240,19 @@ void scan(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_rea
             const double c = c_next;
             dist(pts[k], r2_next, c_next);
             far2 = std::max(far2, double(r2));
-            if (r2 > wide_reps2) {
+            if (!l2) {
+                if (!metric_cone(qx, qy, t, l1, cos_s, sin_s, wide, complete)) {
+                    break; // no segment from a can pass near every vertex seen
+                }
+                if (inner_sure && r2 > disc2) {
+                    // The arc on the inner disc, with h - slack: narrower is
+                    // safe here. One under the slack, or one this close to a
+                    // half-plane, makes nothing sure from here on.
+                    const double sin_i = r_in * cos_s - c * sin_s, cos_i = c * cos_s + r_in * sin_s;
+                    inner_sure = sin_i > 0 && cos_i > 1e-6 * (c + r_in) &&
+                                 inner.narrow(arc_around(double(qx), double(qy), sin_i, cos_i));
+                }
+            } else if (r2 > wide_reps2) {
                 // The arc of directions within h of q, sin h = r_eps / |q|,
                 // as vectors scaled by |q|: c = |q| cos h, exact under the
                 // root (integers), so no division and one square root.
@@ -205,8 +276,13 @@ void scan(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_rea
             const double len2 = bx * bx + by * by;
             // Clearly inside every constraint and no vertex beyond b: every
             // intermediate vertex projects onto the segment within eps (L2).
-            const bool sure = tol.metric == Metric::l2 && complete && far2 * (1 + 1e-12) < len2 &&
-                              (wide.state == Wedge::open || wide.arc.deep_inside(bx, by, len2, deep2));
+            // (L1, Linf: beyond every intermediate vertex's ball, whose L2
+            // radius is at most r_eps.)
+            const double beyond2 = l2 ? far2 : (std::sqrt(far2) + r_eps) * (std::sqrt(far2) + r_eps);
+            const bool sure = (complete && beyond2 * (1 + 1e-12) < len2 &&
+                               (wide.state == Wedge::open || wide.arc.deep_inside(bx, by, len2, deep2))) ||
+                              (inner_sure && far2 * (1 + 1e-12) < len2 &&
+                               (inner.state == Wedge::open || inner.arc.deep_inside(bx, by, len2, deep2)));
             if (sure || proximate_exact(pts, j, k, tol)) {
                 out.add(j, k);
             }

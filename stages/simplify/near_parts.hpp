@@ -3,12 +3,15 @@
 /// The parts of a shortcut that the raster needs to test.
 ///
 /// Every point x of a proximate shortcut s of chain i lies within eps_i of a
-/// segment of its subchain v_0 .. v_m: the feet of the v_k on s run from one
-/// end of s to the other, so x lies between the feet of some v_k and
-/// v_k+1, where the distance to segment v_k v_k+1 (convex along s) is at most
-/// eps_i. If that segment has no other chain within eps_i + every other
-/// chain's reach ("clear"), x is farther than that reach from every other
-/// chain, and so are the pixels the raster tests around x. So only the
+/// segment of its subchain v_0 .. v_m: the feet of the v_k on s (their
+/// nearest points on s) run from one end of s to the other, so x lies
+/// between the feet of some v_k and v_k+1, where the distance to segment
+/// v_k v_k+1 (convex along s) is at most eps_i. This holds in any norm, so
+/// in L1 and Linf too, and then x is within eps_i x l2_reach of that segment
+/// as an L2 distance (1 for L1, sqrt 2 for Linf); below, eps_i stands for
+/// that L2 radius. If the segment has no other chain within eps_i + every
+/// other chain's reach ("clear"), x is farther than that reach from every
+/// other chain, and so are the pixels the raster tests around x. So only the
 /// points of s within eps_i of the subchain's blocked (not clear) segments
 /// can fail, and only they are drawn: near a junction, a kilometre-long
 /// shortcut is tested over its first few pixels.

@@ -480,8 +480,11 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     // A shortcut farther from every other chain than that chain's reach
     // (eps_j in the metric plus the colouring margin) lies in its own
     // chain's eps-Voronoi region: proximate shortcuts stay within eps_i of
-    // their chain, and no other region comes near. Those skip the raster.
+    // their chain in the metric (near_parts.hpp: in any norm), so within
+    // eps_i x l2_reach as an L2 distance, and no other region comes near.
+    // Those skip the raster.
     t0 = Clock::now();
+    const double own_reach = l2_reach(opt.metric);
     const double margin = pixel * opt.color.margin_px;
     double reach_max = 0;
     for (const double e : eps) {
@@ -498,11 +501,10 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         uint32_t chain, index;
     };
     std::vector<std::pair<uint64_t, GridSeg>> grid; // (cell, segment), segments in (chain, index) order
-    // Only the L2 far-shortcut rule below reads the grid.
     // Each segment goes in the cells it passes through (not its bounding box:
     // a 10 km diagonal at 1 m covers 25 M cells of its box, measured at 17 GB).
     GridBox extent;
-    for (uint32_t c = 0; opt.metric == Metric::l2 && c < store.chains.size(); ++c) {
+    for (uint32_t c = 0; c < store.chains.size(); ++c) {
         for (const GridPoint p : store.chain_points(store.chains[c])) {
             extent.extend(p);
         }
@@ -510,7 +512,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     const CellGrid cells = extent.empty() ? CellGrid{}
                                           : CellGrid(double(extent.min_x), double(extent.min_y), double(extent.max_x),
                                                      double(extent.max_y), cell);
-    for (uint32_t c = 0; opt.metric == Metric::l2 && c < store.chains.size(); ++c) {
+    for (uint32_t c = 0; c < store.chains.size(); ++c) {
         const auto pts = store.chain_points(store.chains[c]);
         const auto use = keep_of(keep, store.chains[c]);
         for (uint32_t i = 0; i + 1 < pts.size(); ++i) {
@@ -560,35 +562,33 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         return near;
     };
     // Per owned chain, prefix counts of its segments that have another chain
-    // within eps_i + the largest reach: a shortcut spanning only clear
-    // segments lies within eps_i of them (L2), so farther than any other
-    // chain's reach from that chain. And the blocked segments with the part
-    // of each that is near another chain, for the parts of a shortcut that
-    // can fail (near_parts.hpp).
+    // within eps_i x l2_reach + the largest reach (L2): a shortcut spanning
+    // only clear segments lies within eps_i x l2_reach of them, so farther
+    // than any other chain's reach from that chain. And the blocked segments
+    // with the part of each that is near another chain, for the parts of a
+    // shortcut that can fail (near_parts.hpp).
     std::vector<std::vector<uint32_t>> blocked(work.size());
     std::vector<std::vector<NearSegment>> blocked_at(work.size());
-    if (opt.metric == Metric::l2) {
-        parallel_each(work.size(), opt.threads, [&](size_t wi) {
-            const Work& w = work[wi];
-            if (w.cand.empty()) {
-                return;
+    parallel_each(work.size(), opt.threads, [&](size_t wi) {
+        const Work& w = work[wi];
+        if (w.cand.empty()) {
+            return;
+        }
+        const auto pts = points_of(w);
+        auto& b = blocked[wi];
+        b.assign(pts.size(), 0);
+        for (size_t k = 0; k + 1 < pts.size(); ++k) {
+            const auto near = near_other(w.chain, pts[k], pts[k + 1], w.tol.eps * own_reach + reach_max);
+            b[k + 1] = b[k] + (near ? 1 : 0);
+            if (near) {
+                // Widened by 2 grid units for rounding.
+                const double len = std::hypot(double(pts[k + 1].x) - pts[k].x, double(pts[k + 1].y) - pts[k].y);
+                const double pad = len > 0 ? 2 / len : 1;
+                blocked_at[wi].push_back(
+                    {static_cast<uint32_t>(k), std::max(0.0, near->first - pad), std::min(1.0, near->second + pad)});
             }
-            const auto pts = points_of(w);
-            auto& b = blocked[wi];
-            b.assign(pts.size(), 0);
-            for (size_t k = 0; k + 1 < pts.size(); ++k) {
-                const auto near = near_other(w.chain, pts[k], pts[k + 1], w.tol.eps + reach_max);
-                b[k + 1] = b[k] + (near ? 1 : 0);
-                if (near) {
-                    // Widened by 2 grid units for rounding.
-                    const double len = std::hypot(double(pts[k + 1].x) - pts[k].x, double(pts[k + 1].y) - pts[k].y);
-                    const double pad = len > 0 ? 2 / len : 1;
-                    blocked_at[wi].push_back({static_cast<uint32_t>(k), std::max(0.0, near->first - pad),
-                                              std::min(1.0, near->second + pad)});
-                }
-            }
-        });
-    }
+        }
+    });
 
     st.seconds_far += since(t0);
 
@@ -649,7 +649,8 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
                 parts.assign(1, {0.0, 1.0});
             } else {
                 // Slack of 2 grid units on the radius, and a pixel at each end of a part.
-                parts = near_parts(pts, sc.from, sc.to, blocked_at[wi], work[wi].tol.eps + 2, colors->pixel + 2);
+                parts = near_parts(pts, sc.from, sc.to, blocked_at[wi], work[wi].tol.eps * own_reach + 2,
+                                   colors->pixel + 2);
             }
             for (const auto& [p0, p1] : parts) {
                 const double ax = a.x + p0 * double(b.x - a.x), ay = a.y + p0 * double(b.y - a.y);

@@ -243,6 +243,28 @@ TEST(Candidates, MatchBruteForceOnRandomChains)
     }
 }
 
+TEST(Candidates, AVertexWhoseConeIsNearlyAHalfPlaneStillCounts)
+{
+    // Vertex 1 lies just outside the metric's ball around vertex 0, so the
+    // directions that pass within eps of it span nearly a half-plane, too
+    // close to one for the wedge to hold it. Vertex 2 lies on the other
+    // side, far beyond: shortcut 0 -> 2 passes farther than eps from vertex
+    // 1 (its nearest point is vertex 0) and must not be taken for sure.
+    // Against it, vertex 2 straight ahead through vertex 1 is a shortcut.
+    const double t = 4e6;
+    for (const Metric m : {Metric::l1, Metric::linf}) {
+        const Tolerance tol(t, m);
+        const GridPoint q = m == Metric::l1 ? GridPoint{2000001, 2000000} : GridPoint{4000001, 0};
+        const Pts behind = {{0, 0}, q, {-q.x * 3, -q.y * 3}};
+        ASSERT_FALSE(within(behind[1], behind[0], behind[2], tol)) << metric_name(m);
+        EXPECT_TRUE(proximate_shortcuts(behind, tol, 0).empty()) << metric_name(m);
+        const Pts ahead = {{0, 0}, q, {q.x * 3, q.y * 3}};
+        const auto got = proximate_shortcuts(ahead, tol, 0).list();
+        ASSERT_EQ(got.size(), 1U) << metric_name(m);
+        EXPECT_EQ(got[0], (Shortcut{0, 2})) << metric_name(m);
+    }
+}
+
 TEST(Candidates, TheFastestKernelFindsWhatTheScalarScanFinds)
 {
     // Four starts at once against one at a time, run for run: chains of every
