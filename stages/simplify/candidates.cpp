@@ -212,7 +212,7 @@ void scan(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_rea
     // The disc whose arcs the scan takes: the metric's ball (L2), the inner disc (L1, Linf).
     const auto disc2 = static_cast<Wide>(rin2);
     const double r_in = std::sqrt(double(rin2));
-    const auto t = static_cast<int64_t>(tol.threshold); // L1, Linf: at most sqrt(reps2) < 2^31
+    const auto t = static_cast<int64_t>(tol.threshold); // L1, Linf: floor(eps), the ball's radius
     const WedgeConstants wc(reps2);
     const double r_eps = wc.r_eps, cos_s = wc.cos_s, sin_s = wc.sin_s, deep2 = wc.deep2;
     for (uint32_t j = 0; j + 2 < n; ++j) {

@@ -571,7 +571,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     std::vector<std::vector<NearSegment>> blocked_at(work.size());
     parallel_each(work.size(), opt.threads, [&](size_t wi) {
         const Work& w = work[wi];
-        if (w.cand.empty()) {
+        if (w.cand.empty() || !opt.far_rule) {
             return;
         }
         const auto pts = points_of(w);

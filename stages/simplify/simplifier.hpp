@@ -29,6 +29,7 @@ struct SimplifyOptions {
     std::vector<LonLat> user_points;
     bool lazy = true;       ///< test only shortcuts on shortest paths
     bool clip_tests = true; ///< draw only the parts of a shortcut that can fail (near_parts.hpp); off for tests
+    bool far_rule = true;   ///< accept shortcuts far from every other chain without the raster; off for tests
     ColorOptions color;
     unsigned threads = 1;
     /// Runs GL work on the thread that owns the context, waiting for it:

@@ -824,6 +824,40 @@ TEST(Simplify, DrawingOnlyTheNearPartsChangesNothing)
     }
 }
 
+TEST(Simplify, TheFarRuleAndTheNearPartsChangeNothingInEveryMetric)
+{
+    // Without the far rule every candidate is drawn whole. Beside the
+    // star and the wiggly rows, rows far apart whose shortcuts away from
+    // their ends meet no other chain's reach.
+    MapBuilder apart;
+    for (int row = 0; row < 3; ++row) {
+        Pts p;
+        for (int i = 0; i <= 40; ++i) {
+            p.push_back({i * 50, row * 2000 + ((i * 37 + row * 11) % 7) * 9 - (i % 3) * 7});
+        }
+        apart.chain(uint64_t(row + 1), p);
+    }
+    for (const Metric m : {Metric::l2, Metric::l1, Metric::linf}) {
+        size_t proved_far = 0;
+        double pixels_fast = 0, pixels_slow = 0;
+        for (const auto& map : {star_map(), wiggly_map(), apart.s}) {
+            for (double eps : {0.3, 0.6, 1.2}) {
+                SimplifyOptions all = plain(m);
+                all.far_rule = false;
+                all.clip_tests = false;
+                const auto [fast, slow] = expect_same_stores(map, eps, plain(m), all);
+                EXPECT_EQ(slow.proved_far, 0U);
+                EXPECT_EQ(fast.banned_raster, slow.banned_raster) << metric_name(m) << " eps " << eps;
+                proved_far += fast.proved_far;
+                pixels_fast += fast.drawn_pixels;
+                pixels_slow += slow.drawn_pixels;
+            }
+        }
+        EXPECT_GT(proved_far, 0U) << metric_name(m);
+        EXPECT_LT(pixels_fast, pixels_slow) << metric_name(m);
+    }
+}
+
 TEST(Simplify, TheSmallFramebufferChangesNothing)
 {
     // Tiles of 1024 pixels; with a small framebuffer of 64, the tiles whose
