@@ -24,6 +24,26 @@ bool proximate_exact(std::span<const GridPoint> pts, uint32_t j, uint32_t k, con
     return true;
 }
 
+/// L1 and Linf, for an end b deep inside every intermediate vertex's cone:
+/// the ray from a meets each vertex's ball no farther than |q| + its L2
+/// radius `r_ball`, so only the vertices whose ball reaches past b can miss
+/// the segment; the exact test for those alone.
+bool proximate_near_end(std::span<const GridPoint> pts, uint32_t j, uint32_t k, const Tolerance& tol, double len2,
+                        double r_ball) noexcept
+{
+    // |q| below lim means |q| + r_ball below |b| (shrunk for rounding).
+    const double lim = std::sqrt(len2 / (1 + 1e-12)) - r_ball;
+    const double safe2 = lim > 0 ? lim * lim * (1 - 1e-9) : -1;
+    const GridPoint a = pts[j];
+    for (uint32_t i = j + 1; i < k; ++i) {
+        const double qx = double(pts[i].x) - a.x, qy = double(pts[i].y) - a.y;
+        if (!(qx * qx + qy * qy < safe2) && !within(pts[i], a, pts[k], tol)) {
+            return false;
+        }
+    }
+    return true;
+}
+
 /// The directions from A counter-clockwise to B, an arc of less than pi;
 /// vectors need not be unit.
 struct Arc {
@@ -279,11 +299,12 @@ void scan(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_rea
             // (L1, Linf: beyond every intermediate vertex's ball, whose L2
             // radius is at most r_eps.)
             const double beyond2 = l2 ? far2 : (std::sqrt(far2) + r_eps) * (std::sqrt(far2) + r_eps);
-            const bool sure = (complete && beyond2 * (1 + 1e-12) < len2 &&
-                               (wide.state == Wedge::open || wide.arc.deep_inside(bx, by, len2, deep2))) ||
+            const bool deep = complete && (wide.state == Wedge::open || wide.arc.deep_inside(bx, by, len2, deep2));
+            const bool sure = (deep && beyond2 * (1 + 1e-12) < len2) ||
                               (inner_sure && far2 * (1 + 1e-12) < len2 &&
                                (inner.state == Wedge::open || inner.arc.deep_inside(bx, by, len2, deep2)));
-            if (sure || proximate_exact(pts, j, k, tol)) {
+            if (sure ||
+                (!l2 && deep ? proximate_near_end(pts, j, k, tol, len2, r_eps) : proximate_exact(pts, j, k, tol))) {
                 out.add(j, k);
             }
         }
