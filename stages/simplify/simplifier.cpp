@@ -484,11 +484,11 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     // eps_i x l2_reach as an L2 distance, and no other region comes near.
     // Those skip the raster.
     t0 = Clock::now();
-    const double own_reach = l2_reach(opt.metric);
+    const double ball_l2 = l2_reach(opt.metric); // the metric's unit ball lies in the L2 disc of this radius
     const double margin = pixel * opt.color.margin_px;
     double reach_max = 0;
     for (const double e : eps) {
-        reach_max = std::max(reach_max, e * l2_reach(opt.metric) + margin);
+        reach_max = std::max(reach_max, e * ball_l2 + margin);
     }
     // Cells at least three mean segments wide: at 1 m a 2 x reach cell is
     // 3 m, and a county's 100 m segments each filled dozens of them (74 s of
@@ -578,7 +578,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         auto& b = blocked[wi];
         b.assign(pts.size(), 0);
         for (size_t k = 0; k + 1 < pts.size(); ++k) {
-            const auto near = near_other(w.chain, pts[k], pts[k + 1], w.tol.eps * own_reach + reach_max);
+            const auto near = near_other(w.chain, pts[k], pts[k + 1], w.tol.eps * ball_l2 + reach_max);
             b[k + 1] = b[k] + (near ? 1 : 0);
             if (near) {
                 // Widened by 2 grid units for rounding.
@@ -649,8 +649,8 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
                 parts.assign(1, {0.0, 1.0});
             } else {
                 // Slack of 2 grid units on the radius, and a pixel at each end of a part.
-                parts = near_parts(pts, sc.from, sc.to, blocked_at[wi], work[wi].tol.eps * own_reach + 2,
-                                   colors->pixel + 2);
+                parts =
+                    near_parts(pts, sc.from, sc.to, blocked_at[wi], work[wi].tol.eps * ball_l2 + 2, colors->pixel + 2);
             }
             for (const auto& [p0, p1] : parts) {
                 const double ax = a.x + p0 * double(b.x - a.x), ay = a.y + p0 * double(b.y - a.y);
