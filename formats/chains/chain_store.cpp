@@ -201,6 +201,7 @@ ChainStore decode(std::span<const std::byte> bytes, const std::string& name)
         body.get<char>("header");
     }
     ChainStore s;
+    s.minor = minor;
     s.level_index = body.get<uint32_t>("meta");
     s.level_count = body.get<uint32_t>("meta");
     if (s.level_index >= s.level_count) {
@@ -297,7 +298,7 @@ ChainStore decode(std::span<const std::byte> bytes, const std::string& name)
         c.p.x = body.get<int32_t>("constraint point");
         c.p.y = body.get<int32_t>("constraint point");
         check_index(c.unit, "constraint unit");
-        if (c.kind > constraint_user) {
+        if (c.kind > constraint_neighbour || (c.kind == constraint_neighbour && minor < 2)) {
             body.fail("unknown constraint kind " + std::to_string(c.kind));
         }
         s.constraints.push_back(c);
@@ -324,6 +325,20 @@ ChainStore read(const std::filesystem::path& path)
         throw environment_error(path.string() + ": read failed");
     }
     return decode(std::as_bytes(std::span(data.data(), data.size())), path.string());
+}
+
+const char* constraint_kind_name(uint32_t kind) noexcept
+{
+    switch (kind) {
+    case constraint_internal:
+        return "internal";
+    case constraint_user:
+        return "user";
+    case constraint_neighbour:
+        return "neighbour";
+    default:
+        return "unknown";
+    }
 }
 
 std::string to_text(const ChainStore& s)
@@ -357,8 +372,8 @@ std::string to_text(const ChainStore& s)
         out << "junction " << j.id << ' ' << j.p.x << ',' << j.p.y << " degree=" << j.degree << "\n";
     }
     for (const auto& cp : c.constraints) {
-        out << "point " << c.strings[cp.unit] << ' ' << (cp.kind == constraint_internal ? "internal" : "user") << ' '
-            << cp.p.x << ',' << cp.p.y << "\n";
+        out << "point " << c.strings[cp.unit] << ' ' << constraint_kind_name(cp.kind) << ' ' << cp.p.x << ',' << cp.p.y
+            << "\n";
     }
     return out.str();
 }

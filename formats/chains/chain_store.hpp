@@ -19,7 +19,7 @@
 namespace tigerlod::chains {
 
 constexpr uint16_t major_version = 1;
-constexpr uint16_t minor_version = 1;
+constexpr uint16_t minor_version = 2;
 
 /// Bits of ChainInfo::flags.
 enum ChainFlags : uint32_t {
@@ -48,7 +48,11 @@ struct Junction {
 };
 
 /// Kinds of constraint points.
-enum ConstraintKind : uint32_t { constraint_internal = 0, constraint_user = 1 };
+enum ConstraintKind : uint32_t {
+    constraint_internal = 0,  ///< the internal point of one of the partition's own units
+    constraint_user = 1,      ///< a user point
+    constraint_neighbour = 2, ///< since 1.2: the internal point of another partition's unit that an owned chain bounds
+};
 
 /// A point that must stay on its side of the chains: inside its unit.
 struct ConstraintPoint {
@@ -65,6 +69,7 @@ struct ChainStore {
     std::string partition;
     ProjectionParams projection;
     double halo_m = 0.0;
+    uint16_t minor = minor_version;       ///< the minor version it was read from (written: always the current)
     double eps_m = 0.0;                   ///< tolerance this store was simplified at; 0 for original chains
     uint8_t metric = 0;                   ///< metric of eps_m: 0 L2, 1 L1, 2 Linf
     std::vector<std::string> strings{""}; ///< entry 0 is "" (no unit)
@@ -95,7 +100,7 @@ struct ChainStore {
 /// as ingest's stores do for the units of their partition.
 PointLocation unit_location(const ChainStore& store, uint32_t unit, GridPoint p);
 
-/// Encode as the bytes of a version 1.0 file.
+/// Encode as the bytes of a file of the current version (major_version.minor_version).
 std::string encode(const ChainStore& store);
 
 /// Decode and validate the bytes of a file; `name` is used in messages.
@@ -108,6 +113,9 @@ void write(const std::filesystem::path& path, const ChainStore& store);
 /// Read and validate. Throws environment_error if the file cannot be read,
 /// format_error if it is not a valid chain store.
 ChainStore read(const std::filesystem::path& path);
+
+/// "internal", "user" or "neighbour" (the text dump's and messages' name of a ConstraintKind).
+const char* constraint_kind_name(uint32_t kind) noexcept;
 
 /// Canonical sorted text of a store, one item per line, for diffs and goldens.
 std::string to_text(const ChainStore& store);

@@ -268,6 +268,7 @@ int IngestStage::run(const StageContext& ctx)
                           {"partitions", l.partitions},
                           {"halo_chains", l.halo_chains},
                           {"constraint_points", l.constraint_points},
+                          {"neighbour_points", l.neighbour_points},
                           {"computed_internal_points", l.computed_internal_points}});
     }
     report["levels"] = levels;

@@ -1259,11 +1259,30 @@ LevelStats process_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw
     };
     const size_t npoints = raw.kind == RawMap::Kind::lines ? 0 : lc.codes.size();
     std::vector<UnitPoint> unit_points(npoints);
+    // The partition contract (formats/chains/SPEC.md): a store holds the
+    // internal point of every unit that one of its own chains bounds, whoever
+    // owns the unit, so that a shortcut never cuts a neighbour's point off.
+    // The build has those units whole: a region takes the whole neighbouring
+    // units within reach (regions.hpp), and a unit touching an owned chain is.
+    std::vector<uint8_t> needed(npoints, 0);
+    for (uint32_t code = 0; code < npoints; ++code) {
+        needed[code] = owns(L, code) ? 1 : 0;
+    }
+    for (const auto& c : lev.chains) {
+        if (npoints == 0 || !owns_part(c.owner)) {
+            continue;
+        }
+        for (uint32_t side : {c.left, c.right}) {
+            if (side != none) {
+                needed[side] = 1;
+            }
+        }
+    }
     // A few thousand units whose cost varies with their boundary: 64 at a time.
     parallel_blocks(npoints, options.threads, 64, [&](size_t b, size_t e) {
         std::vector<std::pair<GridPoint, GridPoint>> useg;
         for (size_t code = b; code < e; ++code) {
-            if (!owns(L, static_cast<uint32_t>(code))) {
+            if (!needed[code]) {
                 continue;
             }
             useg.clear();
@@ -1313,6 +1332,23 @@ LevelStats process_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw
         }
         part_points[parent(code)].push_back({code, chains::constraint_internal, *up.pt});
     }
+    // Each partition's neighbour points: the units of other partitions that its chains bound.
+    std::vector<std::vector<chains::ConstraintPoint>> neighbour_points(npart);
+    for (const auto& c : lev.chains) {
+        if (npoints == 0 || !owns_part(c.owner)) {
+            continue;
+        }
+        for (uint32_t side : {c.left, c.right}) {
+            if (side != none && parent(side) != c.owner && unit_points[side].pt) {
+                neighbour_points[c.owner].push_back({side, chains::constraint_neighbour, *unit_points[side].pt});
+            }
+        }
+    }
+    for (auto& np : neighbour_points) {
+        std::sort(np.begin(), np.end(), [](const auto& a, const auto& b) { return a.unit < b.unit; });
+        np.erase(std::unique(np.begin(), np.end(), [](const auto& a, const auto& b) { return a.unit == b.unit; }),
+                 np.end());
+    }
     // One store per partition, built, encoded and handed to the sink on the
     // worker threads, each taking the next partition as it finishes one.
     // Chains in order of id (unique within the level), so that a store's
@@ -1337,6 +1373,7 @@ LevelStats process_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw
         std::sort(halo[part].begin(), halo[part].end(), by_id);
         st.halo_chains += halo[part].size();
         st.constraint_points += part_points[part].size();
+        st.neighbour_points += neighbour_points[part].size();
     }
     parallel_each(npart, options.threads, [&](size_t part) {
         std::vector<GridPoint> pts;
@@ -1403,8 +1440,10 @@ LevelStats process_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw
                 s.junctions.push_back({g.keys[v], g.grid[v], lev.junction_degree[k]});
             }
         }
-        for (const auto& cp : part_points[part]) {
-            s.constraints.push_back({str(cp.unit), cp.kind, cp.p});
+        for (const auto* points : {&part_points[part], &neighbour_points[part]}) {
+            for (const auto& cp : *points) {
+                s.constraints.push_back({str(cp.unit), cp.kind, cp.p});
+            }
         }
         s.canonicalize();
         sink(s);

@@ -57,6 +57,9 @@ struct LevelStats {
     std::string name;
     uint64_t units = 0, chains = 0, rings = 0, vertices = 0, junctions = 0, partitions = 0, halo_chains = 0,
              constraint_points = 0, computed_internal_points = 0;
+    /// Internal points of other partitions' units that a store's own chains
+    /// bound, summed over the stores (the partition contract).
+    uint64_t neighbour_points = 0;
 };
 
 /// Keep the first `max` samples in their order: by kind, longitude, latitude,

@@ -234,6 +234,7 @@ void add_result(BuildResult& total, BuildResult&& r, size_t first_level, size_t 
         t.partitions += l.partitions;
         t.halo_chains += l.halo_chains;
         t.constraint_points += l.constraint_points;
+        t.neighbour_points += l.neighbour_points;
         t.computed_internal_points += l.computed_internal_points;
     }
     for (const auto& [k, v] : r.problems) {

@@ -34,6 +34,7 @@ void ToleranceStats::add(const ToleranceStats& o)
     proved_far += o.proved_far;
     banned_raster += o.banned_raster;
     banned_exact += o.banned_exact;
+    banned_border += o.banned_border;
     banned_points += o.banned_points;
     self_intersection_repairs += o.self_intersection_repairs;
     orientation_repairs += o.orientation_repairs;
@@ -118,12 +119,13 @@ struct Work {
     bool ring = false;
     bool fixed = false; ///< problem chain: kept as it is
     Candidates cand;
-    std::vector<uint8_t> state;      ///< per shortcut id
-    std::vector<uint32_t> path;      ///< vertex indices
-    std::vector<uint32_t> path_cand; ///< candidate index of each path edge, UINT32_MAX for an original edge
-    std::vector<uint32_t> checked;   ///< the path the last exact check saw (empty before the first)
-    uint32_t rounds = 0;             ///< lazy rounds that tested this chain
-    bool dirty = true;               ///< path must be recomputed
+    std::vector<uint8_t> state;          ///< per shortcut id
+    std::vector<uint32_t> path;          ///< vertex indices
+    std::vector<uint32_t> path_cand;     ///< candidate index of each path edge, UINT32_MAX for an original edge
+    std::vector<uint32_t> checked;       ///< the path the last exact check saw (empty before the first)
+    std::vector<uint8_t> border_checked; ///< per shortcut id: the border rule has looked at it (empty before)
+    uint32_t rounds = 0;                 ///< lazy rounds that tested this chain
+    bool dirty = true;                   ///< path must be recomputed
 };
 
 /// Twice the signed area of the ring through pts[at(0)], pts[at(1)], ..., pts[at(n-1)].
@@ -370,6 +372,36 @@ ColorResult color_store(const ChainStore& store, double eps_m, const SimplifyOpt
 {
     const auto eps = chain_tolerances(store, eps_m, opt);
     return color_chains(store, eps, segments_in_reach(store, halo_reach(eps, opt)), opt);
+}
+
+std::optional<std::string> partition_contract_fault(const ChainStore& store)
+{
+    std::vector<uint8_t> has_point(store.strings.size(), 0);
+    for (const auto& cp : store.constraints) {
+        if (cp.kind == chains::constraint_internal || cp.kind == chains::constraint_neighbour) {
+            has_point[cp.unit] = 1;
+        }
+    }
+    for (const auto& c : store.chains) {
+        if (c.flags & chains::chain_halo) {
+            continue;
+        }
+        for (const uint32_t side : {c.left, c.right}) {
+            if (side != 0 && !has_point[side]) {
+                std::string why = "chain " + std::to_string(c.id) + " bounds unit " + store.strings[side] +
+                                  ", but the store holds no internal point of that unit; without it a shortcut "
+                                  "could cut the point off (the partition contract, formats/chains/SPEC.md)";
+                if (store.minor < 2) {
+                    why += "; the store is chain store 1." + std::to_string(store.minor) +
+                           ", written before the contract: re-run tigerlod-ingest";
+                } else {
+                    why += "; ingest reports such a unit under missing_internal_points";
+                }
+                return why;
+            }
+        }
+    }
+    return std::nullopt;
 }
 
 ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyOptions& opt, Raster& raster,
@@ -744,6 +776,159 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         raster_test(near);
     }
 
+    // The border rule (formats/chains/SPEC.md, "The partition contract"):
+    // a shortcut of an owned chain o may not meet any proximate shortcut of a
+    // halo chain h with a smaller id that comes near it. h's own partition
+    // can only ever pick h's shortcuts among those (the same scan on the
+    // same points at the same eps), and it checks them against o's original
+    // edges, as this store checks o's path against h's; so however the two
+    // partitions are simplified, apart, their chains cannot meet. Every point
+    // of a proximate shortcut lies within eps_h (as an L2 distance: x
+    // l2_reach) of a segment of its subchain (near_parts.hpp), so only the
+    // shortcuts of h spanning a segment that near are listed. Returns
+    // whether it banned a shortcut.
+    std::vector<Candidates> halo_cand(store.chains.size());
+    std::vector<uint8_t> halo_cand_done(store.chains.size(), 0);
+    std::vector<uint32_t> halo_span(store.chains.size(), 0); ///< the longest shortcut of each, in vertices
+    double halo_eps_max = 0;
+    for (uint32_t i = 0; i < store.chains.size(); ++i) {
+        if (store.chains[i].flags & chains::chain_halo) {
+            halo_eps_max = std::max(halo_eps_max, eps[i]);
+        }
+    }
+    auto border_rule = [&]() -> bool {
+        if (halo_eps_max == 0) {
+            return false; // no halo: a single partition
+        }
+        struct Query {
+            uint32_t work, cand, halo, kmin, kmax;
+        };
+        std::vector<std::vector<Query>> per_work(work.size());
+        parallel_each(work.size(), opt.threads, [&](size_t wi) {
+            Work& w = work[wi];
+            if (w.cand.empty()) {
+                return;
+            }
+            if (w.border_checked.empty()) {
+                w.border_checked.assign(w.cand.size(), 0);
+            }
+            const auto pts = points_of(w);
+            const uint64_t own_id = store.chains[w.chain].id;
+            std::vector<Query> found;
+            for (size_t e = 0; e < w.path_cand.size(); ++e) {
+                const uint32_t ci = w.path_cand[e];
+                if (ci == UINT32_MAX || w.border_checked[ci]) {
+                    continue;
+                }
+                w.border_checked[ci] = 1;
+                const GridPoint a = pts[w.path[e]], b = pts[w.path[e + 1]];
+                found.clear();
+                cover_cells(a.x, a.y, b.x, b.y, halo_eps_max * ball_l2 + 2, cell, 0.0, 0.0, [&](int64_t x, int64_t y) {
+                    if (!cells.contains(x, y)) {
+                        return;
+                    }
+                    for (const GridSeg gs : grid_cells.find(cells.key(x, y))) {
+                        const auto& hc = store.chains[gs.chain];
+                        if (!(hc.flags & chains::chain_halo) || (hc.flags & chains::chain_problem) || hc.id >= own_id) {
+                            continue;
+                        }
+                        const auto hp = store.chain_points(hc);
+                        // 2 grid units of slack for the rounding of the distance.
+                        if (segment_distance(a, b, hp[gs.index], hp[gs.index + 1]) > eps[gs.chain] * ball_l2 + 2) {
+                            continue;
+                        }
+                        found.push_back({static_cast<uint32_t>(wi), ci, gs.chain, gs.index, gs.index});
+                    }
+                });
+                // One query per halo chain, over the hull of its near segments.
+                std::sort(found.begin(), found.end(), [](const Query& p, const Query& q) { return p.halo < q.halo; });
+                for (size_t k = 0; k < found.size();) {
+                    Query q = found[k];
+                    for (++k; k < found.size() && found[k].halo == q.halo; ++k) {
+                        q.kmin = std::min(q.kmin, found[k].kmin);
+                        q.kmax = std::max(q.kmax, found[k].kmax);
+                    }
+                    per_work[wi].push_back(q);
+                }
+            }
+        });
+        std::vector<Query> queries;
+        for (auto& q : per_work) {
+            queries.insert(queries.end(), q.begin(), q.end());
+        }
+        if (queries.empty()) {
+            return false;
+        }
+        // The halo chains' shortcuts, once per store.
+        std::vector<uint32_t> need;
+        for (const Query& q : queries) {
+            if (!halo_cand_done[q.halo]) {
+                halo_cand_done[q.halo] = 1;
+                need.push_back(q.halo);
+            }
+        }
+        parallel_each(need.size(), opt.threads, [&](size_t k) {
+            const uint32_t h = need[k];
+            halo_cand[h] =
+                proximate_shortcuts(store.chain_points(store.chains[h]), Tolerance(eps[h], opt.metric), opt.max_reach);
+            for (const auto& run : halo_cand[h].runs()) {
+                halo_span[h] = std::max(halo_span[h], run.hi - run.from);
+            }
+        });
+        std::vector<uint8_t> meets(queries.size(), 0);
+        parallel_blocks(queries.size(), opt.threads, 16, [&](size_t qb, size_t qe) {
+            for (size_t qi = qb; qi < qe; ++qi) {
+                const Query& q = queries[qi];
+                const auto pts = points_of(work[q.work]);
+                const Shortcut sc = work[q.work].cand.at(q.cand);
+                const GridPoint a = pts[sc.from], b = pts[sc.to];
+                const auto hp = store.chain_points(store.chains[q.halo]);
+                const Candidates& hc = halo_cand[q.halo];
+                const GridBox sbox = [&] {
+                    GridBox box;
+                    box.extend(a);
+                    box.extend(b);
+                    return box;
+                }();
+                // Shortcuts from <= kmax to > kmin span a near segment's hull;
+                // none starts more than the longest span before kmin + 1.
+                const uint32_t first = q.kmin + 1 > halo_span[q.halo] ? q.kmin + 1 - halo_span[q.halo] : 0;
+                for (const auto& run : hc.empty() ? std::span<const Candidates::Run>{}
+                                                  : hc.runs().subspan(hc.first_run(first),
+                                                                      hc.first_run(q.kmax + 1) - hc.first_run(first))) {
+                    if (run.hi <= q.kmin) {
+                        continue;
+                    }
+                    for (uint32_t to = std::max(run.lo, q.kmin + 1); to <= run.hi && !meets[qi]; ++to) {
+                        const GridPoint c = hp[run.from], d = hp[to];
+                        GridBox cbox;
+                        cbox.extend(c);
+                        cbox.extend(d);
+                        if (!cbox.intersects(sbox)) {
+                            continue;
+                        }
+                        const auto rel = segment_relation(a, b, c, d);
+                        meets[qi] = rel != SegmentRelation::disjoint && rel != SegmentRelation::shared_endpoint;
+                    }
+                    if (meets[qi]) {
+                        break;
+                    }
+                }
+            }
+        });
+        bool banned = false;
+        for (size_t qi = 0; qi < queries.size(); ++qi) {
+            Work& w = work[queries[qi].work];
+            if (meets[qi] && w.state[queries[qi].cand] != bad_exact) {
+                w.state[queries[qi].cand] = bad_exact;
+                w.dirty = true;
+                ++st.banned_border;
+                banned = true;
+            }
+        }
+        return banned;
+    };
+
     bool checked_once = false;
     for (;;) {
         // Step 4 for the chains whose candidates changed, then test what the
@@ -913,6 +1098,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             }
             banned_any |= banned;
         }
+        banned_any |= border_rule();
         st.seconds_exact += since(t0);
         if (!banned_any) {
             break;

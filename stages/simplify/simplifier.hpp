@@ -10,6 +10,7 @@
 
 #include <functional>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -53,6 +54,9 @@ struct ToleranceStats {
     size_t proved_far = 0; ///< shortcuts accepted without drawing: farther from every other chain than its reach
     size_t banned_raster = 0;
     size_t banned_exact = 0;
+    /// Shortcuts that met a proximate shortcut of a halo chain with a smaller
+    /// id (the border rule: partitions simplified apart cannot meet).
+    size_t banned_border = 0;
     size_t banned_points = 0;
     size_t self_intersection_repairs = 0;
     size_t orientation_repairs = 0;
@@ -81,6 +85,14 @@ std::vector<double> chain_tolerances(const chains::ChainStore& store, double eps
 /// stay in and none within reach is left out. Empty when the store has no
 /// halo: every segment takes part.
 std::vector<uint8_t> segments_in_reach(const chains::ChainStore& store, double reach);
+
+/// Where `store` breaks the point part of the partition contract
+/// (formats/chains/SPEC.md, "The partition contract"): the first unit, in
+/// chain order, that an owned chain bounds and of which the store holds no
+/// internal point (its own, or a neighbour's). Empty when it holds. Without
+/// that point a shortcut could cut the unit's point off, and the store alone
+/// cannot tell.
+std::optional<std::string> partition_contract_fault(const chains::ChainStore& store);
 
 /// Colour `store` at `eps_m` (what tigerlod-color writes).
 ColorResult color_store(const chains::ChainStore& store, double eps_m, const SimplifyOptions& opt);

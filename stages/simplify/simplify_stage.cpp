@@ -253,6 +253,11 @@ int SimplifyStage::run(const StageContext& ctx)
                               std::to_string(need) + " m so that partitions cannot cross; re-run tigerlod-ingest " +
                               "with a larger ingest.halo_m (or --halo-m), or lower the tolerances");
         }
+        if (so.point_constraints) {
+            if (const auto fault = partition_contract_fault(store)) {
+                throw input_error(sf.path.string() + ": " + *fault);
+            }
+        }
         for (size_t ti = 0; ti < m_common.tolerances.size(); ++ti) {
             const double eps_m = m_common.tolerances[ti];
             ColorResult given;
@@ -362,7 +367,10 @@ int SimplifyStage::run(const StageContext& ctx)
         j["tents_drawn"] = t.tent_segments;
         j["tents_skipped"] = t.tent_segments_skipped;
         j["proved_far"] = t.proved_far;
-        j["banned"] = {{"raster", t.banned_raster}, {"exact", t.banned_exact}, {"point_constraints", t.banned_points}};
+        j["banned"] = {{"raster", t.banned_raster},
+                       {"exact", t.banned_exact},
+                       {"border", t.banned_border},
+                       {"point_constraints", t.banned_points}};
         j["self_intersection_repairs"] = t.self_intersection_repairs;
         j["orientation_repairs"] = t.orientation_repairs;
         j["input_conflicts"] = t.input_conflicts;

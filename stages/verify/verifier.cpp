@@ -299,7 +299,9 @@ class Verifier {
     {
         std::set<std::string> units;
         for (const auto& c : store.constraints) {
-            units.insert(store.strings[c.unit]);
+            if (c.kind != chains::constraint_neighbour) { // another partition's unit, checked in its own node
+                units.insert(store.strings[c.unit]);
+            }
         }
         std::vector<GridPoint> grid(m_options.user_points.size());
         std::vector<bool> valid(grid.size(), false);
@@ -344,7 +346,9 @@ class Verifier {
     {
         std::set<std::string> mine;
         for (const auto& c : store.constraints) {
-            mine.insert(store.strings[c.unit]);
+            if (c.kind != chains::constraint_neighbour) {
+                mine.insert(store.strings[c.unit]);
+            }
         }
         std::vector<uint32_t> out;
         for (uint32_t i = 1; i < t.strings.size(); ++i) {
@@ -496,14 +500,16 @@ class Verifier {
             }
         }
         for (const auto& cp : store.constraints) {
+            if (cp.kind == chains::constraint_neighbour) {
+                continue; // checked in the node of the partition that owns the unit
+            }
             const std::string& unit = store.strings[cp.unit];
             const auto ui = std::find(r.table.strings.begin(), r.table.strings.end(), unit);
             ++r.points;
             const uint32_t u = static_cast<uint32_t>(ui - r.table.strings.begin());
             if (ui == r.table.strings.end() || locate(r, u, cp.p) != PointLocation::inside) {
                 violation("point_constraints", {}, cp.p,
-                          std::string(cp.kind == chains::constraint_internal ? "internal" : "user") + " point of " +
-                              unit + " not inside it");
+                          std::string(chains::constraint_kind_name(cp.kind)) + " point of " + unit + " not inside it");
             }
         }
         for (const auto& up : user_points) {

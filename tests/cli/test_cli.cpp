@@ -231,7 +231,7 @@ TEST_F(Cli, IngestSucceedsQuietlyAndDeterministically)
     // dump prints a store as sorted text.
     const Result d = run("dump", (m_dir / "out" / "tract" / "51063.tlc").string());
     EXPECT_EQ(d.code, 0);
-    EXPECT_EQ(d.out.rfind("chain-store 1.1\nlevel 2/5 tract\npartition 51063\n", 0), 0U) << d.out;
+    EXPECT_EQ(d.out.rfind("chain-store 1.2\nlevel 2/5 tract\npartition 51063\n", 0), 0U) << d.out;
 }
 
 TEST_F(Cli, MissingInputFile)

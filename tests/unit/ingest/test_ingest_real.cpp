@@ -67,19 +67,50 @@ std::map<std::string, uint64_t> units_per_level(const Ingested& r)
 
 /// Every constraint point strictly inside its unit, by an exact test against the
 /// store's own chains (halo included: a unit's border may belong to a neighbour
-/// partition); every unit of each partition has exactly one point.
+/// partition); every unit of each partition has exactly one point. And the
+/// partition contract's points: every unit an owned chain bounds has its point
+/// in the store, a neighbour's (kind 2) the very point its own store holds.
 void expect_points_inside(const Ingested& r)
 {
     size_t checked = 0;
+    std::map<std::string, GridPoint> own_point; // level/unit -> its internal point
+    for (const auto& s : r.stores) {
+        for (const auto& cp : s.constraints) {
+            if (cp.kind == chains::constraint_internal) {
+                own_point[s.level_name + "/" + s.strings[cp.unit]] = cp.p;
+            }
+        }
+    }
+    size_t neighbours = 0;
     for (const auto& s : r.stores) {
         std::set<uint32_t> seen;
         for (const auto& cp : s.constraints) {
             EXPECT_TRUE(seen.insert(cp.unit).second) << s.level_name << " " << s.strings[cp.unit];
+            if (cp.kind == chains::constraint_neighbour) {
+                const auto it = own_point.find(s.level_name + "/" + s.strings[cp.unit]);
+                ASSERT_NE(it, own_point.end()) << s.level_name << "/" << s.partition << " " << s.strings[cp.unit];
+                EXPECT_EQ(it->second, cp.p) << s.level_name << "/" << s.partition << " " << s.strings[cp.unit];
+                ++neighbours;
+                continue;
+            }
             EXPECT_EQ(chains::unit_location(s, cp.unit, cp.p), PointLocation::inside)
                 << s.level_name << "/" << s.partition << " unit " << s.strings[cp.unit];
             ++checked;
         }
+        for (const auto& c : s.chains) {
+            for (const uint32_t side : {c.left, c.right}) {
+                if (!(c.flags & chains::chain_halo) && side != 0) {
+                    EXPECT_TRUE(seen.count(side)) << s.level_name << "/" << s.partition << ": chain " << c.id
+                                                  << " bounds " << s.strings[side] << ", whose point is missing";
+                }
+            }
+        }
     }
+    uint64_t neighbour_points = 0;
+    for (const auto& l : r.result.levels) {
+        neighbour_points += l.neighbour_points;
+    }
+    EXPECT_EQ(neighbours, neighbour_points);
     uint64_t units = 0;
     for (const auto& l : r.result.levels) {
         units += l.units;
