@@ -1,0 +1,119 @@
+// The partition contract against maps built to break it (formats/chains/SPEC.md,
+// tests/support/adversarial_map.hpp): each seed's map, partitioned three ways,
+// goes through tigerlod-ingest -> color -> simplify -> pack -> verify at a fine
+// and a coarse ladder (the coarse one with the coarsest pixel allowed, so that
+// the gaps between strips are narrower than a pixel), and verify must find
+// nothing. Seeds 1-3 by default; TIGERLOD_PROPERTY_SEEDS=A-B sweeps others
+// (scripts/property-sweep).
+#include "../support/adversarial_map.hpp"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+using tigerlod::testing::AdversarialMap;
+using json = nlohmann::json;
+
+namespace {
+
+const fs::path bin_dir = TIGERLOD_BIN_DIR;
+
+std::string slurp(const fs::path& p)
+{
+    std::ifstream in(p, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+int run(const std::string& tool, const std::string& args, const fs::path& log)
+{
+    const std::string cmd = (bin_dir / ("tigerlod-" + tool)).string() + " " + args + " >" + log.string() + " 2>&1";
+    const int status = std::system(cmd.c_str());
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+std::pair<uint64_t, uint64_t> seed_range()
+{
+    const char* env = std::getenv("TIGERLOD_PROPERTY_SEEDS");
+    if (!env || !*env) {
+        return {1, 3};
+    }
+    const std::string s = env;
+    const auto dash = s.find('-');
+    return dash == std::string::npos ? std::pair{std::stoull(s), std::stoull(s)}
+                                     : std::pair{std::stoull(s.substr(0, dash)), std::stoull(s.substr(dash + 1))};
+}
+
+struct Ladder {
+    const char* name;
+    const char* options; ///< for color and simplify
+};
+
+const Ladder ladders[] = {{"fine", "--tolerances 1,4"}, {"coarse", "--tolerances 16,64 --pixel-fraction 0.5"}};
+
+const std::pair<AdversarialMap::Partitioning, const char*> partitionings[] = {
+    {AdversarialMap::Partitioning::whole, "whole"},
+    {AdversarialMap::Partitioning::blocks, "blocks"},
+    {AdversarialMap::Partitioning::scattered, "scattered"}};
+
+} // namespace
+
+TEST(Partitions, AdversarialMapsVerifyCleanHoweverPartitioned)
+{
+    const auto [first, last] = seed_range();
+    const fs::path dir = fs::temp_directory_path() / ("tigerlod-partitions-" + std::to_string(::getpid()));
+    size_t runs = 0, neighbour_points = 0, border_bans = 0;
+    for (uint64_t seed = first; seed <= last; ++seed) {
+        const AdversarialMap map(seed);
+        for (const auto& [partitioning, pname] : partitionings) {
+            for (const Ladder& ladder : ladders) {
+                const std::string what = "seed " + std::to_string(seed) + ", " + pname + ", " + ladder.name + " ladder";
+                SCOPED_TRACE(what);
+                fs::remove_all(dir);
+                fs::create_directories(dir);
+                std::ofstream(dir / "map.geojson") << map.geojson(partitioning);
+                std::ofstream(dir / "config.yaml")
+                    << "name: adversarial\n"
+                       "dataset:\n  kind: polygons\n  inputs: [map.geojson]\n  code_field: GEOID\n"
+                       "  intpt_lat_field: INTPTLAT\n  intpt_lon_field: INTPTLON\n"
+                       "levels:\n  - {name: nation, code: US}\n  - {name: state, prefix: 2}\n"
+                       "  - {name: county, prefix: 5}\n  - {name: tract, prefix: 11}\n"
+                       "ingest:\n  halo_m: 150\n";
+                const std::string d = dir.string();
+                const fs::path log = dir / "log";
+                ASSERT_EQ(run("ingest", d + "/config.yaml " + d + "/ingest --threads 2", log), 0) << slurp(log);
+                const json ingest = json::parse(slurp(dir / "ingest" / "ingest-report.json"));
+                for (const auto& l : ingest["levels"]) {
+                    neighbour_points += l["neighbour_points"].get<size_t>();
+                }
+                ASSERT_EQ(ingest["problems"]["crossings"], 0) << "the generator made a map that is not planar";
+                ASSERT_EQ(run("color", std::string(ladder.options) + " " + d + "/ingest " + d + "/color", log), 0)
+                    << slurp(log);
+                ASSERT_EQ(run("simplify",
+                              std::string(ladder.options) + " --threads 2 --colors " + d + "/color " + d + "/ingest " +
+                                  d + "/simp",
+                              log),
+                          0)
+                    << slurp(log);
+                const json simp = json::parse(slurp(dir / "simp" / "simplify-report.json"));
+                for (const auto& t : simp["tolerances"]) {
+                    border_bans += t["banned"]["border"].get<size_t>();
+                }
+                ASSERT_EQ(run("pack", d + "/ingest " + d + "/simp " + d + "/tree", log), 0) << slurp(log);
+                EXPECT_EQ(run("verify", d + "/tree " + d + "/ingest " + d + "/verify", log), 0) << slurp(log);
+                ++runs;
+            }
+        }
+    }
+    fs::remove_all(dir);
+    // The maps do exercise the contract: neighbours' points in the stores,
+    // and shortcuts that the border rule turned down.
+    EXPECT_GT(neighbour_points, 0U);
+    std::printf("%zu runs clean; %zu neighbour points; %zu shortcuts banned by the border rule\n", runs,
+                neighbour_points, border_bans);
+}
