@@ -933,3 +933,69 @@ TEST(Color, ConflictingChainsGetDifferentClassesAndTilesSplitBeforeFailing)
         EXPECT_NE(std::string(e.what()).find("needs more than 2 stencil classes"), std::string::npos) << e.what();
     }
 }
+
+// The partition contract's points (formats/chains/SPEC.md): every unit an
+// owned chain bounds, whoever owns it, has its internal point in the store.
+TEST(Simplify, AStoreMustHoldThePointOfEveryUnitItsOwnChainsBound)
+{
+    MapBuilder m;
+    m.chain(1, {{0, 0}, {100, 50}, {200, 0}}, "A", "B");
+    m.chain(2, {{0, 0}, {100, -50}, {200, 0}}, "B", "X", "", chains::chain_halo); // X: bounded by the halo only
+    m.point("A", {100, 100});
+    auto fault = partition_contract_fault(m.s);
+    ASSERT_TRUE(fault.has_value());
+    EXPECT_NE(fault->find("chain 1 bounds unit B"), std::string::npos) << *fault;
+    EXPECT_NE(fault->find("missing_internal_points"), std::string::npos) << *fault;
+    m.s.minor = 1; // a store from an ingest before the contract
+    EXPECT_NE(partition_contract_fault(m.s)->find("chain store 1.1, written before the contract"), std::string::npos);
+    m.s.constraints.push_back({m.s.intern("B"), chains::constraint_neighbour, {100, 0}});
+    EXPECT_FALSE(partition_contract_fault(m.s).has_value());
+    // A user point is no unit's internal point.
+    m.s.constraints = {{m.s.intern("A"), chains::constraint_internal, {100, 100}},
+                       {m.s.intern("B"), chains::constraint_user, {100, 0}}};
+    EXPECT_TRUE(partition_contract_fault(m.s).has_value());
+}
+
+// The border rule. A lake on a border between two partitions, its shores two
+// chains from J to K (10 m apart, 2.5 pixels at 16 m: the raster tests no
+// pixel of J K, all within 1.5 pixels of an end). Each partition sees the
+// other's shore as halo, and both shores may become J K: simplified apart,
+// they would overlap. Chain 20 gives way to chain 10 (the smaller id).
+//
+//            10 (north shore)
+//          .-----.
+//       J <       > K      1 m = 100 grid units
+//          '-----'
+//            20 (south shore)
+TEST(Simplify, TheBorderRuleKeepsPartitionsSimplifiedApartFromMeeting)
+{
+    const Pts north{{0, 0}, {333, 300}, {666, 300}, {1000, 0}};
+    const Pts south{{0, 0}, {333, -300}, {666, -300}, {1000, 0}};
+    MapBuilder a, b;
+    a.chain(20, south, "S", "").chain(10, north, "", "N", "", chains::chain_halo);
+    b.chain(10, north, "", "N").chain(20, south, "S", "", "", chains::chain_halo);
+    ToleranceStats sa, sb;
+    const ChainStore out_a = run(a.s, 16, plain(), &sa);
+    const ChainStore out_b = run(b.s, 16, plain(), &sb);
+    ASSERT_EQ(out_a.chains.size(), 1U);
+    ASSERT_EQ(out_b.chains.size(), 1U);
+    EXPECT_EQ(out_b.chains[0].count, 2U); // 10 becomes J K
+    EXPECT_EQ(sb.banned_border, 0U);
+    EXPECT_GE(sa.banned_border, 1U); // 20's J K meets 10's J K
+    const auto pa = out_a.chain_points(out_a.chains[0]), pb = out_b.chain_points(out_b.chains[0]);
+    for (size_t i = 0; i + 1 < pa.size(); ++i) {
+        for (size_t j = 0; j + 1 < pb.size(); ++j) {
+            const auto rel = segment_relation(pa[i], pa[i + 1], pb[j], pb[j + 1]);
+            EXPECT_TRUE(rel == SegmentRelation::disjoint || rel == SegmentRelation::shared_endpoint)
+                << "segment " << i << " of 20 and " << j << " of 10";
+        }
+    }
+    // Within one store the exact check decides, as before: 10 and 20 both
+    // owned, one of them keeps its shore, and the rule never applies.
+    MapBuilder whole;
+    whole.chain(10, north, "", "N").chain(20, south, "S", "");
+    ToleranceStats sw;
+    const ChainStore out_w = run(whole.s, 16, plain(), &sw);
+    EXPECT_EQ(sw.banned_border, 0U);
+    EXPECT_EQ(out_w.chains[0].count + out_w.chains[1].count, 6U);
+}
