@@ -24,25 +24,182 @@ bool proximate_exact(std::span<const GridPoint> pts, uint32_t j, uint32_t k, con
     return true;
 }
 
-/// L1 and Linf, for an end b deep inside every intermediate vertex's cone:
-/// the ray from a meets each vertex's ball no farther than |q| + its L2
-/// radius `r_ball`, so only the vertices whose ball reaches past b can miss
-/// the segment; the exact test for those alone.
-bool proximate_near_end(std::span<const GridPoint> pts, uint32_t j, uint32_t k, const Tolerance& tol, double len2,
-                        double r_ball) noexcept
-{
-    // |q| below lim means |q| + r_ball below |b| (shrunk for rounding).
-    const double lim = std::sqrt(len2 / (1 + 1e-12)) - r_ball;
-    const double safe2 = lim > 0 ? lim * lim * (1 - 1e-9) : -1;
-    const GridPoint a = pts[j];
-    for (uint32_t i = j + 1; i < k; ++i) {
-        const double qx = double(pts[i].x) - a.x, qy = double(pts[i].y) - a.y;
-        if (!(qx * qx + qy * qy < safe2) && !within(pts[i], a, pts[k], tol)) {
-            return false;
+/// The exact test of the ends of one start a that the wedge leaves unsure,
+/// made cheap where a chain meanders far out and back (coarse tolerances:
+/// a coastline at 2000 m left most ends of a start unsure, each an O(w)
+/// test, O(n w^2) for the chain). Two facts, both exact:
+/// - an intermediate vertex farther from a than |ab| + r (r the L2 radius
+///   of the metric's ball) is farther than r from every point of ab: b is
+///   not proximate, whatever the rest;
+/// - for an end deep inside a complete wedge, the ray from a meets every
+///   intermediate vertex's ball no farther than |q| + r_ball (r_ball = 0
+///   in L2, where the ray passes within eps of q and a vertex projecting
+///   past b is farther from a than b), so only the vertices with |q| >=
+///   |ab| - r_ball can miss the segment.
+/// So the vertices within 2 r (and a margin) of the farthest one so far are
+/// kept in a list in order of distance, built on the first unsure end and
+/// extended as the ends go on: a deep end tests the list's vertices beyond
+/// its bound, and stops at the first nearer one. Ends near the wedge's edges take the whole test. The answers are
+/// those of proximate_exact; only their cost changes.
+class UnsureEnds {
+  public:
+    /// r_eps: the L2 radius of the metric's ball; r_in: of the disc inside it.
+    UnsureEnds(const Tolerance& tol, double r_eps, double r_in)
+        : m_tol(tol), m_r_eps(r_eps), m_r_in(r_in), m_l2(tol.metric == Metric::l2)
+    {
+    }
+
+    /// Start over for start j.
+    void reset(uint32_t j) noexcept
+    {
+        m_j = j;
+        m_to = j + 1;
+        m_far2 = 0;
+        m_far.clear();
+        m_recent.clear();
+        m_begin = 0;
+        m_anchored = false;
+    }
+
+    /// Whether shortcut (j, k) is proximate; `deep`: end k is deep inside a
+    /// complete wedge (every constraint in it). b != a.
+    bool proximate(std::span<const GridPoint> pts, uint32_t k, bool deep)
+    {
+        const GridPoint a = pts[m_j], b = pts[k];
+        extend(pts, k);
+        const double bx = double(b.x) - a.x, by = double(b.y) - a.y;
+        const double len = std::sqrt(bx * bx + by * by);
+        if (std::sqrt(m_far2) > (len + m_r_eps) * (1 + 1e-9) + 1) {
+            return false; // a vertex farther than eps from all of ab
+        }
+        if (!deep) {
+            return proximate_exact(pts, m_j, k, m_tol);
+        }
+        // |q| below lim: the ray meets q's ball before b (shrunk for rounding).
+        const double lim = len / (1 + 1e-12) - (m_l2 ? 0.0 : m_r_eps);
+        const double safe2 = lim > 0 ? lim * lim * (1 - 1e-9) : -1;
+        // Near the anchor (an end found proximate before), the vertices it
+        // covered lie within m_anchor_d of it, so within m_anchor_d + the
+        // step of b: inside the disc in the ball, within eps, untested.
+        auto dist = [](GridPoint p, GridPoint q) {
+            const double dx = double(p.x) - q.x, dy = double(p.y) - q.y;
+            return std::sqrt(dx * dx + dy * dy); // below 2^33 each: no overflow, and hypot's care is slow here
+        };
+        const double step = dist(b, m_anchor);
+        double max_d = 0;
+        auto test = [&](uint32_t i) {
+            if (!within(pts[i], a, b, m_tol)) {
+                return false;
+            }
+            max_d = std::max(max_d, dist(pts[i], b));
+            return true;
+        };
+        if (m_anchored && (m_anchor_d + step) * (1 + 1e-9) <= m_r_in * (1 - 1e-9) - 1) {
+            // The vertices added since the anchor, beyond b's bound.
+            size_t tested = 0;
+            for (size_t e = m_anchor_pos; e < m_recent.size(); ++e) {
+                if (m_recent[e].second >= safe2) {
+                    ++tested;
+                    if (!test(m_recent[e].first)) {
+                        return false;
+                    }
+                }
+            }
+            // Those before it that its bound left out and b's takes in.
+            if (safe2 < m_anchor_safe2) {
+                const auto lo = std::lower_bound(m_far.begin() + static_cast<std::ptrdiff_t>(m_begin), m_far.end(),
+                                                 std::pair{safe2, uint32_t{0}});
+                for (auto it = lo; it != m_far.end() && it->first < m_anchor_safe2; ++it) {
+                    if (it->second < m_anchor_k && !test(it->second)) {
+                        return false;
+                    }
+                }
+            }
+            if (tested >= 8) {
+                anchor(b, k, safe2, std::max(max_d, m_anchor_d + step));
+            }
+            return true;
+        }
+        for (size_t e = m_far.size(); e > m_begin; --e) { // farthest first
+            const auto [r2, i] = m_far[e - 1];
+            if (r2 < safe2) {
+                break;
+            }
+            if (!test(i)) {
+                return false;
+            }
+        }
+        anchor(b, k, safe2, max_d);
+        return true;
+    }
+
+  private:
+    /// End k at b, found proximate, covers the vertices before it at least
+    /// sqrt(safe2) from a, all within d of b.
+    void anchor(GridPoint b, uint32_t k, double safe2, double d) noexcept
+    {
+        m_anchored = true;
+        m_anchor = b;
+        m_anchor_k = k;
+        m_anchor_pos = m_recent.size();
+        m_anchor_safe2 = safe2;
+        m_anchor_d = d * (1 + 1e-9) + 1e-6;
+    }
+
+    /// The vertices before k into the lists (those near the farthest so far).
+    void extend(std::span<const GridPoint> pts, uint32_t k)
+    {
+        const GridPoint a = pts[m_j];
+        for (; m_to < k; ++m_to) {
+            const double qx = double(pts[m_to].x) - a.x, qy = double(pts[m_to].y) - a.y;
+            const double r2 = qx * qx + qy * qy;
+            m_far2 = std::max(m_far2, r2);
+            if (r2 >= keep2()) {
+                // Mostly the farthest yet (a chain going out): at the end.
+                const std::pair<double, uint32_t> e{r2, m_to};
+                m_far.insert(std::upper_bound(m_far.begin() + static_cast<std::ptrdiff_t>(m_begin), m_far.end(), e), e);
+                m_recent.emplace_back(m_to, r2);
+            }
+        }
+        const double keep = keep2();
+        while (m_begin < m_far.size() && m_far[m_begin].first < keep) {
+            ++m_begin;
+        }
+        if (m_begin > 64 && 2 * m_begin > m_far.size()) {
+            m_far.erase(m_far.begin(), m_far.begin() + static_cast<std::ptrdiff_t>(m_begin));
+            m_begin = 0;
         }
     }
-    return true;
-}
+    /// The squared distance from a below which a vertex is never tested:
+    /// 2 r (and a margin) inside the farthest, since an end that is not
+    /// rejected lies at most r (and rounding) inside it, and tests the
+    /// vertices at most r_ball inside itself.
+    double keep2() const noexcept
+    {
+        const double lim = std::sqrt(m_far2) * (1 - 1e-8) - 2 * m_r_eps - 4;
+        return lim > 0 ? lim * lim : -1;
+    }
+
+    const Tolerance& m_tol;
+    double m_r_eps, m_r_in;
+    bool m_l2;
+    uint32_t m_j = 0, m_to = 1;
+    double m_far2 = 0;
+    /// (squared distance from a, vertex) of the vertices near the farthest,
+    /// nearest first, from m_begin on (those before it fell out of the band).
+    std::vector<std::pair<double, uint32_t>> m_far;
+    size_t m_begin = 0;
+    /// The same vertices in the order they came (vertex, squared distance).
+    std::vector<std::pair<uint32_t, double>> m_recent;
+    /// The anchor: an end found proximate; the vertices before it (the first
+    /// m_anchor_pos of m_recent) at least sqrt(m_anchor_safe2) from a lie
+    /// within m_anchor_d of it (rounding included).
+    bool m_anchored = false;
+    GridPoint m_anchor;
+    uint32_t m_anchor_k = 0;
+    size_t m_anchor_pos = 0;
+    double m_anchor_safe2 = 0, m_anchor_d = 0;
+};
 
 /// The directions from A counter-clockwise to B, an arc of less than pi;
 /// vectors need not be unit.
@@ -235,8 +392,10 @@ void scan(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_rea
     const auto t = static_cast<int64_t>(tol.threshold); // L1, Linf: floor(eps), the ball's radius
     const WedgeConstants wc(reps2);
     const double r_eps = wc.r_eps, cos_s = wc.cos_s, sin_s = wc.sin_s, deep2 = wc.deep2;
+    UnsureEnds unsure(tol, r_eps, r_in);
     for (uint32_t j = 0; j + 2 < n; ++j) {
         const GridPoint a = pts[j];
+        unsure.reset(j);
         Wedge wide, inner;
         bool complete = true;  // every constraint is in the wedge (none left out near pi / 2)
         bool inner_sure = !l2; // the inner wedge can still make an end sure (L1, Linf)
@@ -303,8 +462,7 @@ void scan(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_rea
             const bool sure = (deep && beyond2 * (1 + 1e-12) < len2) ||
                               (inner_sure && far2 * (1 + 1e-12) < len2 &&
                                (inner.state == Wedge::open || inner.arc.deep_inside(bx, by, len2, deep2)));
-            if (sure ||
-                (!l2 && deep ? proximate_near_end(pts, j, k, tol, len2, r_eps) : proximate_exact(pts, j, k, tol))) {
+            if (sure || unsure.proximate(pts, k, deep)) {
                 out.add(j, k);
             }
         }
@@ -378,9 +536,13 @@ __attribute__((target("avx2"))) void scan_lanes(std::span<const GridPoint> pts, 
     const WedgeConstants wc(reps2);
     const double r_eps = wc.r_eps, cos_s = wc.cos_s, sin_s = wc.sin_s, deep2 = wc.deep2;
     const double eps_cos = r_eps * cos_s, eps_sin = r_eps * sin_s; // scan<>'s products
-    // Per lane, the runs it closed in this group.
+    // Per lane, the runs it closed in this group, and its unsure ends' test.
     std::vector<Candidates::Run> closed[lanes];
+    std::vector<UnsureEnds> unsure(lanes, UnsureEnds(tol, r_eps, r_eps)); // L2: the ball is the disc
     for (uint32_t j = 0; j + 2 < n; j += lanes) {
+        for (int l = 0; l < lanes; ++l) {
+            unsure[l].reset(j + static_cast<uint32_t>(l));
+        }
         V4 steps{}; // per lane, how many ends it tests (0: no start there)
         double longest = 0;
         for (int l = 0; l < lanes; ++l) {
@@ -472,10 +634,14 @@ __attribute__((target("avx2"))) void scan_lanes(std::span<const GridPoint> pts, 
                 const M4 deep = open | ((c1 > 0) & (c2 > 0) & (c1 * c1 >= deep2 * (wax * wax + way * way) * st.len2) &
                                         (c2 * c2 >= deep2 * (wbx * wbx + wby * wby) * st.len2));
                 M4 found = tested & (far2 * (1 + 1e-12) < st.len2) & deep;
-                if (const int unsure = bits(tested & ~found)) {
+                if (const int left = bits(tested & ~found)) {
+                    // Deep in a complete wedge (far2 is infinite once a
+                    // constraint was left out of it).
+                    const int deep_complete = bits(deep & (far2 < HUGE_VAL));
                     for (int l = 0; l < lanes; ++l) {
                         const uint32_t start = j + static_cast<uint32_t>(l), end = static_cast<uint32_t>(k[l]);
-                        if ((unsure >> l & 1) != 0 && pts[end] != pts[start] && proximate_exact(pts, start, end, tol)) {
+                        if ((left >> l & 1) != 0 && pts[end] != pts[start] &&
+                            unsure[l].proximate(pts, end, (deep_complete >> l & 1) != 0)) {
                             found[l] = ~int64_t{0};
                         }
                     }

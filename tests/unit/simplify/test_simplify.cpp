@@ -243,6 +243,44 @@ TEST(Candidates, MatchBruteForceOnRandomChains)
     }
 }
 
+// Chains that go out and back within a strip narrower than eps, as a
+// coastline at a coarse tolerance does: most ends lie short of the farthest
+// vertex, where the scan's exact tests (the list of far vertices and the
+// anchor of UnsureEnds) decide, in both kernels. Regression: the coarse
+// ladder's candidate scan, O(n w^2) before 2026-11-24.
+TEST(Candidates, ChainsGoingOutAndBackMatchBruteForce)
+{
+    std::mt19937 rng(5);
+    std::uniform_int_distribution<int> noise(-40, 40);
+    for (Metric m : {Metric::l2, Metric::l1, Metric::linf}) {
+        for (int trial = 0; trial < 30; ++trial) {
+            Pts pts;
+            const double back = 150 + 20 * trial; // how far each meander turns back
+            for (int k = 0; k < 120; ++k) {
+                pts.push_back({static_cast<int32_t>(std::lround(100.0 * k + back * std::sin(0.9 * k))),
+                               noise(rng) + (trial % 3 == 0 ? k * 7 : 0)});
+            }
+            const Tolerance tol(double(150 + trial % 5 * 150), m);
+            std::vector<Shortcut> want;
+            for (uint32_t j = 0; j < pts.size(); ++j) {
+                for (uint32_t k = j + 2; k < pts.size(); ++k) {
+                    bool ok = pts[j] != pts[k];
+                    for (uint32_t i = j + 1; ok && i < k; ++i) {
+                        ok = within(pts[i], pts[j], pts[k], tol);
+                    }
+                    if (ok) {
+                        want.push_back({j, k});
+                    }
+                }
+            }
+            for (const ScanKernel kernel : {ScanKernel::fastest, ScanKernel::scalar}) {
+                const auto got = proximate_shortcuts(pts, tol, 0, kernel).list();
+                ASSERT_EQ(got, want) << metric_name(m) << " trial " << trial;
+            }
+        }
+    }
+}
+
 TEST(Candidates, AVertexWhoseConeIsNearlyAHalfPlaneStillCounts)
 {
     // Vertex 1 lies just outside the metric's ball around vertex 0, so the
