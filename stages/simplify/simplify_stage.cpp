@@ -397,10 +397,11 @@ int SimplifyStage::run(const StageContext& ctx)
         std::printf("simplify: %zu stores in %.2f s on %s\n", stores.size(), seconds, context->describe().c_str());
         for (const auto& t : totals) {
             std::printf("  eps %g m: %zu -> %zu vertices (%.1f%%), %zu candidates, %zu drawn, banned raster %zu "
-                        "exact %zu points %zu\n",
+                        "exact %zu border %zu points %zu\n",
                         t.eps_m, t.input_vertices, t.output_vertices,
                         t.input_vertices ? 100.0 * double(t.output_vertices) / double(t.input_vertices) : 0.0,
-                        t.candidates, t.drawn_segments, t.banned_raster, t.banned_exact, t.banned_points);
+                        t.candidates, t.drawn_segments, t.banned_raster, t.banned_exact, t.banned_border,
+                        t.banned_points);
         }
         std::printf("outputs in %s\n", m_common.output.c_str());
     }
