@@ -6,6 +6,7 @@
 // nothing. Seeds 1-3 by default; TIGERLOD_PROPERTY_SEEDS=A-B sweeps others
 // (scripts/property-sweep).
 #include "../support/adversarial_map.hpp"
+#include "../support/run_tool.hpp"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -24,17 +25,11 @@ namespace {
 
 const fs::path bin_dir = TIGERLOD_BIN_DIR;
 
-std::string slurp(const fs::path& p)
-{
-    std::ifstream in(p, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
+using tigerlod::testing::slurp;
 
 int run(const std::string& tool, const std::string& args, const fs::path& log)
 {
-    const std::string cmd = (bin_dir / ("tigerlod-" + tool)).string() + " " + args + " >" + log.string() + " 2>&1";
-    const int status = std::system(cmd.c_str());
-    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return tigerlod::testing::run_tool(bin_dir, tool, args, log);
 }
 
 std::pair<uint64_t, uint64_t> seed_range()

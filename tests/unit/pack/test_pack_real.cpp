@@ -3,6 +3,7 @@
 // runtime: every LOD of every node decodes to exactly the chains of the stores
 // (borders from the store that owns them), packing is deterministic, and
 // repacking after one partition changed rewrites only its tile.
+#include "../../support/run_tool.hpp"
 #include "formats/chains/chain_store.hpp"
 #include "reader/reader.hpp"
 
@@ -22,17 +23,11 @@ const fs::path source_dir = TIGERLOD_SOURCE_DIR;
 const fs::path bin_dir = TIGERLOD_BIN_DIR;
 const fs::path floyd_edges = source_dir.parent_path() / "shared" / "data" / "tiger" / "tl_2020_51063_edges.zip";
 
-std::string slurp(const fs::path& p)
-{
-    std::ifstream in(p, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
+using tigerlod::testing::slurp;
 
 int run(const std::string& tool, const std::string& args, const fs::path& log)
 {
-    const std::string cmd = (bin_dir / ("tigerlod-" + tool)).string() + " " + args + " >" + log.string() + " 2>&1";
-    const int status = std::system(cmd.c_str());
-    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return tigerlod::testing::run_tool(bin_dir, tool, args, log);
 }
 
 class PackReal : public ::testing::Test {
