@@ -129,15 +129,33 @@ inline std::vector<std::pair<double, double>> near_parts(std::span<const GridPoi
         return Point2{p.x + t * (double(q.x) - p.x), p.y + t * (double(q.y) - p.y)};
     };
     const Point2 fa{double(a.x), double(a.y)}, fb{double(b.x), double(b.y)};
+    // The parts come mostly in order along ab: `covered` is how far from 0
+    // they cover ab without a gap, so far. Once that is all of ab, the union
+    // is [0, 1] whatever the rest (a long shortcut at a coarse tolerance
+    // passes hundreds of blocked segments, and drawing it whole is then what
+    // the union says anyway).
+    double covered = 0;
+    bool sorted = true;
     for (auto it = std::lower_bound(blocked.begin(), blocked.end(), from,
                                     [](const NearSegment&n, uint32_t k) { return n.k < k; });
          it != blocked.end() && it->k < to; ++it) {
         const GridPoint p = pts[it->k], q = pts[it->k + 1];
         if (const auto iv = capsule_interval(fa, fb, at(p, q, it->t0), at(p, q, it->t1), r)) {
-            parts.emplace_back(std::max(0.0, iv->first - widen), std::min(1.0, iv->second + widen));
+            const std::pair<double, double> part{std::max(0.0, iv->first - widen), std::min(1.0, iv->second + widen)};
+            sorted = sorted && (parts.empty() || !(part < parts.back()));
+            parts.push_back(part);
+            if (part.first <= covered) {
+                covered = std::max(covered, part.second);
+                if (covered >= 1) {
+                    parts.assign(1, {0.0, 1.0});
+                    return parts;
+                }
+            }
         }
     }
-    std::sort(parts.begin(), parts.end());
+    if (!sorted) {
+        std::sort(parts.begin(), parts.end());
+    }
     size_t n = 0;
     for (const auto& iv : parts) {
         if (n > 0 && iv.first <= parts[n - 1].second) {
