@@ -39,8 +39,13 @@ bool proximate_exact(std::span<const GridPoint> pts, uint32_t j, uint32_t k, con
 /// So the vertices within 2 r (and a margin) of the farthest one so far are
 /// kept in a list in order of distance, built on the first unsure end and
 /// extended as the ends go on: a deep end tests the list's vertices beyond
-/// its bound, and stops at the first nearer one. Ends near the wedge's edges take the whole test. The answers are
-/// those of proximate_exact; only their cost changes.
+/// its bound, and stops at the first nearer one. And a third fact: the
+/// vertices an end found proximate (its anchor) tested lie within their
+/// largest distance d of it, so within d + |b - anchor| of a later end b;
+/// while that stays inside the disc in the ball, b tests only the vertices
+/// the anchor did not (added since, or nearer than its bound). Ends near the
+/// wedge's edges take the whole test. The answers are those of
+/// proximate_exact; only their cost changes.
 class UnsureEnds {
   public:
     /// r_eps: the L2 radius of the metric's ball; r_in: of the disc inside it.
