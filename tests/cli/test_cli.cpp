@@ -2,6 +2,8 @@
 // stderr, determinism, and every kind of bad input failing with the
 // documented exit code, a message naming the file and fault, and nothing
 // half-written.
+#include "formats/chains/chain_store.hpp"
+
 #include <cpl_conv.h>
 #include <gdal.h>
 #include <ogr_api.h>
@@ -650,6 +652,16 @@ TEST_F(Cli, ColorAndSimplifyRejectBadInput)
     expect_failure(run("color", in), 1, "51063.tlc: checksum mismatch (corrupt file)");
     expect_failure(run("simplify", in), 1, "51063.tlc: checksum mismatch (corrupt file)");
     EXPECT_FALSE(fs::exists(m_dir / "res"));
+    // A store that breaks the partition contract: a unit its chains bound has no point.
+    tigerlod::chains::ChainStore s =
+        tigerlod::chains::decode(std::as_bytes(std::span(bytes.data(), bytes.size())), store.string());
+    ASSERT_FALSE(s.constraints.empty());
+    const std::string unit = s.strings[s.constraints.front().unit];
+    s.constraints.erase(s.constraints.begin());
+    tigerlod::chains::write(store, s);
+    expect_failure(run("simplify", in), 1, "bounds unit " + unit + ", but the store holds no internal point");
+    EXPECT_FALSE(fs::exists(m_dir / "res"));
+    std::ofstream(store, std::ios::binary) << bytes;
 }
 
 TEST_F(Cli, PackDumpExportAndVerifyRejectBadInput)

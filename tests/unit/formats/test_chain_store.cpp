@@ -1,3 +1,4 @@
+#include "core/digest.hpp"
 #include "core/errors.hpp"
 #include "formats/chains/chain_store.hpp"
 
@@ -121,6 +122,31 @@ TEST(ChainStore, RejectsInconsistentContentEvenWithAValidChecksum)
     ChainStore c = sample();
     c.chains[0].flags |= chain_closed; // but its ends differ
     expect_format_error(encode(c), "closed flag disagrees");
+}
+
+// Kind 2 (a neighbour unit's internal point) is new in 1.2: it round-trips,
+// a file that calls itself 1.1 may not hold it, and kind 3 is nobody's.
+TEST(ChainStore, NeighbourPointsAreVersionOneTwo)
+{
+    ChainStore s = sample();
+    s.constraints.push_back({s.intern("C"), constraint_neighbour, {20, 1}});
+    s.canonicalize();
+    const std::string good = encode(s);
+    const ChainStore back = decode(as_span(good), "x.tlc");
+    EXPECT_EQ(back.minor, 2);
+    EXPECT_EQ(encode(back), good);
+    EXPECT_NE(to_text(back).find("point C neighbour 20,1"), std::string::npos) << to_text(back);
+    auto with_crc = [](std::string b) {
+        const uint32_t crc = crc32(as_span(b.substr(0, b.size() - 4)));
+        std::memcpy(b.data() + b.size() - 4, &crc, 4);
+        return b;
+    };
+    std::string old = good;
+    old[10] = 1; // minor version 1
+    expect_format_error(with_crc(old), "unknown constraint kind 2");
+    ChainStore bad = s;
+    bad.constraints.back().kind = 3;
+    expect_format_error(encode(bad), "unknown constraint kind 3");
 }
 
 TEST(ChainStore, MissingFileIsAnEnvironmentError)
