@@ -297,12 +297,7 @@ class Verifier {
     void original_facts(const chains::ChainStore& store, std::map<std::string, int>& area_sign,
                         std::vector<UserPoint>& user_points) const
     {
-        std::set<std::string> units;
-        for (const auto& c : store.constraints) {
-            if (c.kind != chains::constraint_neighbour) { // another partition's unit, checked in its own node
-                units.insert(store.strings[c.unit]);
-            }
-        }
+        const std::set<std::string> units = own_units(store);
         std::vector<GridPoint> grid(m_options.user_points.size());
         std::vector<bool> valid(grid.size(), false);
         for (size_t i = 0; i < grid.size(); ++i) {
@@ -341,15 +336,24 @@ class Verifier {
         }
     }
 
+    /// The codes of the partition's own units: those with a point in its
+    /// store other than a neighbour's (another partition's unit, checked in
+    /// its own node).
+    static std::set<std::string> own_units(const chains::ChainStore& store)
+    {
+        std::set<std::string> units;
+        for (const auto& c : store.constraints) {
+            if (c.kind != chains::constraint_neighbour) {
+                units.insert(store.strings[c.unit]);
+            }
+        }
+        return units;
+    }
+
     /// The table indices of the partition's own units (those whose whole boundary the node holds).
     static std::vector<uint32_t> units_in_table(const datatree::ChainTable& t, const chains::ChainStore& store)
     {
-        std::set<std::string> mine;
-        for (const auto& c : store.constraints) {
-            if (c.kind != chains::constraint_neighbour) {
-                mine.insert(store.strings[c.unit]);
-            }
-        }
+        const std::set<std::string> mine = own_units(store);
         std::vector<uint32_t> out;
         for (uint32_t i = 1; i < t.strings.size(); ++i) {
             if (mine.contains(t.strings[i])) {
