@@ -1268,16 +1268,20 @@ LevelStats process_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw
     for (uint32_t code = 0; code < npoints; ++code) {
         needed[code] = owns(L, code) ? 1 : 0;
     }
+    std::vector<std::pair<uint32_t, uint32_t>> neighbours; // (partition, unit of another partition its chain bounds)
     for (const auto& c : lev.chains) {
         if (npoints == 0 || !owns_part(c.owner)) {
             continue;
         }
         for (uint32_t side : {c.left, c.right}) {
-            if (side != none) {
+            if (side != none && parent(side) != c.owner) {
                 needed[side] = 1;
+                neighbours.emplace_back(c.owner, side);
             }
         }
     }
+    std::sort(neighbours.begin(), neighbours.end());
+    neighbours.erase(std::unique(neighbours.begin(), neighbours.end()), neighbours.end());
     // A few thousand units whose cost varies with their boundary: 64 at a time.
     parallel_blocks(npoints, options.threads, 64, [&](size_t b, size_t e) {
         std::vector<std::pair<GridPoint, GridPoint>> useg;
@@ -1334,20 +1338,10 @@ LevelStats process_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw
     }
     // Each partition's neighbour points: the units of other partitions that its chains bound.
     std::vector<std::vector<chains::ConstraintPoint>> neighbour_points(npart);
-    for (const auto& c : lev.chains) {
-        if (npoints == 0 || !owns_part(c.owner)) {
-            continue;
+    for (const auto& [part, unit] : neighbours) {
+        if (unit_points[unit].pt) {
+            neighbour_points[part].push_back({unit, chains::constraint_neighbour, *unit_points[unit].pt});
         }
-        for (uint32_t side : {c.left, c.right}) {
-            if (side != none && parent(side) != c.owner && unit_points[side].pt) {
-                neighbour_points[c.owner].push_back({side, chains::constraint_neighbour, *unit_points[side].pt});
-            }
-        }
-    }
-    for (auto& np : neighbour_points) {
-        std::sort(np.begin(), np.end(), [](const auto& a, const auto& b) { return a.unit < b.unit; });
-        np.erase(std::unique(np.begin(), np.end(), [](const auto& a, const auto& b) { return a.unit == b.unit; }),
-                 np.end());
     }
     // One store per partition, built, encoded and handed to the sink on the
     // worker threads, each taking the next partition as it finishes one.
