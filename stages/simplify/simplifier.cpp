@@ -130,6 +130,11 @@ struct Work {
     bool dirty = true;                   ///< path must be recomputed
 };
 
+/// A segment of a store in the far rule's grid: its chain and index.
+struct GridSeg {
+    uint32_t chain, index;
+};
+
 /// Twice the signed area of the ring through pts[at(0)], pts[at(1)], ..., pts[at(n-1)].
 template <class At> int128 signed_area2(std::span<const GridPoint> pts, size_t n, At at)
 {
@@ -368,6 +373,179 @@ ColorResult color_chains(const ChainStore& store, std::span<const double> eps, c
     }
 }
 
+/// The border rule (formats/chains/SPEC.md, "The partition contract"): a
+/// shortcut of an owned chain o may not meet any proximate shortcut of a
+/// halo chain h with a smaller id that comes near it. h's own partition can
+/// only ever pick h's shortcuts among those (the same scan on the same
+/// points at the same eps), and it checks them against o's original edges,
+/// as this store checks o's path against h's; so however the two partitions
+/// are simplified, apart, their chains cannot meet. Every point of a
+/// proximate shortcut lies within eps_h (as an L2 distance: x l2_reach) of a
+/// segment of its subchain (near_parts.hpp), so only the shortcuts of h
+/// spanning a segment that near are listed; h's are computed once per store,
+/// when a path first comes near it.
+class BorderRule {
+  public:
+    BorderRule(const ChainStore& store, std::span<const double> eps, const SimplifyOptions& opt)
+        : m_store(store), m_eps(eps), m_opt(opt), m_cand(store.chains.size()), m_done(store.chains.size(), 0),
+          m_span(store.chains.size(), 0)
+    {
+        for (uint32_t i = 0; i < store.chains.size(); ++i) {
+            if (store.chains[i].flags & chains::chain_halo) {
+                m_eps_max = std::max(m_eps_max, eps[i]);
+            }
+        }
+    }
+
+    /// Bans the path shortcuts of `work` not looked at before that meet a
+    /// halo chain's shortcut, finding halo segments near them in the far
+    /// rule's grid (`cells` of side `cell`, `grid_cells`); `ball_l2` is the
+    /// metric's l2_reach. Returns whether it banned one.
+    bool ban(std::vector<Work>& work, const CellGrid& cells, const CellBuckets<GridSeg>& grid_cells, double cell,
+             double ball_l2, ToleranceStats& st)
+    {
+        if (m_eps_max == 0) {
+            return false; // no halo: a single partition
+        }
+        struct Query {
+            uint32_t work, cand, halo, kmin, kmax;
+        };
+        std::vector<std::vector<Query>> per_work(work.size());
+        parallel_each(work.size(), m_opt.threads, [&](size_t wi) {
+            Work& w = work[wi];
+            if (w.cand.empty()) {
+                return;
+            }
+            if (w.border_checked.empty()) {
+                w.border_checked.assign(w.cand.size(), 0);
+            }
+            const auto pts = m_store.chain_points(m_store.chains[w.chain]);
+            const uint64_t own_id = m_store.chains[w.chain].id;
+            std::vector<Query> found;
+            for (size_t e = 0; e < w.path_cand.size(); ++e) {
+                const uint32_t ci = w.path_cand[e];
+                if (ci == UINT32_MAX || w.border_checked[ci]) {
+                    continue;
+                }
+                w.border_checked[ci] = 1;
+                const GridPoint a = pts[w.path[e]], b = pts[w.path[e + 1]];
+                found.clear();
+                cover_cells(a.x, a.y, b.x, b.y, m_eps_max * ball_l2 + 2, cell, 0.0, 0.0, [&](int64_t x, int64_t y) {
+                    if (!cells.contains(x, y)) {
+                        return;
+                    }
+                    for (const GridSeg gs : grid_cells.find(cells.key(x, y))) {
+                        const auto& hc = m_store.chains[gs.chain];
+                        if (!(hc.flags & chains::chain_halo) || (hc.flags & chains::chain_problem) || hc.id >= own_id) {
+                            continue;
+                        }
+                        const auto hp = m_store.chain_points(hc);
+                        // 2 grid units of slack for the rounding of the distance.
+                        if (segment_distance(a, b, hp[gs.index], hp[gs.index + 1]) > m_eps[gs.chain] * ball_l2 + 2) {
+                            continue;
+                        }
+                        found.push_back({static_cast<uint32_t>(wi), ci, gs.chain, gs.index, gs.index});
+                    }
+                });
+                // One query per halo chain, over the hull of its near segments.
+                std::sort(found.begin(), found.end(), [](const Query& p, const Query& q) { return p.halo < q.halo; });
+                for (size_t k = 0; k < found.size();) {
+                    Query q = found[k];
+                    for (++k; k < found.size() && found[k].halo == q.halo; ++k) {
+                        q.kmin = std::min(q.kmin, found[k].kmin);
+                        q.kmax = std::max(q.kmax, found[k].kmax);
+                    }
+                    per_work[wi].push_back(q);
+                }
+            }
+        });
+        std::vector<Query> queries;
+        for (auto& q : per_work) {
+            queries.insert(queries.end(), q.begin(), q.end());
+        }
+        if (queries.empty()) {
+            return false;
+        }
+        // The halo chains' shortcuts, once per m_store.
+        std::vector<uint32_t> need;
+        for (const Query& q : queries) {
+            if (!m_done[q.halo]) {
+                m_done[q.halo] = 1;
+                need.push_back(q.halo);
+            }
+        }
+        parallel_each(need.size(), m_opt.threads, [&](size_t k) {
+            const uint32_t h = need[k];
+            m_cand[h] = proximate_shortcuts(m_store.chain_points(m_store.chains[h]), Tolerance(m_eps[h], m_opt.metric),
+                                            m_opt.max_reach);
+            for (const auto& run : m_cand[h].runs()) {
+                m_span[h] = std::max(m_span[h], run.hi - run.from);
+            }
+        });
+        std::vector<uint8_t> meets(queries.size(), 0);
+        parallel_blocks(queries.size(), m_opt.threads, 16, [&](size_t qb, size_t qe) {
+            for (size_t qi = qb; qi < qe; ++qi) {
+                const Query& q = queries[qi];
+                const auto pts = m_store.chain_points(m_store.chains[work[q.work].chain]);
+                const Shortcut sc = work[q.work].cand.at(q.cand);
+                const GridPoint a = pts[sc.from], b = pts[sc.to];
+                const auto hp = m_store.chain_points(m_store.chains[q.halo]);
+                const Candidates& hc = m_cand[q.halo];
+                const GridBox sbox = [&] {
+                    GridBox box;
+                    box.extend(a);
+                    box.extend(b);
+                    return box;
+                }();
+                // Shortcuts from <= kmax to > kmin span a near segment's hull;
+                // none starts more than the longest span before kmin + 1.
+                const uint32_t first = q.kmin + 1 > m_span[q.halo] ? q.kmin + 1 - m_span[q.halo] : 0;
+                for (const auto& run : hc.empty() ? std::span<const Candidates::Run>{}
+                                                  : hc.runs().subspan(hc.first_run(first),
+                                                                      hc.first_run(q.kmax + 1) - hc.first_run(first))) {
+                    if (run.hi <= q.kmin) {
+                        continue;
+                    }
+                    for (uint32_t to = std::max(run.lo, q.kmin + 1); to <= run.hi && !meets[qi]; ++to) {
+                        const GridPoint c = hp[run.from], d = hp[to];
+                        GridBox cbox;
+                        cbox.extend(c);
+                        cbox.extend(d);
+                        if (!cbox.intersects(sbox)) {
+                            continue;
+                        }
+                        const auto rel = segment_relation(a, b, c, d);
+                        meets[qi] = rel != SegmentRelation::disjoint && rel != SegmentRelation::shared_endpoint;
+                    }
+                    if (meets[qi]) {
+                        break;
+                    }
+                }
+            }
+        });
+        bool banned = false;
+        for (size_t qi = 0; qi < queries.size(); ++qi) {
+            Work& w = work[queries[qi].work];
+            if (meets[qi] && w.state[queries[qi].cand] != bad_exact) {
+                w.state[queries[qi].cand] = bad_exact;
+                w.dirty = true;
+                ++st.banned_border;
+                banned = true;
+            }
+        }
+        return banned;
+    }
+
+  private:
+    const ChainStore& m_store;
+    std::span<const double> m_eps;
+    const SimplifyOptions& m_opt;
+    std::vector<Candidates> m_cand; ///< each halo chain's shortcuts, once needed
+    std::vector<uint8_t> m_done;    ///< whether m_cand holds them
+    std::vector<uint32_t> m_span;   ///< the longest shortcut of each, in vertices
+    double m_eps_max = 0;           ///< the largest halo chain's tolerance; 0 without a halo
+};                                  // class BorderRule
+
 } // namespace
 
 ColorResult color_store(const ChainStore& store, double eps_m, const SimplifyOptions& opt)
@@ -531,9 +709,6 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
     // three, contours 0.52 -> 0.39 s; four was slower on the contours). The
     // answer does not depend on the size.
     const double cell = std::max({2 * reach_max, 3 * mean_segment_length(store), 1.0});
-    struct GridSeg {
-        uint32_t chain, index;
-    };
     std::vector<std::pair<uint64_t, GridSeg>> grid; // (cell, segment), segments in (chain, index) order
     // Each segment goes in the cells it passes through (not its bounding box:
     // a 10 km diagonal at 1 m covers 25 M cells of its box, measured at 17 GB).
@@ -778,158 +953,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         raster_test(near);
     }
 
-    // The border rule (formats/chains/SPEC.md, "The partition contract"):
-    // a shortcut of an owned chain o may not meet any proximate shortcut of a
-    // halo chain h with a smaller id that comes near it. h's own partition
-    // can only ever pick h's shortcuts among those (the same scan on the
-    // same points at the same eps), and it checks them against o's original
-    // edges, as this store checks o's path against h's; so however the two
-    // partitions are simplified, apart, their chains cannot meet. Every point
-    // of a proximate shortcut lies within eps_h (as an L2 distance: x
-    // l2_reach) of a segment of its subchain (near_parts.hpp), so only the
-    // shortcuts of h spanning a segment that near are listed. Returns
-    // whether it banned a shortcut.
-    std::vector<Candidates> halo_cand(store.chains.size());
-    std::vector<uint8_t> halo_cand_done(store.chains.size(), 0);
-    std::vector<uint32_t> halo_span(store.chains.size(), 0); ///< the longest shortcut of each, in vertices
-    double halo_eps_max = 0;
-    for (uint32_t i = 0; i < store.chains.size(); ++i) {
-        if (store.chains[i].flags & chains::chain_halo) {
-            halo_eps_max = std::max(halo_eps_max, eps[i]);
-        }
-    }
-    auto border_rule = [&]() -> bool {
-        if (halo_eps_max == 0) {
-            return false; // no halo: a single partition
-        }
-        struct Query {
-            uint32_t work, cand, halo, kmin, kmax;
-        };
-        std::vector<std::vector<Query>> per_work(work.size());
-        parallel_each(work.size(), opt.threads, [&](size_t wi) {
-            Work& w = work[wi];
-            if (w.cand.empty()) {
-                return;
-            }
-            if (w.border_checked.empty()) {
-                w.border_checked.assign(w.cand.size(), 0);
-            }
-            const auto pts = points_of(w);
-            const uint64_t own_id = store.chains[w.chain].id;
-            std::vector<Query> found;
-            for (size_t e = 0; e < w.path_cand.size(); ++e) {
-                const uint32_t ci = w.path_cand[e];
-                if (ci == UINT32_MAX || w.border_checked[ci]) {
-                    continue;
-                }
-                w.border_checked[ci] = 1;
-                const GridPoint a = pts[w.path[e]], b = pts[w.path[e + 1]];
-                found.clear();
-                cover_cells(a.x, a.y, b.x, b.y, halo_eps_max * ball_l2 + 2, cell, 0.0, 0.0, [&](int64_t x, int64_t y) {
-                    if (!cells.contains(x, y)) {
-                        return;
-                    }
-                    for (const GridSeg gs : grid_cells.find(cells.key(x, y))) {
-                        const auto& hc = store.chains[gs.chain];
-                        if (!(hc.flags & chains::chain_halo) || (hc.flags & chains::chain_problem) || hc.id >= own_id) {
-                            continue;
-                        }
-                        const auto hp = store.chain_points(hc);
-                        // 2 grid units of slack for the rounding of the distance.
-                        if (segment_distance(a, b, hp[gs.index], hp[gs.index + 1]) > eps[gs.chain] * ball_l2 + 2) {
-                            continue;
-                        }
-                        found.push_back({static_cast<uint32_t>(wi), ci, gs.chain, gs.index, gs.index});
-                    }
-                });
-                // One query per halo chain, over the hull of its near segments.
-                std::sort(found.begin(), found.end(), [](const Query& p, const Query& q) { return p.halo < q.halo; });
-                for (size_t k = 0; k < found.size();) {
-                    Query q = found[k];
-                    for (++k; k < found.size() && found[k].halo == q.halo; ++k) {
-                        q.kmin = std::min(q.kmin, found[k].kmin);
-                        q.kmax = std::max(q.kmax, found[k].kmax);
-                    }
-                    per_work[wi].push_back(q);
-                }
-            }
-        });
-        std::vector<Query> queries;
-        for (auto& q : per_work) {
-            queries.insert(queries.end(), q.begin(), q.end());
-        }
-        if (queries.empty()) {
-            return false;
-        }
-        // The halo chains' shortcuts, once per store.
-        std::vector<uint32_t> need;
-        for (const Query& q : queries) {
-            if (!halo_cand_done[q.halo]) {
-                halo_cand_done[q.halo] = 1;
-                need.push_back(q.halo);
-            }
-        }
-        parallel_each(need.size(), opt.threads, [&](size_t k) {
-            const uint32_t h = need[k];
-            halo_cand[h] =
-                proximate_shortcuts(store.chain_points(store.chains[h]), Tolerance(eps[h], opt.metric), opt.max_reach);
-            for (const auto& run : halo_cand[h].runs()) {
-                halo_span[h] = std::max(halo_span[h], run.hi - run.from);
-            }
-        });
-        std::vector<uint8_t> meets(queries.size(), 0);
-        parallel_blocks(queries.size(), opt.threads, 16, [&](size_t qb, size_t qe) {
-            for (size_t qi = qb; qi < qe; ++qi) {
-                const Query& q = queries[qi];
-                const auto pts = points_of(work[q.work]);
-                const Shortcut sc = work[q.work].cand.at(q.cand);
-                const GridPoint a = pts[sc.from], b = pts[sc.to];
-                const auto hp = store.chain_points(store.chains[q.halo]);
-                const Candidates& hc = halo_cand[q.halo];
-                const GridBox sbox = [&] {
-                    GridBox box;
-                    box.extend(a);
-                    box.extend(b);
-                    return box;
-                }();
-                // Shortcuts from <= kmax to > kmin span a near segment's hull;
-                // none starts more than the longest span before kmin + 1.
-                const uint32_t first = q.kmin + 1 > halo_span[q.halo] ? q.kmin + 1 - halo_span[q.halo] : 0;
-                for (const auto& run : hc.empty() ? std::span<const Candidates::Run>{}
-                                                  : hc.runs().subspan(hc.first_run(first),
-                                                                      hc.first_run(q.kmax + 1) - hc.first_run(first))) {
-                    if (run.hi <= q.kmin) {
-                        continue;
-                    }
-                    for (uint32_t to = std::max(run.lo, q.kmin + 1); to <= run.hi && !meets[qi]; ++to) {
-                        const GridPoint c = hp[run.from], d = hp[to];
-                        GridBox cbox;
-                        cbox.extend(c);
-                        cbox.extend(d);
-                        if (!cbox.intersects(sbox)) {
-                            continue;
-                        }
-                        const auto rel = segment_relation(a, b, c, d);
-                        meets[qi] = rel != SegmentRelation::disjoint && rel != SegmentRelation::shared_endpoint;
-                    }
-                    if (meets[qi]) {
-                        break;
-                    }
-                }
-            }
-        });
-        bool banned = false;
-        for (size_t qi = 0; qi < queries.size(); ++qi) {
-            Work& w = work[queries[qi].work];
-            if (meets[qi] && w.state[queries[qi].cand] != bad_exact) {
-                w.state[queries[qi].cand] = bad_exact;
-                w.dirty = true;
-                ++st.banned_border;
-                banned = true;
-            }
-        }
-        return banned;
-    };
+    BorderRule border(store, eps, opt);
 
     bool checked_once = false;
     for (;;) {
@@ -1111,7 +1135,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             }
             banned_any |= banned;
         }
-        banned_any |= border_rule();
+        banned_any |= border.ban(work, cells, grid_cells, cell, ball_l2, st);
         st.seconds_exact += since(t0);
         if (!banned_any) {
             break;
