@@ -753,7 +753,7 @@ std::vector<uint32_t> cull_by_points(std::span<const GridPoint> pts, const Candi
         }
         const size_t first_bad = bad.size();
         for (const GridPoint p : points) {
-            if (p.x < box.min_x || p.x > box.max_x || p.y < box.min_y || p.y > box.max_y) {
+            if (p.x < box.min_x || p.x > box.max_x || p.y < box.min_y || p.y > box.max_y || p == pts[j]) {
                 continue;
             }
             // Even-odd state of p against the subchain j..k, extended one edge
@@ -767,7 +767,7 @@ std::vector<uint32_t> cull_by_points(std::span<const GridPoint> pts, const Candi
                 }
                 PointInPolygon closed = acc;
                 closed.add_segment(pts[k], pts[j]);
-                if (closed.location() != PointLocation::outside) {
+                if (closed.location() != PointLocation::outside && p != pts[k]) {
                     bad.push_back(cand.run_id(r) + (k - runs[r].lo));
                 }
                 if (k == runs[r].hi) {

@@ -101,7 +101,8 @@ Candidates proximate_shortcuts(std::span<const GridPoint> pts, const Tolerance& 
 
 /// Point constraints (Algorithm 5.2, exact): the ids of the shortcuts whose
 /// region between them and the original subchain holds one of `points`
-/// (inside or on the shortcut), in increasing order. The region's even-odd
+/// (inside, or on the shortcut other than at its ends: a junction at a
+/// shortcut's end is on both sides), in increasing order. The region's even-odd
 /// test is accumulated along the subchain, so each (start, point) pair costs
 /// O(reach).
 std::vector<uint32_t> cull_by_points(std::span<const GridPoint> pts, const Candidates& cand,

@@ -213,6 +213,10 @@ struct PointIndex {
         std::sort(entries.begin(), entries.end(), [](const Entry& a, const Entry& b) {
             return std::tie(a.p.x, a.p.y, a.owner) < std::tie(b.p.x, b.p.y, b.owner);
         });
+        // A junction is the end of every chain that meets there.
+        entries.erase(std::unique(entries.begin(), entries.end(),
+                                  [](const Entry& a, const Entry& b) { return a.p == b.p && a.owner == b.owner; }),
+                      entries.end());
     }
     std::vector<GridPoint> near(const GridBox& box, uint32_t self) const
     {
@@ -653,10 +657,17 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             }
         }
     }
+    // A chain of two vertices has no middle one: both its ends stand for it
+    // (a group of straight chains between junctions, wholly inside the
+    // region of a shortcut, would otherwise pass to the other side of it).
+    // A junction at a shortcut's own end does not count (cull_by_points).
     for (uint32_t i = 0; i < store.chains.size(); ++i) {
         const auto pts = store.chain_points(store.chains[i]);
         if (pts.size() >= 3) {
             index.entries.push_back({pts[pts.size() / 2], i});
+        } else if (pts.size() == 2) {
+            index.entries.push_back({pts.front(), UINT32_MAX});
+            index.entries.push_back({pts.back(), UINT32_MAX});
         }
     }
     index.finish();

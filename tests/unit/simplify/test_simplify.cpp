@@ -396,6 +396,11 @@ TEST(Candidates, PointCullingMatchesTheRegionTestOnRandomChains)
             const GridPoint v = pts[at(rng)];
             points.push_back({v.x + off(rng), v.y + off(rng)});
         }
+        // And vertices themselves (junctions): at a shortcut's end they do
+        // not count, elsewhere on the subchain they do.
+        for (int i = 0; i < 3; ++i) {
+            points.push_back(pts[at(rng)]);
+        }
         const auto cand = proximate_shortcuts(pts, Tolerance(double(60 + trial % 5 * 40), Metric::l2), 0);
         std::vector<uint32_t> want;
         const auto all = cand.list();
@@ -407,7 +412,7 @@ TEST(Candidates, PointCullingMatchesTheRegionTestOnRandomChains)
                     pip.add_segment(pts[k], pts[k + 1]);
                 }
                 pip.add_segment(pts[all[id].to], pts[all[id].from]);
-                if (pip.location() != PointLocation::outside) {
+                if (pip.location() != PointLocation::outside && q != pts[all[id].from] && q != pts[all[id].to]) {
                     want.push_back(id);
                     break;
                 }
@@ -634,6 +639,40 @@ TEST(Simplify, IslandInABayIsNotJumped)
             orig.add_segment(o[i], o[i + 1]);
         }
         EXPECT_EQ(pip.location(), orig.location()) << "island vertex " << p.x << "," << p.y;
+    }
+    EXPECT_EQ(count_intersections({&out}), 0U);
+}
+
+TEST(Simplify, AGroupOfStraightChainsInABayIsNotJumped)
+{
+    // The same bay, and in it four junctions joined by six straight chains
+    // (a triangle and its centre, every chain of two vertices): no chain has
+    // a middle vertex and no unit has a point, so only the chains' ends can
+    // tell that the group lies between the coast and its mouth. Near the
+    // bay's bottom, it is farther from the mouth than the bay's walls are,
+    // so the raster passes the mouth.
+    const Pts coast{{0, 0}, {400, 0}, {400, -150}, {600, -150}, {600, 0}, {1000, 0}};
+    const GridPoint a{480, -140}, b{520, -140}, c{500, -110}, d{500, -128};
+    MapBuilder m;
+    m.chain(1, coast, "land", "sea");
+    uint64_t id = 2;
+    for (const auto& [p, q] : {std::pair{a, b}, {b, c}, {c, a}, {a, d}, {b, d}, {c, d}}) {
+        m.chain(id++, Pts{p, q}, "", "");
+    }
+    const auto out = run(m.s, 2.0);
+    Pts ring = points_of(out, 1);
+    ring.push_back(ring.front());
+    Pts orig = coast;
+    orig.push_back(coast.front());
+    for (const GridPoint p : {a, b, c, d}) {
+        PointInPolygon now(p), before(p);
+        for (size_t i = 0; i + 1 < ring.size(); ++i) {
+            now.add_segment(ring[i], ring[i + 1]);
+        }
+        for (size_t i = 0; i + 1 < orig.size(); ++i) {
+            before.add_segment(orig[i], orig[i + 1]);
+        }
+        EXPECT_EQ(now.location(), before.location()) << "junction " << p.x << "," << p.y;
     }
     EXPECT_EQ(count_intersections({&out}), 0U);
 }
