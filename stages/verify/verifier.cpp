@@ -38,6 +38,108 @@ int sign(int128 v)
     return (v > 0) - (v < 0);
 }
 
+/// Which units of a node's map hold a point, in one pass over the segments
+/// that cross the point's row: each segment of a chain with different units
+/// on its two sides flips both units' even-odd state where it crosses the
+/// ray to the right of the point (PointInPolygon's rule), so a unit whose
+/// state ends odd holds the point, for every unit at once. The segments are
+/// bucketed by rows of equal height, about sqrt(segments) of them.
+class UnitLocator {
+  public:
+    UnitLocator(const datatree::ChainTable& table, const datatree::Geometry& geometry)
+    {
+        int64_t lo = INT64_MAX, hi = INT64_MIN;
+        for (size_t c = 0; c < table.chains.size(); ++c) {
+            const auto& e = table.chains[c];
+            if (e.left == e.right) {
+                continue;
+            }
+            const auto pts = geometry.chain(c);
+            for (size_t i = 0; i + 1 < pts.size(); ++i) {
+                m_segs.push_back({pts[i], pts[i + 1], e.left, e.right});
+                lo = std::min<int64_t>({lo, pts[i].y, pts[i + 1].y});
+                hi = std::max<int64_t>({hi, pts[i].y, pts[i + 1].y});
+            }
+        }
+        if (m_segs.empty()) {
+            return;
+        }
+        m_y0 = lo;
+        const auto rows = static_cast<int64_t>(std::ceil(std::sqrt(double(m_segs.size()))));
+        m_row = std::max<int64_t>(1, (hi - lo) / rows + 1);
+        m_first.assign(static_cast<size_t>((hi - lo) / m_row + 2), 0);
+        auto each_row = [&](const Seg& g, auto&& f) {
+            for (int64_t r = (std::min(g.a.y, g.b.y) - m_y0) / m_row; r <= (std::max(g.a.y, g.b.y) - m_y0) / m_row;
+                 ++r) {
+                f(static_cast<size_t>(r));
+            }
+        };
+        for (const Seg& g : m_segs) {
+            each_row(g, [&](size_t r) { ++m_first[r + 1]; });
+        }
+        for (size_t r = 1; r < m_first.size(); ++r) {
+            m_first[r] += m_first[r - 1];
+        }
+        m_in_row.resize(m_first.back());
+        std::vector<uint32_t> fill(m_first.begin(), m_first.end() - 1);
+        for (uint32_t i = 0; i < m_segs.size(); ++i) {
+            each_row(m_segs[i], [&](size_t r) { m_in_row[fill[r]++] = i; });
+        }
+    }
+
+    /// The units strictly holding p (sorted), and those on whose boundary it lies.
+    void locate(GridPoint p, std::vector<uint32_t>& inside, std::vector<uint32_t>& boundary) const
+    {
+        inside.clear();
+        boundary.clear();
+        if (m_segs.empty() || p.y < m_y0 || (p.y - m_y0) / m_row + 1 >= int64_t(m_first.size())) {
+            return;
+        }
+        const auto r = static_cast<size_t>((p.y - m_y0) / m_row);
+        std::vector<uint32_t> flips;
+        for (uint32_t k = m_first[r]; k < m_first[r + 1]; ++k) {
+            const Seg& g = m_segs[m_in_row[k]];
+            if (orientation(g.a, g.b, p) == 0 && in_span(g.a, g.b, p)) {
+                boundary.push_back(g.left);
+                boundary.push_back(g.right);
+                continue;
+            }
+            if ((g.a.y > p.y) != (g.b.y > p.y)) {
+                const int o = orientation(g.a, g.b, p);
+                if ((g.b.y > g.a.y) ? o > 0 : o < 0) {
+                    flips.push_back(g.left);
+                    flips.push_back(g.right);
+                }
+            }
+        }
+        std::sort(flips.begin(), flips.end());
+        for (size_t i = 0; i < flips.size();) {
+            size_t j = i;
+            while (j < flips.size() && flips[j] == flips[i]) {
+                ++j;
+            }
+            if ((j - i) % 2 == 1 && flips[i] != 0) {
+                inside.push_back(flips[i]);
+            }
+            i = j;
+        }
+        std::sort(boundary.begin(), boundary.end());
+        boundary.erase(std::unique(boundary.begin(), boundary.end()), boundary.end());
+        // On a boundary is not inside, whatever the parity says.
+        std::erase_if(inside, [&](uint32_t u) { return std::binary_search(boundary.begin(), boundary.end(), u); });
+    }
+
+  private:
+    struct Seg {
+        GridPoint a, b;
+        uint32_t left, right;
+    };
+    std::vector<Seg> m_segs;
+    int64_t m_y0 = 0, m_row = 1;
+    std::vector<uint32_t> m_first;  ///< per row, its first entry in m_in_row; rows + 1 entries
+    std::vector<uint32_t> m_in_row; ///< segment indices, row by row
+};                                  // class UnitLocator
+
 /// An original chain of a level: its store, its record and its tolerance at the LOD.
 struct Original {
     const chains::ChainStore* store = nullptr;
@@ -503,17 +605,36 @@ class Verifier {
                 }
             }
         }
+        // Every point strictly inside its own unit (a neighbour's unit is
+        // checked in the node of the partition that owns it), and inside no
+        // other unit of the node: a hole or an island that a shortcut passed
+        // to the other side of a chain leaves the points of the units in it
+        // inside the unit around them too, though each stays in its own.
+        const UnitLocator locator(r.table, r.geometry);
+        std::vector<uint8_t> own(r.table.strings.size(), 0);
+        for (const uint32_t u : units_in_table(r.table, store)) {
+            own[u] = 1;
+        }
+        std::vector<uint32_t> inside, boundary;
         for (const auto& cp : store.constraints) {
-            if (cp.kind == chains::constraint_neighbour) {
-                continue; // checked in the node of the partition that owns the unit
-            }
             const std::string& unit = store.strings[cp.unit];
             const auto ui = std::find(r.table.strings.begin(), r.table.strings.end(), unit);
-            ++r.points;
             const uint32_t u = static_cast<uint32_t>(ui - r.table.strings.begin());
-            if (ui == r.table.strings.end() || locate(r, u, cp.p) != PointLocation::inside) {
-                violation("point_constraints", {}, cp.p,
-                          std::string(chains::constraint_kind_name(cp.kind)) + " point of " + unit + " not inside it");
+            locator.locate(cp.p, inside, boundary);
+            const std::string what = std::string(chains::constraint_kind_name(cp.kind)) + " point of " + unit;
+            if (cp.kind != chains::constraint_neighbour) {
+                ++r.points;
+                if (ui == r.table.strings.end() || !std::binary_search(inside.begin(), inside.end(), u)) {
+                    violation("point_constraints", {}, cp.p, what + " not inside it");
+                    continue; // one violation per point
+                }
+            }
+            for (const uint32_t other : inside) {
+                if (other != u && own[other]) {
+                    violation("point_constraints", {}, cp.p,
+                              what + " inside unit " + r.table.strings[other] + ", which must not overlap it");
+                    break;
+                }
             }
         }
         for (const auto& up : user_points) {

@@ -18,6 +18,13 @@
 /// - islands: a wiggly ring tract inside a cell, of another county;
 /// - lakes: a wiggly hole that no unit fills, and lakes on borders, whose
 ///   shores are two chains of two cells between the same two junctions;
+/// - bays: a tooth without the cell's point, holding at its far end three
+///   tiny triangular tracts of another county around a centre (a K4: six
+///   straight chains of two vertices, no middle vertex among them); the
+///   tooth's walls are nearer its mouth than the triangles are, so the
+///   raster lets a shortcut across the mouth pass, and in a partition that
+///   owns the border but none of the triangles' chains no internal point of
+///   theirs is in the store: only the chains' ends keep them on their side;
 /// - in the partitionings, counties of one tract.
 ///
 /// Every coordinate is on TIGER's 1e-6 degree lattice, and the map is planar
@@ -61,7 +68,7 @@ class AdversarialMap {
     }
 
     /// The map as a GeoJSON FeatureCollection with GEOID (state 2 + county 3 +
-    /// tract 6) and, where given, INTPTLAT / INTPTLON.
+    /// tract 6) and INTPTLAT / INTPTLON, null where not given.
     std::string geojson(Partitioning p) const
     {
         std::string out = "{\"type\":\"FeatureCollection\",\"features\":[\n";
@@ -69,9 +76,9 @@ class AdversarialMap {
             const Unit& unit = m_units[u];
             out += u ? ",\n" : "";
             out += "{\"type\":\"Feature\",\"properties\":{\"GEOID\":\"" + geoid(p, u) + "\"";
-            if (unit.point) {
-                out += ",\"INTPTLAT\":" + deg(unit.point->lat) + ",\"INTPTLON\":" + deg(unit.point->lon);
-            }
+            // null where not given (every unit of a map may lack one): ingest computes it.
+            out += ",\"INTPTLAT\":" + (unit.point ? deg(unit.point->lat) : "null") +
+                   ",\"INTPTLON\":" + (unit.point ? deg(unit.point->lon) : "null");
             out += "},\"geometry\":{\"type\":\"Polygon\",\"coordinates\":[";
             for (size_t r = 0; r < unit.rings.size(); ++r) {
                 out += r ? "," : "";
@@ -99,6 +106,7 @@ class AdversarialMap {
         return n;
     }
     size_t teeth() const noexcept { return m_teeth; }
+    size_t bays() const noexcept { return m_bays; }
 
   private:
     static constexpr int64_t cell = 3000;           ///< cell side in micro-degrees (255 m east, 333 m north)
@@ -164,11 +172,10 @@ class AdversarialMap {
         }
     }
 
-    /// A tooth on border `e` (not an outer border of the map): segment k of
-    /// it extruded sideways by `depth` towards +side (+1: north or east). The
-    /// point returned lies inside the tooth, near its far end: the internal
-    /// point of the cell the tooth belongs to (the one on the -side).
-    MicroDeg add_tooth(std::vector<MicroDeg>& e, int side, int64_t depth)
+    /// Extrudes a middle segment p q of border `e` by `depth` towards +side;
+    /// returns the tooth's parallelogram as a map from (s along p q, t out
+    /// of it), both in [0, 1], to the lattice.
+    auto tooth(std::vector<MicroDeg>& e, int side, int64_t depth)
     {
         const bool horizontal = e.front().lat == e.back().lat;
         const size_t k = e.size() / 2 - 1 + static_cast<size_t>(integer(0, 1));
@@ -177,12 +184,26 @@ class AdversarialMap {
             return horizontal ? MicroDeg{m.lon, m.lat + side * depth} : MicroDeg{m.lon + side * depth, m.lat};
         };
         e.insert(e.begin() + static_cast<std::ptrdiff_t>(k) + 1, {out(p), out(q)});
-        // Between the tooth's sides, 85% of the way out: strictly inside.
-        const MicroDeg mid{(p.lon + q.lon) / 2, (p.lat + q.lat) / 2};
-        const auto reach = depth * 85 / 100;
         ++m_teeth;
-        return horizontal ? MicroDeg{mid.lon, mid.lat + side * reach} : MicroDeg{mid.lon + side * reach, mid.lat};
+        return [=](double s, double t) {
+            const auto off = static_cast<int64_t>(std::llround(t * double(side * depth)));
+            const MicroDeg m{p.lon + std::llround(s * double(q.lon - p.lon)),
+                             p.lat + std::llround(s * double(q.lat - p.lat))};
+            return horizontal ? MicroDeg{m.lon, m.lat + off} : MicroDeg{m.lon + off, m.lat};
+        };
     }
+
+    /// A tooth on border `e` (not an outer border of the map): segment k of
+    /// it extruded sideways by `depth` towards +side (+1: north or east). The
+    /// point returned lies inside the tooth, near its far end: the internal
+    /// point of the cell the tooth belongs to (the one on the -side).
+    MicroDeg add_tooth(std::vector<MicroDeg>& e, int side, int64_t depth) { return tooth(e, side, depth)(0.5, 0.85); }
+
+    /// The K4 at the far end of a bay: corners a, b (near the far side), c
+    /// (towards the mouth) and the centre d, inside the triangle.
+    struct K4 {
+        MicroDeg a, b, c, d;
+    };
 
     /// A closed wiggly ring around c, radius r (micro-degrees) +-20%.
     std::vector<MicroDeg> blob(MicroDeg c, double r)
@@ -294,24 +315,32 @@ class AdversarialMap {
     {
         // Teeth first: they change the borders every cell then reads.
         std::vector<std::optional<MicroDeg>> tooth_point(static_cast<size_t>(m_nx * m_ny));
+        std::vector<std::optional<K4>> bay(static_cast<size_t>(m_nx * m_ny));
         for (int i = 0; i < m_nx; ++i) {
             for (int j = 0; j < m_ny; ++j) {
                 if (integer(0, 2) != 0) {
                     continue; // a third of the cells
                 }
                 // One of the cell's inner borders, bulging into the neighbour.
+                // A bay bulges south or west: into a cell with a smaller code
+                // in the blocks partitioning, whose partition then owns the
+                // border but none of the triangles' chains.
+                const bool is_bay = integer(0, 2) == 0;
                 std::vector<std::pair<std::vector<MicroDeg>*, int>> options;
-                if (j + 1 < m_ny) {
+                if (j + 1 < m_ny && !is_bay) {
                     options.push_back({&m_h[i][j + 1], +1});
                 }
                 if (j > 0) {
                     options.push_back({&m_h[i][j], -1});
                 }
-                if (i + 1 < m_nx) {
+                if (i + 1 < m_nx && !is_bay) {
                     options.push_back({&m_v[i + 1][j], +1});
                 }
                 if (i > 0) {
                     options.push_back({&m_v[i][j], -1});
+                }
+                if (options.empty()) {
+                    continue; // a bay in the south-west cell
                 }
                 auto [e, side] = options[static_cast<size_t>(integer(0, static_cast<int>(options.size()) - 1))];
                 if (m_toothed.count(e)) {
@@ -319,7 +348,17 @@ class AdversarialMap {
                 }
                 m_toothed.insert(e);
                 // 17 to 67 m deep: cut at coarse tolerances unless its point holds it.
-                tooth_point[static_cast<size_t>(i * m_ny + j)] = add_tooth(*e, side, integer(200, cell / 5));
+                const int64_t depth = integer(200, cell / 5);
+                if (is_bay) {
+                    // The segment is 4 to 21 m wide, the triangles 75-90% of the
+                    // way out, farther from the mouth than its walls.
+                    const auto at = tooth(*e, side, depth);
+                    ++m_bays;
+                    bay[static_cast<size_t>(i * m_ny + j)] =
+                        K4{at(0.3, 0.9), at(0.7, 0.9), at(0.5, 0.75), at(0.5, 0.85)};
+                } else {
+                    tooth_point[static_cast<size_t>(i * m_ny + j)] = add_tooth(*e, side, depth);
+                }
             }
         }
         add_lakes();
@@ -340,6 +379,16 @@ class AdversarialMap {
                 const MicroDeg c{lon0 + i * cell + cell / 2, lat0 + j * cell + cell / 2};
                 const size_t self = m_units.size();
                 m_units.push_back(std::move(u));
+                if (const auto& k4 = bay[static_cast<size_t>(m_units[self].cell)]) {
+                    m_units[self].rings.push_back({k4->a, k4->b, k4->c, k4->a});
+                    for (const auto& [p, q] : {std::pair{k4->a, k4->b}, {k4->b, k4->c}, {k4->c, k4->a}}) {
+                        Unit tri;
+                        tri.rings.push_back({p, q, k4->d, p});
+                        tri.cell = m_units[self].cell;
+                        tri.inner = true;
+                        m_units.push_back(std::move(tri));
+                    }
+                }
                 switch (integer(0, 3)) {
                 case 0: { // strips, 20 to 80 micro-degrees of latitude (2.2 to 8.9 m) apart
                     const int64_t gaps[] = {20, 40, 80};
@@ -407,7 +456,7 @@ class AdversarialMap {
     std::vector<std::vector<std::vector<MicroDeg>>> m_h, m_v;
     std::set<const std::vector<MicroDeg>*> m_toothed;
     std::vector<Unit> m_units;
-    size_t m_teeth = 0;
+    size_t m_teeth = 0, m_bays = 0;
 }; // class AdversarialMap
 
 } // namespace tigerlod::testing

@@ -252,6 +252,21 @@ TEST_F(Verify, InternalPointLeftOnTheOtherSide)
     EXPECT_NE(r.items.at(0).detail.find("internal point of A1"), std::string::npos);
 }
 
+TEST_F(Verify, IslandPassedToTheNeighbourKeepsItsPointButIsCaught)
+{
+    // An island tract in A1's pocket; the pocket goes to A2 and the island
+    // with it. Every point stays inside its own unit (I's inside I), but
+    // I's point is now inside A2 too: A1's hole lies outside its shell.
+    Map m = county_a(false, {300, 200});
+    chain(m.stores[1], 13, "I", "A1", {{600, 450}, {700, 450}, {700, 550}, {600, 550}, {600, 450}});
+    point(m.stores[1], "I", {650, 500});
+    m.simplified[12] = {{500, 0}, {500, 1000}};
+    const auto r = run(m);
+    expect(r, {{"point_constraints", 1}});
+    EXPECT_NE(r.items.at(0).detail.find("internal point of I inside unit A2"), std::string::npos)
+        << r.items.at(0).detail;
+}
+
 TEST_F(Verify, UserPointLeftOnTheOtherSide)
 {
     Map m = county_a(false, {300, 200});
