@@ -5,6 +5,7 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <iterator>
 #include <string>
 #include <system_error>
 #include <unistd.h>
@@ -56,11 +57,35 @@ void write_file(const fs::path& path, std::string_view data)
     write_to(path, path, data);
 }
 
-OutputDir::OutputDir(fs::path final_path, bool overwrite) : m_final(std::move(final_path))
+void refuse_to_replace_inputs(const fs::path& output, const std::vector<fs::path>& inputs)
+{
+    std::error_code ec;
+    const fs::path out = fs::weakly_canonical(fs::absolute(output, ec), ec);
+    for (const fs::path& input : inputs) {
+        if (input.empty()) {
+            continue;
+        }
+        const fs::path in = fs::weakly_canonical(fs::absolute(input, ec), ec);
+        // out is in itself, or one of its parents.
+        auto o = out.begin();
+        auto i = in.begin();
+        for (; o != out.end() && i != in.end() && *o == *i; ++o, ++i) {
+        }
+        if (o == out.end() || (std::next(o) == out.end() && o->empty())) {
+            throw usage_error(output.string() + ": " +
+                              (i == in.end() ? std::string("is the input ") : std::string("holds the input ")) +
+                              input.string() + ", which this stage reads; write the output elsewhere");
+        }
+    }
+}
+
+OutputDir::OutputDir(fs::path final_path, bool overwrite, const std::vector<fs::path>& inputs)
+    : m_final(std::move(final_path))
 {
     if (m_final.filename().empty()) {
         m_final = m_final.parent_path();
     }
+    refuse_to_replace_inputs(m_final, inputs);
     if (fs::exists(m_final) && !overwrite) {
         throw usage_error(m_final.string() + " exists. Use --overwrite to replace it.");
     }

@@ -5,6 +5,7 @@
 /// place and renamed on success.
 
 #include <filesystem>
+#include <vector>
 #include <string_view>
 
 namespace tigerlod {
@@ -19,14 +20,21 @@ void write_file_atomic(const std::filesystem::path& path, std::string_view data)
 /// began is removed then.
 void write_file(const std::filesystem::path& path, std::string_view data);
 
+/// Throws usage_error if writing `output` would replace or remove one of
+/// `inputs`: the same file or folder, or a folder that holds it (symbolic
+/// links and `..` resolved). A stage checks this before anything else, so
+/// `--overwrite` can never delete what the stage reads.
+void refuse_to_replace_inputs(const std::filesystem::path& output, const std::vector<std::filesystem::path>& inputs);
+
 /// An output folder built under a temporary name and renamed into place by
 /// commit(). Destroyed without commit(), it removes what it wrote.
 class OutputDir {
   public:
-    /// Prepare `final_path`. Throws usage_error if it exists and `overwrite` is
+    /// Prepare `final_path`. Throws usage_error if it would replace one of
+    /// `inputs` (refuse_to_replace_inputs) or if it exists and `overwrite` is
     /// false ("Use --overwrite to replace it."), environment_error if the
     /// temporary folder cannot be made.
-    OutputDir(std::filesystem::path final_path, bool overwrite);
+    OutputDir(std::filesystem::path final_path, bool overwrite, const std::vector<std::filesystem::path>& inputs = {});
     OutputDir(const OutputDir&) = delete;
     OutputDir& operator=(const OutputDir&) = delete;
     ~OutputDir();

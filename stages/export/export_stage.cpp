@@ -1,5 +1,6 @@
 #include "stages/export/export_stage.hpp"
 
+#include "core/fs.hpp"
 #include "stages/export/tree_view.hpp"
 
 #include <gdal.h>
@@ -43,6 +44,7 @@ void ExportStage::initialize()
     if (ext != ".gpkg" && ext != ".geojson" && ext != ".json") {
         throw usage_error("export: OUTPUT must end in .gpkg or .geojson");
     }
+    refuse_to_replace_inputs(m_output, {m_tree});
     if (fs::exists(m_output) && !m_overwrite) {
         throw usage_error("export: " + m_output + " exists. Use --overwrite to replace it.");
     }

@@ -174,7 +174,11 @@ int IngestStage::run(const StageContext& ctx)
         return out;
     });
 
-    OutputDir out(m_output, m_overwrite);
+    std::vector<fs::path> reads{m_config};
+    for (const auto& f : input_files) {
+        reads.emplace_back(f.first);
+    }
+    OutputDir out(m_output, m_overwrite, reads);
     for (const auto& l : cfg.levels) {
         fs::create_directories(out.path() / l.name);
     }

@@ -37,6 +37,7 @@ void PackStage::initialize()
     if (m_threads < 0 || m_threads > 1024) {
         throw usage_error("pack: option '--threads' must be in 0..1024");
     }
+    refuse_to_replace_inputs(m_output, {m_original, m_simplified});
     const fs::path out(m_output);
     std::error_code ec;
     if (fs::exists(out, ec) &&

@@ -205,11 +205,14 @@ std::vector<LonLat> read_points(const std::string& path)
 int SimplifyStage::run(const StageContext& ctx)
 {
     auto& o = m_common.options;
+    // --points is read whole before the output is made; INPUT and --colors as the stores go.
+    const std::vector<fs::path> reads{m_common.input, m_colors};
+    refuse_to_replace_inputs(m_common.output, reads);
     const auto stores = list_stores(m_common.input, m_common.level);
     if (!m_points.empty()) {
         o.user_points = read_points(m_points);
     }
-    OutputDir out(m_common.output, m_common.overwrite);
+    OutputDir out(m_common.output, m_common.overwrite, reads);
     // llvmpipe (Mesa's software rasterizer, behind OSMesa and EGL without a
     // GPU) starts a rasterizer thread per core. When several stores keep
     // every core busy with workers, those threads only add hand-offs: on 2

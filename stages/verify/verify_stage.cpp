@@ -156,7 +156,8 @@ int VerifyStage::run(const StageContext& ctx)
     }
     std::string error;
     const auto tree = reader::Tree::open(m_tree, error);
-    OutputDir out(m_output, m_overwrite);
+    // --compare and --points are read whole above: an output over them replaces them only on success.
+    OutputDir out(m_output, m_overwrite, {m_tree, m_original});
     Options options;
     options.threads =
         m_threads > 0 ? static_cast<unsigned>(m_threads) : std::max(1U, std::thread::hardware_concurrency());

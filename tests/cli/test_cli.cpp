@@ -664,6 +664,42 @@ TEST_F(Cli, ColorAndSimplifyRejectBadInput)
     std::ofstream(store, std::ios::binary) << bytes;
 }
 
+TEST_F(Cli, NoStageWritesOverItsInputs)
+{
+    // With --overwrite, an output that is an input, or a folder holding one,
+    // would delete what the stage reads: usage error, the input untouched.
+    make_tiger();
+    const fs::path cfg = tiger_config();
+    const std::string in = (m_dir / "in").string(), simp = (m_dir / "simp").string(),
+                      colors = (m_dir / "colors").string(), tree = (m_dir / "t.gpkg").string();
+    ASSERT_EQ(run("ingest", cfg.string() + " " + in).code, 0);
+    ASSERT_EQ(run("color", in + " " + colors + " --tolerances 8").code, 0);
+    ASSERT_EQ(run("simplify", in + " " + simp + " --tolerances 8").code, 0);
+    ASSERT_EQ(run("pack", in + " " + simp + " " + tree).code, 0) << slurp(m_dir / "stderr");
+    fs::create_symlink(m_dir / "in", m_dir / "link");
+    auto refused = [&](const std::string& tool, const std::string& args, const std::string& fragment) {
+        const Result r = run(tool, args + (tool == "pack" ? "" : " --overwrite")); // pack updates in place
+        EXPECT_EQ(r.code, 2) << tool << " " << args << ": " << r.err;
+        EXPECT_NE(r.err.find(fragment), std::string::npos) << tool << " " << args << ": " << r.err;
+    };
+    refused("ingest", cfg.string() + " " + m_dir.string(), "holds the input " + cfg.string());
+    refused("color", in + " " + in + " --tolerances 8", "is the input " + in);
+    refused("simplify", in + " " + in + " --tolerances 8", "is the input " + in);
+    refused("simplify", in + " " + (m_dir / "link").string() + " --tolerances 8", "is the input " + in);
+    refused("simplify", in + " " + m_dir.string() + " --tolerances 8", "holds the input " + in);
+    refused("simplify", in + " " + colors + " --tolerances 8 --colors " + colors, "is the input " + colors);
+    refused("pack", in + " " + simp + " " + simp, "is the input " + simp);
+    refused("verify", tree + " " + in + " " + tree, "is the input " + tree);
+    refused("verify", tree + " " + in + " " + in, "is the input " + in);
+    refused("export", tree + " " + tree, "is the input " + tree);
+    // Everything is still there and still reads.
+    EXPECT_TRUE(fs::exists(cfg));
+    EXPECT_TRUE(fs::exists(m_dir / "in" / "manifest.json"));
+    EXPECT_TRUE(fs::exists(m_dir / "colors" / "color-report.json"));
+    EXPECT_TRUE(fs::exists(m_dir / "simp" / "simplify-report.json"));
+    EXPECT_EQ(run("verify", tree + " " + in + " " + out()).code, 0) << slurp(m_dir / "stderr");
+}
+
 TEST_F(Cli, PackDumpExportAndVerifyRejectBadInput)
 {
     make_tiger();
