@@ -5,9 +5,12 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <thread>
 
 namespace fs = std::filesystem;
@@ -71,6 +74,40 @@ int PackStage::run(const StageContext& ctx)
     options.threads =
         m_threads > 0 ? static_cast<unsigned>(m_threads) : std::max(1U, std::thread::hardware_concurrency());
     const PackedTree tree = build_tree(m_original, m_simplified, options);
+    // The ladder simplify finished: a tolerance folder lost since (or a
+    // run that never finished) would give a tree with an LOD fewer.
+    const fs::path report_path = fs::path(m_simplified) / "simplify-report.json";
+    std::vector<double> ladder;
+    try {
+        std::ifstream in(report_path);
+        if (!in) {
+            throw input_error("no simplify-report.json: not a finished tigerlod-simplify output folder");
+        }
+        const json report = json::parse(in);
+        for (const auto& t : report.at("tolerances")) {
+            ladder.push_back(t.at("eps_m").get<double>());
+        }
+    } catch (const json::exception& e) {
+        throw input_error(report_path.string() + ": " + e.what());
+    } catch (const input_error& e) {
+        throw input_error(m_simplified + ": " + e.what());
+    }
+    std::vector<double> found(tree.skeleton.lod_eps_m.begin() + 1, tree.skeleton.lod_eps_m.end());
+    std::sort(ladder.begin(), ladder.end());
+    if (found != ladder) {
+        auto list = [](const std::vector<double>& v) {
+            std::string out;
+            for (const double e : v) {
+                char buf[32];
+                std::snprintf(buf, sizeof buf, "%s%g", out.empty() ? "" : ", ", e);
+                out += buf;
+            }
+            return out.empty() ? std::string("none") : out + " m";
+        };
+        throw input_error(m_simplified + ": simplify-report.json lists the tolerances " + list(ladder) +
+                          ", but the eps-<E>m folders hold " + list(found) +
+                          "; re-run tigerlod-simplify rather than pack a partial ladder");
+    }
     ctx.log.info("pack: built " + std::to_string(tree.skeleton.nodes.size()) + " nodes in " +
                  std::to_string(tree.skeleton.tiles.size()) + " tiles");
     const WriteStats ws = write_tree(m_output, tree);

@@ -700,6 +700,23 @@ TEST_F(Cli, NoStageWritesOverItsInputs)
     EXPECT_EQ(run("verify", tree + " " + in + " " + out()).code, 0) << slurp(m_dir / "stderr");
 }
 
+TEST_F(Cli, PackRefusesALadderWithATolerancePartMissing)
+{
+    make_tiger();
+    const std::string in = (m_dir / "in").string(), simp = (m_dir / "simp").string();
+    ASSERT_EQ(run("ingest", tiger_config().string() + " " + in).code, 0);
+    ASSERT_EQ(run("simplify", in + " " + simp + " --tolerances 8,32").code, 0);
+    // A tolerance folder lost after simplify: pack would build a tree with an LOD fewer.
+    fs::copy(m_dir / "simp", m_dir / "part", fs::copy_options::recursive);
+    fs::remove_all(m_dir / "part" / "eps-32m");
+    expect_failure(run("pack", in + " " + (m_dir / "part").string() + " " + out()), 1,
+                   "simplify-report.json lists the tolerances 8, 32 m, but the eps-<E>m folders hold 8 m");
+    // A folder without its report: not a finished simplify output.
+    fs::remove(m_dir / "simp" / "simplify-report.json");
+    expect_failure(run("pack", in + " " + simp + " " + out()), 1,
+                   "no simplify-report.json: not a finished tigerlod-simplify output folder");
+}
+
 TEST_F(Cli, PackDumpExportAndVerifyRejectBadInput)
 {
     make_tiger();
