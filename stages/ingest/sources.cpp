@@ -116,6 +116,26 @@ class Source {
     {
         return field_name.empty() ? -1 : OGR_FD_GetFieldIndex(OGR_L_GetLayerDefn(m_layer), field_name.c_str());
     }
+    /// Field `i` (if any: i >= 0) must have one of the `allowed` types: a
+    /// TLID stored as text or a code stored as an integer would be read as
+    /// something else (0, or a code without its leading zeros) and give a
+    /// wrong map, not an error.
+    int expect_type(int i, const std::string& needed_for, std::initializer_list<OGRFieldType> allowed,
+                    const char* wanted) const
+    {
+        if (i < 0) {
+            return i;
+        }
+        OGRFieldDefnH fd = OGR_FD_GetFieldDefn(OGR_L_GetLayerDefn(m_layer), i);
+        const OGRFieldType t = OGR_Fld_GetType(fd);
+        for (const auto a : allowed) {
+            if (t == a) {
+                return i;
+            }
+        }
+        throw input_error(where() + ": field '" + OGR_Fld_GetNameRef(fd) + "' is " + OGR_GetFieldTypeName(t) +
+                          ", but " + needed_for + " needs " + wanted);
+    }
     /// Check the layer's geometry type against the allowed flat types (wkbUnknown passes).
     void expect_geometry(std::initializer_list<OGRwkbGeometryType> allowed, const char* what) const
     {
@@ -211,13 +231,29 @@ std::string level_code(const LevelSpec& level, OGRFeatureH f, const std::vector<
     return s;
 }
 
+/// What a code field needs: text, or an integer (whose codes have no leading zeros).
+constexpr const char* code_type = "text or an integer";
+constexpr const char* id_type = "an integer (Integer or Integer64)";
+constexpr const char* number_type = "a number, or text holding one";
+
+/// The internal point fields, the class field and ATOTAL, whichever are given: of usable types.
+void expect_optional_types(const Source& src, int lat, int lon, int cls, int area)
+{
+    src.expect_type(lat, "dataset.intpt_lat_field", {OFTReal, OFTInteger, OFTInteger64, OFTString}, number_type);
+    src.expect_type(lon, "dataset.intpt_lon_field", {OFTReal, OFTInteger, OFTInteger64, OFTString}, number_type);
+    src.expect_type(cls, "dataset.class_field", {OFTString, OFTInteger, OFTInteger64}, code_type);
+    src.expect_type(area, "the face weight ATOTAL", {OFTReal, OFTInteger, OFTInteger64, OFTString}, number_type);
+}
+
 std::vector<std::vector<int>> level_fields(const Source& src, const std::vector<LevelSpec>& levels)
 {
     std::vector<std::vector<int>> out;
     for (const auto& l : levels) {
         std::vector<int> idx;
         for (const auto& name : l.fields) {
-            idx.push_back(src.field(name, ("level '" + l.name + "'").c_str()));
+            const std::string needed_for = "level '" + l.name + "'";
+            idx.push_back(src.expect_type(src.field(name, needed_for.c_str()), needed_for,
+                                          {OFTString, OFTInteger, OFTInteger64}, code_type));
         }
         out.push_back(idx);
     }
@@ -234,11 +270,13 @@ FacesLayer open_faces(const IngestConfig& cfg, const fs::path& path)
 {
     Source src(path, cfg.dataset.layer, "TIGER FACES");
     src.expect_geometry({wkbPolygon, wkbMultiPolygon}, "TIGER FACES need polygons");
-    const int tfid = src.field("TFID", "TIGER FACES face id");
+    const int tfid = src.expect_type(src.field("TFID", "TIGER FACES face id"), "TFID, the face id",
+                                     {OFTInteger, OFTInteger64}, id_type);
     auto levels = level_fields(src, cfg.levels);
     const int lat = src.optional_field(cfg.dataset.intpt_lat_field);
     const int lon = src.optional_field(cfg.dataset.intpt_lon_field);
     const int area = src.optional_field("ATOTAL");
+    expect_optional_types(src, lat, lon, -1, area);
     return {std::move(src), tfid, lat, lon, area, std::move(levels)};
 }
 
@@ -251,10 +289,14 @@ EdgesLayer open_edges(const IngestConfig& cfg, const fs::path& path)
 {
     Source src(path, cfg.dataset.layer, "TIGER EDGES");
     src.expect_geometry({wkbLineString}, "TIGER EDGES need line strings");
-    const int tlid = src.field("TLID", "TIGER EDGES edge id");
-    const int tfidl = src.field("TFIDL", "TIGER EDGES face on the left");
-    const int tfidr = src.field("TFIDR", "TIGER EDGES face on the right");
+    const std::initializer_list<OGRFieldType> ids{OFTInteger, OFTInteger64};
+    const int tlid = src.expect_type(src.field("TLID", "TIGER EDGES edge id"), "TLID, the edge id", ids, id_type);
+    const int tfidl = src.expect_type(src.field("TFIDL", "TIGER EDGES face on the left"), "TFIDL, the face on the left",
+                                      ids, id_type);
+    const int tfidr = src.expect_type(src.field("TFIDR", "TIGER EDGES face on the right"),
+                                      "TFIDR, the face on the right", ids, id_type);
     const int cls = src.optional_field(cfg.dataset.class_field);
+    expect_optional_types(src, -1, -1, cls, -1);
     return {std::move(src), tlid, tfidl, tfidr, cls};
 }
 
@@ -268,7 +310,8 @@ PolygonLayer open_polygons(const IngestConfig& cfg, const fs::path& path)
 {
     Source src(path, cfg.dataset.layer, "polygons");
     src.expect_geometry({wkbPolygon, wkbMultiPolygon}, "a polygons dataset needs polygons");
-    const int code = src.field(cfg.dataset.code_field, "dataset.code_field");
+    const int code = src.expect_type(src.field(cfg.dataset.code_field, "dataset.code_field"), "dataset.code_field",
+                                     {OFTString, OFTInteger, OFTInteger64}, code_type);
     auto levels = level_fields(src, cfg.levels);
     const int lat = src.optional_field(cfg.dataset.intpt_lat_field);
     const int lon = src.optional_field(cfg.dataset.intpt_lon_field);
@@ -277,6 +320,7 @@ PolygonLayer open_polygons(const IngestConfig& cfg, const fs::path& path)
                           cfg.dataset.intpt_lon_field + "' (dataset.intpt_lat_field/intpt_lon_field)");
     }
     const int cls = src.optional_field(cfg.dataset.class_field);
+    expect_optional_types(src, lat, lon, cls, -1);
     return {std::move(src), code, lat, lon, cls, std::move(levels)};
 }
 
@@ -293,6 +337,7 @@ LineLayer open_lines(const IngestConfig& cfg, const fs::path& path)
     if (!cfg.dataset.class_field.empty() && cls < 0) {
         throw input_error(src.where() + ": no field '" + cfg.dataset.class_field + "' (dataset.class_field)");
     }
+    expect_optional_types(src, -1, -1, cls, -1);
     return {std::move(src), cls};
 }
 

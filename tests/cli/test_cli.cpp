@@ -61,7 +61,8 @@ class Cli : public ::testing::Test {
 
     /// Write a shapefile of `type` with the given fields and features (WKT, then one value per field).
     void write_shp(const fs::path& path, OGRwkbGeometryType type, const std::vector<std::string>& fields,
-                   const std::vector<std::vector<std::string>>& features)
+                   const std::vector<std::vector<std::string>>& features,
+                   const std::map<std::string, OGRFieldType>& types = {})
     {
         GDALDriverH drv = GDALGetDriverByName("ESRI Shapefile");
         GDALDatasetH ds = GDALCreate(drv, path.c_str(), 0, 0, 0, GDT_Unknown, nullptr);
@@ -72,7 +73,10 @@ class Cli : public ::testing::Test {
         OGRLayerH layer = GDALDatasetCreateLayer(ds, path.stem().c_str(), srs, type, nullptr);
         for (const auto& f : fields) {
             const bool is_int = f == "TLID" || f == "TFIDL" || f == "TFIDR" || f == "TFID";
-            OGRFieldDefnH fd = OGR_Fld_Create(f.c_str(), is_int ? OFTInteger64 : OFTString);
+            const auto given = types.find(f);
+            OGRFieldDefnH fd = OGR_Fld_Create(f.c_str(), given != types.end() ? given->second
+                                                         : is_int             ? OFTInteger64
+                                                                              : OFTString);
             ASSERT_EQ(OGR_L_CreateField(layer, fd, TRUE), OGRERR_NONE);
             OGR_Fld_Destroy(fd);
         }
@@ -115,7 +119,9 @@ class Cli : public ::testing::Test {
     }
 
     /// A county of three faces (A; B1 north of B2) as TIGER EDGES and FACES zips.
-    void make_tiger(const std::string& tag = "")
+    /// A small TIGER county as EDGES and FACES shapefiles, zipped; `types`
+    /// overrides the type of named fields (TLID stored as text, ...).
+    void make_tiger(const std::string& tag = "", const std::map<std::string, OGRFieldType>& types = {})
     {
         auto p = [](double x, double y) {
             std::ostringstream o;
@@ -139,7 +145,7 @@ class Cli : public ::testing::Test {
                    {line({{2, 2}, {1, 2}}), "5", "102", "900", "F"}, {line({{1, 2}, {0, 2}}), "6", "101", "900", "F"},
                    {line({{0, 2}, {0, 0}}), "7", "101", "900", "F"}, {line({{1, 0}, {1, 1}}), "8", "101", "103", "F"},
                    {line({{1, 1}, {1, 2}}), "9", "101", "102", "F"}, {line({{1, 1}, {2, 1}}), "10", "102", "103", "F"}};
-        write_shp(m_dir / ("edges" + tag + ".shp"), wkbLineString, ef, m_edges);
+        write_shp(m_dir / ("edges" + tag + ".shp"), wkbLineString, ef, m_edges, types);
         auto poly = [&](double x0, double y0, double x1, double y1) {
             return "POLYGON ((" + p(x0, y0) + "," + p(x0, y1) + "," + p(x1, y1) + "," + p(x1, y0) + "," + p(x0, y0) +
                    "))";
@@ -147,7 +153,7 @@ class Cli : public ::testing::Test {
         m_faces = {{poly(0, 0, 1, 2), "101", "51", "063", "920100", "1", "1000", "+40.0010", "-095.9995", "5"},
                    {poly(1, 1, 2, 2), "102", "51", "063", "920200", "1", "1001", "+40.0015", "-095.9985", "5"},
                    {poly(1, 0, 2, 1), "103", "51", "063", "920200", "2", "2000", "+40.0005", "-095.9985", "5"}};
-        write_shp(m_dir / ("faces" + tag + ".shp"), wkbPolygon, m_face_fields, m_faces);
+        write_shp(m_dir / ("faces" + tag + ".shp"), wkbPolygon, m_face_fields, m_faces, types);
         zip(m_dir / ("edges" + tag + ".zip"), shp_files(m_dir / ("edges" + tag + ".shp")));
         zip(m_dir / ("faces" + tag + ".zip"), shp_files(m_dir / ("faces" + tag + ".shp")));
     }
@@ -467,6 +473,30 @@ TEST_F(Cli, LineAndPolygonLayersWithMissingFields)
                                          .string() +
                                      " " + out()),
                    1, "geometry type is Line String, a polygons dataset needs polygons");
+}
+
+TEST_F(Cli, FieldsOfAWrongTypeAreRefusedNotReadAsZero)
+{
+    // Read as they are, a TLID stored as text or a TFID as a date come out
+    // as 0 and ingest built a wrong map with exit 0: now exit 1, naming the
+    // file, the field, the type found and the type wanted, nothing written.
+    const std::vector<std::tuple<std::string, OGRFieldType, std::string>> cases = {
+        {"TLID", OFTString, "edges.zip layer 'edges': field 'TLID' is String, but TLID, the edge id needs an integer"},
+        {"TFIDL", OFTDate, "field 'TFIDL' is Date, but TFIDL, the face on the left needs an integer"},
+        {"TFIDR", OFTString, "field 'TFIDR' is String, but TFIDR, the face on the right needs an integer"},
+        {"TFID", OFTString, "faces.zip layer 'faces': field 'TFID' is String, but TFID, the face id needs an integer"},
+        {"STATEFP20", OFTReal, "field 'STATEFP20' is Real, but level 'state' needs text or an integer"},
+        {"INTPTLAT", OFTDate, "field 'INTPTLAT' is Date, but dataset.intpt_lat_field needs a number"},
+        {"MTFCC", OFTReal, "field 'MTFCC' is Real, but dataset.class_field needs text or an integer"},
+    };
+    for (const auto& [field, type, message] : cases) {
+        SCOPED_TRACE(field);
+        make_tiger("", {{field, type}});
+        expect_failure(run("ingest", tiger_config().string() + " " + out()), 1, message);
+    }
+    // The same files with their usual types: exit 0.
+    make_tiger();
+    EXPECT_EQ(run("ingest", tiger_config().string() + " " + out()).code, 0) << slurp(m_dir / "stderr");
 }
 
 TEST_F(Cli, PolygonFilesWithABadOneLeaveNothingBehind)
