@@ -373,10 +373,19 @@ void read_faces_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw,
 /// (a neighbouring county's file had it) only fills the sides that copy left
 /// without a face. With `keep_foreign`, a side whose TFID is not in
 /// `face_unit` is listed in raw.foreign for another part to resolve.
+/// An edge of a county's EDGES bounds a face of that county: one that names
+/// no face of `face_unit` on either side means EDGES and FACES that do not
+/// belong together (another county's, or FACES with faces missing), and
+/// input_error says how many, with examples and where they are. `faces_from`
+/// names the FACES files for that message; empty, nothing is checked (a
+/// part of a region build, whose edges another part may resolve: a build
+/// whose parts cannot is done whole, and checked then).
 void read_edges_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw,
                      const std::unordered_map<int64_t, uint32_t>& face_unit,
-                     std::unordered_map<int64_t, uint32_t>& seen_tlid, bool keep_foreign)
+                     std::unordered_map<int64_t, uint32_t>& seen_tlid, bool keep_foreign, const std::string& faces_from)
 {
+    size_t edges = 0, orphans = 0;
+    std::string examples;
     auto [src, tlid, tfidl, tfidr, cls] = open_edges(cfg, path);
     const auto file = static_cast<uint32_t>(raw.files.size());
     raw.files.push_back(src.name());
@@ -395,6 +404,19 @@ void read_edges_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw,
         const int64_t id = OGR_F_GetFieldAsInteger64(f, tlid);
         const auto [l, l_foreign] = side(f, tfidl);
         const auto [r, r_foreign] = side(f, tfidr);
+        ++edges;
+        if (l == no_unit && r == no_unit && ++orphans <= 3) {
+            // One call at a time: GDAL returns the string in a buffer it reuses.
+            const std::string left = OGR_F_GetFieldAsString(f, tfidl);
+            const std::string right = OGR_F_GetFieldAsString(f, tfidr);
+            examples += std::string(examples.empty() ? "" : "; ") + "TLID " + std::to_string(id) + " (TFIDL " + left +
+                        ", TFIDR " + right + ")";
+            if (OGRGeometryH g = OGR_F_GetGeometryRef(f); g != nullptr && OGR_G_GetPointCount(g) > 0) {
+                char at[64];
+                std::snprintf(at, sizeof at, " at %.6f, %.6f", OGR_G_GetX(g, 0), OGR_G_GetY(g, 0));
+                examples += at;
+            }
+        }
         if (auto it = seen_tlid.find(id); it != seen_tlid.end()) {
             // The same edge from a neighbouring county: it may know the other side's face.
             auto& pl = raw.left[it->second];
@@ -421,6 +443,19 @@ void read_edges_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw,
             raw.foreign.push_back({p, 1, r_foreign});
         }
     });
+    if (faces_from.empty()) {
+        return;
+    }
+    if (orphans == edges && edges > 0) {
+        throw input_error(src.where() + " and " + faces_from + " share no face: every edge names faces that " +
+                          faces_from + " does not hold (e.g. " + examples +
+                          "); give each county's EDGES with its own FACES");
+    }
+    if (orphans > 0) {
+        throw input_error(src.where() + ": " + std::to_string(orphans) + " of " + std::to_string(edges) +
+                          " edges name no face of " + faces_from + " on either side (e.g. " + examples +
+                          "): FACES is incomplete or of another county");
+    }
 }
 
 void read_tiger(const IngestConfig& cfg, RawMap& raw, const Log& log)
@@ -431,8 +466,10 @@ void read_tiger(const IngestConfig& cfg, RawMap& raw, const Log& log)
         log.info("read " + path.string() + ": " + std::to_string(raw.units.size()) + " faces so far");
     }
     std::unordered_map<int64_t, uint32_t> seen_tlid;
+    const std::string faces_from =
+        cfg.dataset.faces.size() == 1 ? cfg.dataset.faces.front().filename().string() : "the FACES files given";
     for (const auto& path : cfg.dataset.edges) {
-        read_edges_file(cfg, path, raw, face_unit, seen_tlid, false);
+        read_edges_file(cfg, path, raw, face_unit, seen_tlid, false, faces_from);
         log.info("read " + path.string() + ": " + std::to_string(raw.polyline_count()) + " edges so far");
     }
 }
@@ -659,7 +696,7 @@ void read_tiger_parts(const IngestConfig& cfg, unsigned threads, const Log& log,
             part = empty_map(cfg, RawMap::Kind::edges);
             std::unordered_map<int64_t, uint32_t> face_unit, seen_tlid;
             read_faces_file(cfg, cfg.dataset.faces[i], part, face_unit);
-            read_edges_file(cfg, cfg.dataset.edges[i], part, face_unit, seen_tlid, true);
+            read_edges_file(cfg, cfg.dataset.edges[i], part, face_unit, seen_tlid, true, "");
         },
         take);
 }

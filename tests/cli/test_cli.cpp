@@ -499,6 +499,29 @@ TEST_F(Cli, FieldsOfAWrongTypeAreRefusedNotReadAsZero)
     EXPECT_EQ(run("ingest", tiger_config().string() + " " + out()).code, 0) << slurp(m_dir / "stderr");
 }
 
+TEST_F(Cli, EdgesAndFacesThatDoNotBelongTogetherAreRefused)
+{
+    // FACES without face 103: edges 2 and 3 bound only 103 and the world
+    // outside (900), and ingest built a map without them with exit 0.
+    make_tiger();
+    m_faces.erase(m_faces.begin() + 2);
+    write_shp(m_dir / "faces.shp", wkbPolygon, m_face_fields, m_faces);
+    zip(m_dir / "faces.zip", shp_files(m_dir / "faces.shp"));
+    expect_failure(run("ingest", tiger_config().string() + " " + out()), 1,
+                   "edges.zip layer 'edges': 2 of 10 edges name no face of faces.zip on either side (e.g. TLID 2 "
+                   "(TFIDL 103, TFIDR 900) at -95.999000, 40.000000; TLID 3 (TFIDL 103, TFIDR 900) at -95.998000, "
+                   "40.000000): FACES is incomplete or of another county");
+    // Another county's FACES (no TFID in common): "0 stores" and exit 0 before.
+    make_tiger();
+    for (auto& f : m_faces) {
+        f[1] = std::to_string(std::stoi(f[1]) + 1000);
+    }
+    write_shp(m_dir / "faces.shp", wkbPolygon, m_face_fields, m_faces);
+    zip(m_dir / "faces.zip", shp_files(m_dir / "faces.shp"));
+    expect_failure(run("ingest", tiger_config().string() + " " + out()), 1,
+                   "edges.zip layer 'edges' and faces.zip share no face");
+}
+
 TEST_F(Cli, PolygonFilesWithABadOneLeaveNothingBehind)
 {
     // Several polygon files go region by region: the good first file is put
