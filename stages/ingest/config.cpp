@@ -207,6 +207,23 @@ IngestConfig load_config(const fs::path& file)
         if (d.kind == DatasetSpec::Kind::lines && cfg.levels.size() != 1) {
             ctx.fail(lv, "a lines dataset has exactly one level");
         }
+        // Levels go from the coarsest to the finest, each nesting in the one
+        // before: what the config alone can show (the data shows the rest,
+        // ingest's check of nesting).
+        for (size_t i = 1; i < cfg.levels.size(); ++i) {
+            const LevelSpec& a = cfg.levels[i - 1];
+            const LevelSpec& b = cfg.levels[i];
+            const std::string where = "levels[" + std::to_string(i) + "]";
+            if (!b.code.empty()) {
+                ctx.fail(lv[i], where + " ('" + b.name + "') has a 'code': a level of one unit must be the first, " +
+                                    "since levels go from the coarsest to the finest");
+            }
+            if (a.prefix >= 0 && b.prefix >= 0 && b.prefix <= a.prefix) {
+                ctx.fail(lv[i], where + ".prefix " + std::to_string(b.prefix) + " is not longer than " + a.name +
+                                    "'s " + std::to_string(a.prefix) +
+                                    ": levels go from the coarsest to the finest, each nesting in the one before");
+            }
+        }
     } else if (d.kind == DatasetSpec::Kind::tiger) {
         cfg.levels = default_tiger_levels();
     } else if (d.kind == DatasetSpec::Kind::lines) {

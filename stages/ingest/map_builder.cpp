@@ -1510,12 +1510,33 @@ BuildResult build(RawMap raw, const Projection& projection, const BuildOptions& 
             owner.own_rank.push_back(std::binary_search(scope->own.begin(), scope->own.end(), c) ? 1 : 0);
         }
     }
+    // A unit of a level in two units of the level before: the config's
+    // levels do not nest on this data (a level without its parent's code,
+    // levels out of order), and every level below would be built wrong.
     for (auto [u, L] : non_nesting) {
-        if (owner.unit(u)) {
-            problems.add_lonlat("non_nesting_units", raw.units[u].intpt.value_or(LonLatE6{}),
-                                raw.where(raw.units[u].source) + " (" + raw.level_names[L] + " " +
-                                    lcs[L].codes[lcs[L].of_unit[u]] + ")");
+        if (!owner.unit(u)) {
+            continue;
         }
+        const auto& here = lcs[L];
+        const auto& up = lcs[L - 1];
+        size_t v = 0; // the first unit that gave the code its parent
+        while (here.of_unit[v] != here.of_unit[u] || up.of_unit[v] == up.of_unit[u]) {
+            ++v;
+        }
+        auto at = [&](size_t w) {
+            std::string s = raw.where(raw.units[w].source);
+            if (const auto& p = raw.units[w].intpt) {
+                char buf[64];
+                std::snprintf(buf, sizeof buf, " near %.6f, %.6f", p->lon * 1e-6, p->lat * 1e-6);
+                s += buf;
+            }
+            return s;
+        };
+        throw input_error("level '" + raw.level_names[L] + "' does not nest in level '" + raw.level_names[L - 1] +
+                          "': its unit " + here.codes[here.of_unit[u]] + " lies in " + raw.level_names[L - 1] + " " +
+                          up.codes[up.of_unit[v]] + " (" + at(v) + ") and in " + raw.level_names[L - 1] + " " +
+                          up.codes[up.of_unit[u]] + " (" + at(u) + "); each unit must lie in one unit of the level " +
+                          "before: check the order of the levels and their fields or prefixes");
     }
     Graph g = make_graph(raw, projection, options.threads, problems, owner);
     phase("intern_project");

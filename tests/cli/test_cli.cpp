@@ -522,6 +522,31 @@ TEST_F(Cli, EdgesAndFacesThatDoNotBelongTogetherAreRefused)
                    "edges.zip layer 'edges' and faces.zip share no face");
 }
 
+TEST_F(Cli, LevelsThatDoNotNestAreRefused)
+{
+    make_tiger();
+    // A block-group level without the tract's code: block group 1 of the
+    // county holds faces of tracts 920100 and 920200. Before, ingest counted
+    // it under non_nesting_units and every stage after exited 0.
+    const std::string no_tract = "levels:\n  - {name: county, fields: [STATEFP20, COUNTYFP20]}\n"
+                                 "  - {name: tract, fields: [STATEFP20, COUNTYFP20, TRACTCE20]}\n"
+                                 "  - {name: block_group, fields: [STATEFP20, COUNTYFP20, BLKGRPCE20]}\n";
+    expect_failure(run("ingest", tiger_config("edges.zip", "faces.zip", no_tract).string() + " " + out()), 1,
+                   "level 'block_group' does not nest in level 'tract': its unit 510631 lies in tract 51063920100 "
+                   "(faces.zip:0 near -95.999500, 40.001000) and in tract 51063920200 (faces.zip:1 near "
+                   "-95.998500, 40.001500)");
+    // What the config alone shows, with --validate too: prefixes that do not
+    // grow, a level of one unit that is not the first.
+    const std::string polygons = "dataset:\n  kind: polygons\n  inputs: [faces.zip]\n  code_field: TFID\n";
+    const fs::path shrinking = config(polygons + "levels:\n  - {name: a, prefix: 3}\n  - {name: b, prefix: 1}\n");
+    expect_failure(run("ingest", shrinking.string() + " " + out()), 2,
+                   "levels[1].prefix 1 is not longer than a's 3: levels go from the coarsest to the finest");
+    expect_failure(run("ingest", shrinking.string() + " " + out() + " --validate"), 2, "levels[1].prefix 1");
+    const fs::path late_code = config(polygons + "levels:\n  - {name: a, prefix: 1}\n  - {name: all, code: X}\n");
+    expect_failure(run("ingest", late_code.string() + " " + out()), 2,
+                   "levels[1] ('all') has a 'code': a level of one unit must be the first");
+}
+
 TEST_F(Cli, PolygonFilesWithABadOneLeaveNothingBehind)
 {
     // Several polygon files go region by region: the good first file is put
