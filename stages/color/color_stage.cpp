@@ -37,6 +37,7 @@ int ColorStage::run(const StageContext& ctx)
     std::vector<Total> totals(m_common.tolerances.size());
     for (const auto& sf : stores) {
         const auto store = chains::read(sf.path);
+        simplify::check_store(store, sf);
         for (size_t ti = 0; ti < m_common.tolerances.size(); ++ti) {
             const double eps_m = m_common.tolerances[ti];
             simplify::ColorResult r;

@@ -247,6 +247,7 @@ int SimplifyStage::run(const StageContext& ctx)
     auto simplify_one = [&](const auto& sf, const SimplifyOptions& so) {
         std::vector<ToleranceStats> stats(m_common.tolerances.size());
         const auto store = chains::read(sf.path);
+        check_store(store, sf);
         // Partitions are simplified independently only if each sees every
         // chain within eps_i + eps_j of its own: its halo must be that wide.
         const double need = 2 * m_common.tolerances.back() * max_scale * l2_reach(so.metric);

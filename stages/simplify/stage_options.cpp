@@ -1,10 +1,14 @@
 #include "stages/simplify/stage_options.hpp"
 
 #include "core/errors.hpp"
+#include "core/projection.hpp"
+
+#include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <fstream>
 #include <sstream>
 #include <thread>
 
@@ -125,7 +129,7 @@ std::vector<StoreFile> list_stores(const fs::path& input, const std::string& lev
         }
         for (const auto& f : fs::directory_iterator(d.path())) {
             if (f.is_regular_file() && f.path().extension() == ".tlc") {
-                out.push_back({d.path().filename().string(), f.path().stem().string(), f.path()});
+                out.push_back({d.path().filename().string(), f.path().stem().string(), f.path(), ""});
             }
         }
     }
@@ -137,7 +141,62 @@ std::vector<StoreFile> list_stores(const fs::path& input, const std::string& lev
                           (level.empty() ? std::string() : " of level '" + level + "'") +
                           " (expected <level>/<partition>.tlc files)");
     }
+    // Against what ingest says it wrote: a store lost, or one copied in from
+    // another run, would otherwise be simplified as if it belonged.
+    const fs::path report_path = input / "ingest-report.json";
+    std::map<std::string, size_t> wrote; // level -> stores
+    std::string projection;
+    try {
+        std::ifstream in(report_path);
+        if (!in) {
+            throw input_error(input.string() + ": no ingest-report.json: not a finished tigerlod-ingest output");
+        }
+        const auto report = nlohmann::json::parse(in);
+        projection = report.at("projection").get<std::string>();
+        for (const auto& l : report.at("levels")) {
+            wrote[l.at("name").get<std::string>()] = l.at("partitions").get<size_t>();
+        }
+    } catch (const nlohmann::json::exception& e) {
+        throw input_error(report_path.string() + ": " + e.what());
+    }
+    std::map<std::string, size_t> found;
+    for (auto& f : out) {
+        ++found[f.level];
+        f.projection = projection;
+    }
+    for (const auto& [name, count] : found) {
+        const auto it = wrote.find(name);
+        if (it == wrote.end()) {
+            throw input_error((input / name).string() + ": a level tigerlod-ingest did not write (ingest-report.json " +
+                              "lists no level '" + name + "')");
+        }
+        if (it->second != count) {
+            throw input_error((input / name).string() + ": " + std::to_string(count) + " chain stores, but " +
+                              "tigerlod-ingest wrote " + std::to_string(it->second) +
+                              " (ingest-report.json): a store is missing or foreign; re-run tigerlod-ingest");
+        }
+    }
+    for (const auto& [name, count] : wrote) {
+        if ((level.empty() || level == name) && count > 0 && !found.contains(name)) {
+            throw input_error((input / name).string() + ": tigerlod-ingest wrote " + std::to_string(count) +
+                              " chain stores of level '" + name + "' here, and none is left; re-run tigerlod-ingest");
+        }
+    }
     return out;
+}
+
+void check_store(const chains::ChainStore& store, const StoreFile& file)
+{
+    if (store.level_name != file.level || store.partition != file.partition) {
+        throw input_error(file.path.string() + ": holds partition '" + store.partition + "' of level '" +
+                          store.level_name + "', not what its place names (another store under this name?); " +
+                          "re-run tigerlod-ingest");
+    }
+    const std::string p = Projection(store.projection).describe();
+    if (!file.projection.empty() && p != file.projection) {
+        throw input_error(file.path.string() + ": projection " + p + ", but tigerlod-ingest wrote the others in " +
+                          file.projection + "; re-run tigerlod-ingest");
+    }
 }
 
 } // namespace tigerlod::simplify

@@ -18,6 +18,7 @@ struct StoreFile {
     std::string level;
     std::string partition; ///< the file name's stem
     std::filesystem::path path;
+    std::string projection; ///< the projection ingest wrote every store in (its report)
 };
 
 class CommonOptions {
@@ -49,7 +50,15 @@ std::string tolerance_dir(double eps_m);
 std::map<std::string, double> parse_class_scale(const std::string& list, const std::string& stage);
 
 /// The stores under `input`, sorted by (level, partition); only `level` if not empty.
-/// Throws usage_error if `input` is not a folder or holds no store.
+/// Throws usage_error if `input` is not a folder or holds no store, and
+/// input_error if they are not the stores ingest wrote there: its report
+/// missing, a level folder it did not write, a level with a store more or
+/// fewer than it wrote.
 std::vector<StoreFile> list_stores(const std::filesystem::path& input, const std::string& level);
+
+/// Throws input_error if `store`, read from `file`, is not the store its place
+/// names (another partition's under this name) or is in another projection
+/// or grid than ingest wrote the others in.
+void check_store(const chains::ChainStore& store, const StoreFile& file);
 
 } // namespace tigerlod::simplify

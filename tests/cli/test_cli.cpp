@@ -795,6 +795,54 @@ TEST_F(Cli, PackRefusesALadderWithATolerancePartMissing)
                    "no simplify-report.json: not a finished tigerlod-simplify output folder");
 }
 
+TEST_F(Cli, ColorAndSimplifyReadOnlyTheStoresIngestWrote)
+{
+    // Foreign stores: before, color and simplify exited 0 and only pack noticed.
+    make_tiger();
+    const std::string in = (m_dir / "in").string();
+    ASSERT_EQ(run("ingest", tiger_config().string() + " " + in).code, 0);
+    ASSERT_EQ(run("ingest", tiger_config("edges.zip", "faces.zip", "projection:\n  grid_m: 0.1\n").string() + " " +
+                                (m_dir / "coarse").string())
+                  .code,
+              0);
+    const fs::path tract = m_dir / "in" / "tract" / "51063.tlc";
+    const fs::path block_group = fs::directory_iterator(m_dir / "in" / "block_group")->path();
+    const fs::path keep = m_dir / "keep.tlc";
+    fs::copy_file(tract, keep);
+    auto both = [&](int code, const std::string& fragment) {
+        for (const std::string tool : {"color", "simplify"}) {
+            SCOPED_TRACE(tool);
+            expect_failure(run(tool, in + " " + out() + " --tolerances 8"), code, fragment);
+        }
+    };
+    // Another level's store under the tract's name.
+    fs::copy_file(block_group, tract, fs::copy_options::overwrite_existing);
+    both(1, "tract/51063.tlc: holds partition '" + block_group.stem().string() +
+                "' of level 'block_group', not what its place names");
+    // The same store on another grid.
+    fs::copy_file(m_dir / "coarse" / "tract" / "51063.tlc", tract, fs::copy_options::overwrite_existing);
+    both(1, "tract/51063.tlc: projection albers lon0=-96 lat0=23 stdlat=29.5,45.5 grid=0.1m, but tigerlod-ingest "
+            "wrote the others in albers lon0=-96 lat0=23 stdlat=29.5,45.5 grid=0.01m");
+    // A store more, a store fewer, a level ingest did not write.
+    fs::copy_file(keep, tract, fs::copy_options::overwrite_existing);
+    fs::copy_file(keep, m_dir / "in" / "tract" / "51999.tlc");
+    both(1, "tract: 2 chain stores, but tigerlod-ingest wrote 1 (ingest-report.json)");
+    fs::remove(m_dir / "in" / "tract" / "51999.tlc");
+    fs::remove(tract);
+    both(1, "tract: tigerlod-ingest wrote 1 chain stores of level 'tract' here, and none is left");
+    fs::copy_file(keep, tract);
+    fs::create_directories(m_dir / "in" / "zone");
+    fs::copy_file(keep, m_dir / "in" / "zone" / "51063.tlc");
+    both(1, "zone: a level tigerlod-ingest did not write");
+    fs::remove_all(m_dir / "in" / "zone");
+    // No report: not a finished ingest output.
+    fs::rename(m_dir / "in" / "ingest-report.json", m_dir / "report.json");
+    both(1, "no ingest-report.json: not a finished tigerlod-ingest output");
+    fs::rename(m_dir / "report.json", m_dir / "in" / "ingest-report.json");
+    // Put back as ingest wrote it: both run.
+    EXPECT_EQ(run("color", in + " " + out() + " --tolerances 8").code, 0) << slurp(m_dir / "stderr");
+}
+
 TEST_F(Cli, PackDumpExportAndVerifyRejectBadInput)
 {
     make_tiger();
