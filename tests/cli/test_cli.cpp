@@ -10,6 +10,7 @@
 #include <ogr_srs_api.h>
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cstdio>
 #include <cstdlib>
@@ -40,7 +41,10 @@ class Cli : public ::testing::Test {
     void SetUp() override
     {
         const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        m_dir = fs::temp_directory_path() / (std::string("tigerlod-cli-") + info->name());
+        // The process id too: two builds' tests (a clone's CI beside a
+        // checkout's) must not share a folder.
+        m_dir = fs::temp_directory_path() /
+                (std::string("tigerlod-cli-") + info->name() + "-" + std::to_string(::getpid()));
         fs::remove_all(m_dir);
         fs::create_directories(m_dir);
         GDALAllRegister();

@@ -3,6 +3,7 @@
 #include "formats/chains/chain_store.hpp"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cstring>
 #include <filesystem>
@@ -78,7 +79,8 @@ TEST(ChainStore, RoundTripIsExact)
 
 TEST(ChainStore, FileRoundTripAndNoTemporaryLeft)
 {
-    const auto dir = std::filesystem::temp_directory_path() / "tigerlod-test-chain-store";
+    const auto dir =
+        std::filesystem::temp_directory_path() / ("tigerlod-test-chain-store-" + std::to_string(::getpid()));
     std::filesystem::remove_all(dir);
     std::filesystem::create_directories(dir);
     write(dir / "a.tlc", sample());

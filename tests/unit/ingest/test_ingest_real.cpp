@@ -507,7 +507,7 @@ TEST(IngestReal, FloydLinearWaterAsALineLayerLosesNoSegment)
     if (!fs::exists(zip)) {
         GTEST_SKIP() << "../shared/data/tiger is absent: the line layer test needs it";
     }
-    const fs::path dir = fs::temp_directory_path() / "tigerlod-test-linearwater";
+    const fs::path dir = fs::temp_directory_path() / ("tigerlod-test-linearwater-" + std::to_string(::getpid()));
     fs::create_directories(dir);
     std::ofstream(dir / "water.yaml") << "name: water\ndataset:\n  kind: lines\n  inputs: [" << zip.string()
                                       << "]\n  class_field: MTFCC\n";

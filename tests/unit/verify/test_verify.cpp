@@ -5,6 +5,7 @@
 #include "stages/verify/verifier.hpp"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <functional>
 #include <map>
@@ -56,7 +57,8 @@ class Verify : public ::testing::Test {
     void SetUp() override
     {
         dir = fs::temp_directory_path() /
-              ("tigerlod-verify-" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+              ("tigerlod-verify-" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) + "-" +
+               std::to_string(::getpid()));
         fs::remove_all(dir);
     }
     void TearDown() override { fs::remove_all(dir); }
