@@ -59,13 +59,20 @@ void write_file(const fs::path& path, std::string_view data)
 
 void refuse_to_replace_inputs(const fs::path& output, const std::vector<fs::path>& inputs)
 {
-    std::error_code ec;
-    const fs::path out = fs::weakly_canonical(fs::absolute(output, ec), ec);
+    // Links resolved where the path can be read; lexically otherwise (an
+    // empty result would compare as a parent of everything).
+    auto resolve = [](const fs::path& p) {
+        std::error_code ec;
+        const fs::path abs = fs::absolute(p, ec).lexically_normal();
+        const fs::path real = fs::weakly_canonical(abs, ec);
+        return ec || real.empty() ? abs : real;
+    };
+    const fs::path out = resolve(output);
     for (const fs::path& input : inputs) {
         if (input.empty()) {
             continue;
         }
-        const fs::path in = fs::weakly_canonical(fs::absolute(input, ec), ec);
+        const fs::path in = resolve(input);
         // out is in itself, or one of its parents.
         auto o = out.begin();
         auto i = in.begin();
