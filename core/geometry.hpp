@@ -106,6 +106,18 @@ inline SegmentRelation segment_relation(GridPoint a, GridPoint b, GridPoint c, G
 /// Where point p lies relative to a closed polygon given as boundary segments.
 enum class PointLocation { outside, inside, boundary };
 
+/// Whether segment ab crosses the horizontal ray from p to +x (half-open in
+/// y, so a vertex on the ray counts once): the even-odd rule's step, for p
+/// not on ab.
+inline bool crosses_ray_right(GridPoint a, GridPoint b, GridPoint p) noexcept
+{
+    if ((a.y > p.y) == (b.y > p.y)) {
+        return false;
+    }
+    const int o = orientation(a, b, p);
+    return (b.y > a.y) ? o > 0 : o < 0;
+}
+
 /// Accumulates an exact even-odd point-in-polygon test for point p, one
 /// boundary segment at a time (the segments may come in any order and from any
 /// number of rings). Half-open rule on y, so vertices are counted once.
@@ -121,13 +133,8 @@ class PointInPolygon {
             m_on_boundary = true;
             return;
         }
-        if ((a.y > m_p.y) != (b.y > m_p.y)) {
-            // The edge crosses the horizontal line through p; count it if the
-            // crossing lies right of p.
-            const int o = orientation(a, b, m_p);
-            if ((b.y > a.y) ? o > 0 : o < 0) {
-                m_inside = !m_inside;
-            }
+        if (crosses_ray_right(a, b, m_p)) {
+            m_inside = !m_inside;
         }
     }
     PointLocation location() const noexcept

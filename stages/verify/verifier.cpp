@@ -104,12 +104,9 @@ class UnitLocator {
                 boundary.push_back(g.right);
                 continue;
             }
-            if ((g.a.y > p.y) != (g.b.y > p.y)) {
-                const int o = orientation(g.a, g.b, p);
-                if ((g.b.y > g.a.y) ? o > 0 : o < 0) {
-                    flips.push_back(g.left);
-                    flips.push_back(g.right);
-                }
+            if (crosses_ray_right(g.a, g.b, p)) {
+                flips.push_back(g.left);
+                flips.push_back(g.right);
             }
         }
         std::sort(flips.begin(), flips.end());
@@ -465,21 +462,6 @@ class Verifier {
         return out;
     }
 
-    static PointLocation locate(const NodeResult& r, uint32_t unit, GridPoint p)
-    {
-        PointInPolygon pip(p);
-        for (size_t c = 0; c < r.table.chains.size(); ++c) {
-            const auto& e = r.table.chains[c];
-            if ((e.left == unit) != (e.right == unit)) {
-                const auto pts = r.geometry.chain(c);
-                for (size_t s = 0; s + 1 < pts.size(); ++s) {
-                    pip.add_segment(pts[s], pts[s + 1]);
-                }
-            }
-        }
-        return pip.location();
-    }
-
     /// Sign of the unit's area from its chains (left side positive): exact.
     static int unit_area_sign(const NodeResult& r, uint32_t unit)
     {
@@ -640,8 +622,10 @@ class Verifier {
         for (const auto& up : user_points) {
             ++r.points;
             const auto ui = std::find(r.table.strings.begin(), r.table.strings.end(), up.unit);
+            locator.locate(up.p, inside, boundary);
             if (ui == r.table.strings.end() ||
-                locate(r, static_cast<uint32_t>(ui - r.table.strings.begin()), up.p) != PointLocation::inside) {
+                !std::binary_search(inside.begin(), inside.end(),
+                                    static_cast<uint32_t>(ui - r.table.strings.begin()))) {
                 violation("point_constraints", {}, up.p,
                           "user point " + std::to_string(up.index) + " left unit " + up.unit);
             }
