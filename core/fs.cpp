@@ -2,10 +2,14 @@
 
 #include "core/errors.hpp"
 
+#include <algorithm>
+#include <cctype>
 #include <cerrno>
+#include <csignal>
 #include <cstdio>
 #include <cstring>
 #include <iterator>
+#include <optional>
 #include <string>
 #include <system_error>
 #include <unistd.h>
@@ -16,9 +20,68 @@ namespace tigerlod {
 
 namespace {
 
-fs::path temp_sibling(const fs::path& path, const char* tag)
+/// This host's short name, reduced to letters, digits and '-' (a '.' would
+/// read as an extension, and the name is split at its last '-').
+const std::string& host_name()
 {
-    return path.parent_path() / (path.filename().string() + tag + std::to_string(::getpid()));
+    static const std::string name = [] {
+        char buf[256] = {};
+        std::string h;
+        if (::gethostname(buf, sizeof buf - 1) == 0) {
+            h = buf;
+        }
+        h = h.substr(0, h.find('.'));
+        for (char& c : h) {
+            if (!std::isalnum(static_cast<unsigned char>(c)) && c != '-') {
+                c = '_';
+            }
+        }
+        return h.empty() ? std::string("host") : h;
+    }();
+    return name;
+}
+
+std::string temp_id()
+{
+    return host_name() + "-" + std::to_string(::getpid());
+}
+
+/// A temporary name taken apart: `<base><kind><host>-<pid>[<ext>]`.
+struct Leftover {
+    std::string base, host;
+    long pid = 0;
+};
+
+std::optional<Leftover> parse_leftover(const std::string& name)
+{
+    const size_t tmp = name.rfind(".tmp-"), old = name.rfind(".old-");
+    const size_t at = tmp == std::string::npos ? old : old == std::string::npos ? tmp : std::max(tmp, old);
+    if (at == std::string::npos || at == 0) {
+        return std::nullopt;
+    }
+    std::string id = name.substr(at + 5);
+    id = id.substr(0, id.find('.')); // an extension after the id
+    const size_t dash = id.rfind('-');
+    const std::string digits = dash == std::string::npos ? id : id.substr(dash + 1);
+    if (digits.empty() || digits.size() > 9 ||
+        !std::all_of(digits.begin(), digits.end(), [](char c) { return c >= '0' && c <= '9'; })) {
+        return std::nullopt;
+    }
+    Leftover l;
+    l.base = name.substr(0, at);
+    // Names from before hosts were part of them: this host's.
+    l.host = dash == std::string::npos ? host_name() : id.substr(0, dash);
+    l.pid = std::stol(digits);
+    return l.host.empty() ? std::nullopt : std::optional<Leftover>(l);
+}
+
+bool process_is_gone(long pid)
+{
+    if (pid <= 0 || pid == ::getpid()) {
+        return false;
+    }
+    // EPERM: it exists, run by someone else.
+    return ::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH;
 }
 
 /// Write `data` to `file`; messages name `name`. Throws environment_error,
@@ -39,6 +102,39 @@ void write_to(const fs::path& file, const fs::path& name, std::string_view data)
 }
 
 } // namespace
+
+fs::path temp_sibling(const fs::path& path, std::string_view kind)
+{
+    return path.parent_path() / (path.filename().string() + std::string(kind) + temp_id());
+}
+
+fs::path temp_sibling_keeping_extension(const fs::path& path)
+{
+    return path.parent_path() / (path.stem().string() + ".tmp-" + temp_id() + path.extension().string());
+}
+
+std::vector<fs::path> remove_dead_leftovers(const fs::path& folder, std::string_view base)
+{
+    std::vector<fs::path> removed;
+    std::error_code ec;
+    std::vector<fs::path> found;
+    for (fs::directory_iterator it(folder, ec), end; !ec && it != end; it.increment(ec)) {
+        found.push_back(it->path());
+    }
+    std::sort(found.begin(), found.end());
+    for (const fs::path& p : found) {
+        const auto l = parse_leftover(p.filename().string());
+        if (!l || (!base.empty() && l->base != base) || l->host != host_name() || !process_is_gone(l->pid)) {
+            continue;
+        }
+        std::error_code rm;
+        fs::remove_all(p, rm);
+        if (!rm) {
+            removed.push_back(p);
+        }
+    }
+    return removed;
+}
 
 void write_file_atomic(const fs::path& path, std::string_view data)
 {
@@ -97,6 +193,8 @@ OutputDir::OutputDir(fs::path final_path, bool overwrite, const std::vector<fs::
         throw usage_error(m_final.string() + " exists. Use --overwrite to replace it.");
     }
     m_tmp = temp_sibling(m_final, ".tmp-");
+    m_removed = remove_dead_leftovers(m_final.parent_path().empty() ? fs::path(".") : m_final.parent_path(),
+                                      m_final.filename().string());
     std::error_code ec;
     fs::remove_all(m_tmp, ec);
     fs::create_directories(m_tmp, ec);

@@ -5,10 +5,30 @@
 /// place and renamed on success.
 
 #include <filesystem>
-#include <vector>
+#include <string>
 #include <string_view>
+#include <vector>
 
 namespace tigerlod {
+
+/// The temporary name of `path` for this process: `<name><kind><host>-<pid>`
+/// beside it, `kind` being ".tmp-" (being written) or ".old-" (moved aside
+/// to be replaced). Host and process id together let a later run tell a dead
+/// process's leftovers from a live one's, on a folder shared by machines.
+std::filesystem::path temp_sibling(const std::filesystem::path& path, std::string_view kind = ".tmp-");
+
+/// The same for a file whose extension must stay last (GDAL picks a driver
+/// by it): `<stem>.tmp-<host>-<pid><extension>`.
+std::filesystem::path temp_sibling_keeping_extension(const std::filesystem::path& path);
+
+/// Remove what dead runs left in `folder`: entries named as temp_sibling and
+/// temp_sibling_keeping_extension name them, written by a process of this
+/// host that no longer exists. With `base` given, only leftovers of that
+/// name (`<base>.tmp-...`, `<base>.old-...`). Entries of live processes, of
+/// other hosts and of any other name are left alone. Returns what it
+/// removed; throws nothing (what cannot be removed stays).
+std::vector<std::filesystem::path> remove_dead_leftovers(const std::filesystem::path& folder,
+                                                         std::string_view base = {});
 
 /// Write `data` to `path` through a temporary file and rename. Throws
 /// environment_error on any I/O failure; the temporary is removed then.
@@ -30,7 +50,8 @@ void refuse_to_replace_inputs(const std::filesystem::path& output, const std::ve
 /// commit(). Destroyed without commit(), it removes what it wrote.
 class OutputDir {
   public:
-    /// Prepare `final_path`. Throws usage_error if it would replace one of
+    /// Prepare `final_path`, removing what dead runs left beside it
+    /// (remove_dead_leftovers). Throws usage_error if it would replace one of
     /// `inputs` (refuse_to_replace_inputs) or if it exists and `overwrite` is
     /// false ("Use --overwrite to replace it."), environment_error if the
     /// temporary folder cannot be made.
@@ -43,10 +64,14 @@ class OutputDir {
     const std::filesystem::path& path() const noexcept { return m_tmp; }
     /// Move the temporary folder into place, replacing an old one.
     void commit();
+    /// What dead runs had left beside the output, removed by the
+    /// constructor (remove_dead_leftovers), for the stage to log.
+    const std::vector<std::filesystem::path>& removed_leftovers() const noexcept { return m_removed; }
 
   private:
     std::filesystem::path m_final;
     std::filesystem::path m_tmp;
+    std::vector<std::filesystem::path> m_removed;
     bool m_committed = false;
 }; // class OutputDir
 

@@ -145,6 +145,13 @@ std::string ArgSet::help_text(const std::string& program, const std::string& des
     return out.str();
 }
 
+void log_removed_leftovers(const Log& log, const std::vector<std::filesystem::path>& removed)
+{
+    for (const auto& p : removed) {
+        log.info("removed " + p.string() + ", left by a run that died");
+    }
+}
+
 namespace detail {
 
 int run_stage_impl(Stage& stage, const char* name, const char* description, int argc, char** argv)

@@ -9,6 +9,7 @@
 #include "core/errors.hpp"
 #include "core/log.hpp"
 
+#include <filesystem>
 #include <string>
 #include <variant>
 #include <vector>
@@ -52,6 +53,10 @@ class ArgSet {
 struct StageContext {
     Log& log;
 };
+
+/// Log one line per leftover of a dead run that a stage removed
+/// (remove_dead_leftovers in core/fs.hpp), so a rerun says what it cleaned.
+void log_removed_leftovers(const Log& log, const std::vector<std::filesystem::path>& removed);
 
 /// A stage: declares its options, validates them, then runs.
 class Stage {

@@ -29,6 +29,7 @@ int ColorStage::run(const StageContext& ctx)
     refuse_to_replace_inputs(m_common.output, {m_common.input});
     const auto stores = simplify::list_stores(m_common.input, m_common.level);
     OutputDir out(m_common.output, m_common.overwrite, {m_common.input});
+    log_removed_leftovers(ctx.log, out.removed_leftovers());
     struct Total {
         size_t tiles = 0, splits = 0, conflict_edges = 0, stores = 0;
         uint32_t max_classes = 0;

@@ -124,8 +124,9 @@ int ExportStage::run(const StageContext& ctx)
     const Projection proj(view::projection_of(s));
     const fs::path out(m_output);
     const bool gpkg = out.extension() == ".gpkg";
-    const fs::path tmp =
-        out.parent_path() / (out.stem().string() + ".tmp-" + std::to_string(::getpid()) + out.extension().string());
+    const fs::path tmp = temp_sibling_keeping_extension(out);
+    log_removed_leftovers(ctx.log, remove_dead_leftovers(out.parent_path().empty() ? fs::path(".") : out.parent_path(),
+                                                         out.stem().string()));
     GDALAllRegister();
     GDALDriverH driver = GDALGetDriverByName(gpkg ? "GPKG" : "GeoJSON");
     TempDataset g;

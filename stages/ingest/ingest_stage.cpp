@@ -179,6 +179,7 @@ int IngestStage::run(const StageContext& ctx)
         reads.emplace_back(f.first);
     }
     OutputDir out(m_output, m_overwrite, reads);
+    log_removed_leftovers(ctx.log, out.removed_leftovers());
     for (const auto& l : cfg.levels) {
         fs::create_directories(out.path() / l.name);
     }

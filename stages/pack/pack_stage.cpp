@@ -43,10 +43,13 @@ void PackStage::initialize()
     refuse_to_replace_inputs(m_output, {m_original, m_simplified});
     const fs::path out(m_output);
     std::error_code ec;
+    // A Data Tree is updated in place; a folder a killed first pack left
+    // (no skeleton yet, only pack's own files) is resumed.
     if (fs::exists(out, ec) &&
-        !(fs::is_directory(out, ec) && (fs::is_empty(out, ec) || fs::exists(out / "skeleton.tls", ec)))) {
+        !(fs::is_directory(out, ec) && (fs::exists(out / "skeleton.tls", ec) || is_pack_leftover(out)))) {
         throw usage_error("pack: " + m_output +
-                          " exists and is not a Data Tree (no skeleton.tls); pick another OUTPUT");
+                          " exists and is not a Data Tree (no skeleton.tls, and files pack does not write); "
+                          "pick another OUTPUT");
     }
 }
 
@@ -111,6 +114,7 @@ int PackStage::run(const StageContext& ctx)
     ctx.log.info("pack: built " + std::to_string(tree.skeleton.nodes.size()) + " nodes in " +
                  std::to_string(tree.skeleton.tiles.size()) + " tiles");
     const WriteStats ws = write_tree(m_output, tree);
+    log_removed_leftovers(ctx.log, ws.leftovers_removed);
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
     json report;
@@ -130,6 +134,7 @@ int PackStage::run(const StageContext& ctx)
     report["tiles"] = {{"count", tree.skeleton.tiles.size()},
                        {"written", ws.tiles_written},
                        {"kept", ws.tiles_kept},
+                       {"repaired", ws.tiles_repaired},
                        {"removed", ws.tiles_removed}};
     json lods = json::array();
     uint64_t vertices = 0, bytes = 0;
@@ -151,9 +156,9 @@ int PackStage::run(const StageContext& ctx)
     report["seconds"] = seconds;
     write_file_atomic(fs::path(m_output) / "pack-report.json", report.dump(2) + "\n");
 
-    std::printf("pack: %zu nodes, %zu tiles (%zu written, %zu kept, %zu removed), %llu bytes\n",
+    std::printf("pack: %zu nodes, %zu tiles (%zu written, %zu kept, %zu repaired, %zu removed), %llu bytes\n",
                 tree.skeleton.nodes.size(), tree.skeleton.tiles.size(), ws.tiles_written, ws.tiles_kept,
-                ws.tiles_removed, static_cast<unsigned long long>(ws.tree_bytes));
+                ws.tiles_repaired, ws.tiles_removed, static_cast<unsigned long long>(ws.tree_bytes));
     for (const auto& l : tree.lods) {
         std::printf("  LOD eps %g m: %llu vertices, %.2f bytes/vertex\n", l.eps_m,
                     static_cast<unsigned long long>(l.vertices),

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <fstream>
 #include <set>
 #include <unordered_map>
 
@@ -460,6 +461,24 @@ void layout_tiles(PackedTree& tree, const std::vector<std::vector<std::string>>&
     }
 }
 
+namespace {
+
+/// Whether `path` holds exactly `bytes`: a tile is named by its content, so
+/// a file of its name that differs (a flipped byte, a truncation) is damaged.
+bool holds_exactly(const fs::path& path, std::string_view bytes)
+{
+    std::error_code ec;
+    if (!fs::is_regular_file(path, ec) || fs::file_size(path, ec) != bytes.size() || ec) {
+        return false;
+    }
+    std::ifstream in(path, std::ios::binary);
+    std::string have(bytes.size(), '\0');
+    in.read(have.data(), static_cast<std::streamsize>(have.size()));
+    return in.gcount() == static_cast<std::streamsize>(have.size()) && have == bytes;
+}
+
+} // namespace
+
 WriteStats write_tree(const fs::path& dir, const PackedTree& tree)
 {
     WriteStats st;
@@ -468,31 +487,78 @@ WriteStats write_tree(const fs::path& dir, const PackedTree& tree)
     if (ec) {
         throw environment_error(dir.string() + ": cannot create: " + ec.message());
     }
-    std::set<std::string> names;
-    for (size_t t = 0; t < tree.skeleton.tiles.size(); ++t) {
-        const auto& tile = tree.skeleton.tiles[t];
-        names.insert(fs::path(tile.file).filename().string());
-        const fs::path path = dir / tile.file;
-        // Named by content: a file of that name and size is this tile.
-        if (fs::is_regular_file(path, ec) && fs::file_size(path, ec) == tile.size) {
-            ++st.tiles_kept;
-        } else {
-            write_file_atomic(path, tree.tile_bytes[t]);
-            ++st.tiles_written;
-        }
-        st.tree_bytes += tile.size;
+    for (const fs::path& folder : {dir, dir / "tiles"}) {
+        auto removed = remove_dead_leftovers(folder);
+        st.leftovers_removed.insert(st.leftovers_removed.end(), removed.begin(), removed.end());
     }
-    const std::string skeleton = datatree::encode_skeleton(tree.skeleton);
-    write_file_atomic(dir / "skeleton.tls", skeleton);
-    st.skeleton_bytes = skeleton.size();
-    st.tree_bytes += skeleton.size();
+    std::set<std::string> names;
+    // Tiles this run wrote where there was no file: a failed run removes
+    // them, leaving the folder as it found it.
+    std::vector<fs::path> created;
+    try {
+        for (size_t t = 0; t < tree.skeleton.tiles.size(); ++t) {
+            const auto& tile = tree.skeleton.tiles[t];
+            names.insert(fs::path(tile.file).filename().string());
+            const fs::path path = dir / tile.file;
+            if (holds_exactly(path, tree.tile_bytes[t])) {
+                ++st.tiles_kept;
+            } else {
+                const bool existed = fs::exists(path, ec);
+                write_file_atomic(path, tree.tile_bytes[t]);
+                if (existed) {
+                    ++st.tiles_repaired;
+                } else {
+                    created.push_back(path);
+                    ++st.tiles_written;
+                }
+            }
+            st.tree_bytes += tile.size;
+        }
+        const std::string skeleton = datatree::encode_skeleton(tree.skeleton);
+        write_file_atomic(dir / "skeleton.tls", skeleton);
+        st.skeleton_bytes = skeleton.size();
+        st.tree_bytes += skeleton.size();
+    } catch (...) {
+        for (const fs::path& p : created) {
+            fs::remove(p, ec);
+        }
+        throw;
+    }
+    std::vector<fs::path> unnamed;
     for (const auto& f : fs::directory_iterator(dir / "tiles")) {
         if (f.path().extension() == ".tlt" && !names.contains(f.path().filename().string())) {
-            fs::remove(f.path(), ec);
-            ++st.tiles_removed;
+            unnamed.push_back(f.path());
         }
     }
+    for (const fs::path& p : unnamed) {
+        fs::remove(p, ec);
+        ++st.tiles_removed;
+    }
     return st;
+}
+
+bool is_pack_leftover(const fs::path& dir)
+{
+    // skeleton.tls is written last: without it, pack's own files are its
+    // temporaries, its report and tiles/ holding only tiles.
+    auto temporary_of = [](const std::string& name, const std::string& of) { return name.rfind(of + ".tmp-", 0) == 0; };
+    std::error_code ec;
+    for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+        const std::string name = it->path().filename().string();
+        if (name == "tiles" && it->is_directory(ec)) {
+            for (fs::directory_iterator t(it->path(), ec); !ec && t != end; t.increment(ec)) {
+                const std::string tile = t->path().filename().string();
+                if (!t->is_regular_file(ec) ||
+                    !(t->path().extension() == ".tlt" || tile.find(".tlt.tmp-") != std::string::npos)) {
+                    return false;
+                }
+            }
+        } else if (!(name == "pack-report.json" || temporary_of(name, "pack-report.json") ||
+                     temporary_of(name, "skeleton.tls"))) {
+            return false;
+        }
+    }
+    return !ec;
 }
 
 } // namespace tigerlod::pack

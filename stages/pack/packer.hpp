@@ -49,14 +49,28 @@ void layout_tiles(PackedTree& tree, const std::vector<std::vector<std::string>>&
 
 /// What writing a tree did.
 struct WriteStats {
-    size_t tiles_written = 0, tiles_kept = 0, tiles_removed = 0;
+    size_t tiles_written = 0;                             ///< new tile files
+    size_t tiles_kept = 0;                                ///< files already there holding exactly the tile
+    size_t tiles_repaired = 0;                            ///< files of a tile's name with other bytes, rewritten
+    size_t tiles_removed = 0;                             ///< tile files the new skeleton does not name
+    std::vector<std::filesystem::path> leftovers_removed; ///< of dead runs (remove_dead_leftovers)
     uint64_t skeleton_bytes = 0, tree_bytes = 0;
 };
 
-/// Write into `dir`, updating a tree already there: tile files are named by
-/// their content, so unchanged ones are kept; new ones are written under a
+/// Write into `dir`, updating a tree already there. First what dead runs
+/// left (temporaries) is removed. Tile files are named by their content: a
+/// file that holds exactly its tile's bytes is kept, one of the name with
+/// other bytes (damaged) is rewritten, a missing one written, each under a
 /// temporary name and renamed; then the skeleton is replaced atomically;
-/// then tile files it no longer names are removed.
+/// then tile files it no longer names are removed. If writing fails, the
+/// tile files this call created are removed again and the old tree, if
+/// any, is as it was.
 WriteStats write_tree(const std::filesystem::path& dir, const PackedTree& tree);
+
+/// Whether `dir` (a folder without skeleton.tls) holds only what a pack
+/// that did not finish leaves: tiles/ with tile files and their
+/// temporaries, pack-report.json, and temporaries of the skeleton and the
+/// report. Such a folder is resumed; any other is refused.
+bool is_pack_leftover(const std::filesystem::path& dir);
 
 } // namespace tigerlod::pack

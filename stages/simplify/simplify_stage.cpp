@@ -213,6 +213,7 @@ int SimplifyStage::run(const StageContext& ctx)
         o.user_points = read_points(m_points);
     }
     OutputDir out(m_common.output, m_common.overwrite, reads);
+    log_removed_leftovers(ctx.log, out.removed_leftovers());
     // llvmpipe (Mesa's software rasterizer, behind OSMesa and EGL without a
     // GPU) starts a rasterizer thread per core. When several stores keep
     // every core busy with workers, those threads only add hand-offs: on 2

@@ -158,6 +158,7 @@ int VerifyStage::run(const StageContext& ctx)
     const auto tree = reader::Tree::open(m_tree, error);
     // --compare and --points are read whole above: an output over them replaces them only on success.
     OutputDir out(m_output, m_overwrite, {m_tree, m_original});
+    log_removed_leftovers(ctx.log, out.removed_leftovers());
     Options options;
     options.threads =
         m_threads > 0 ? static_cast<unsigned>(m_threads) : std::max(1U, std::thread::hardware_concurrency());

@@ -12,10 +12,12 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <sys/wait.h>
 
@@ -897,4 +899,142 @@ TEST_F(Cli, PackDumpExportAndVerifyRejectBadInput)
     expect_failure(run("verify", tree + " " + (m_dir / "noingest").string() + " " + out()), 2, "not a folder");
     // A clean run for contrast: exit 0.
     EXPECT_EQ(run("verify", verify_args).code, 0) << slurp(m_dir / "stderr");
+}
+
+namespace {
+
+/// The id of a process that has exited and been reaped.
+pid_t dead_pid()
+{
+    const pid_t pid = ::fork();
+    if (pid == 0) {
+        ::_exit(0);
+    }
+    int status = 0;
+    ::waitpid(pid, &status, 0);
+    return pid;
+}
+
+/// Every file under `dir`, by path relative to it, with its bytes.
+std::map<std::string, std::string> files_under(const fs::path& dir)
+{
+    std::map<std::string, std::string> out;
+    for (const auto& e : fs::recursive_directory_iterator(dir)) {
+        if (e.is_regular_file()) {
+            out[fs::relative(e.path(), dir).string()] = slurp(e.path());
+        }
+    }
+    return out;
+}
+
+} // namespace
+
+TEST_F(Cli, PackResumesAKilledFirstRunAndRepairsDamagedTiles)
+{
+    make_tiger();
+    const std::string in = (m_dir / "in").string(), simp = (m_dir / "simp").string(), tree = (m_dir / "tree").string();
+    ASSERT_EQ(run("ingest", tiger_config().string() + " " + in).code, 0);
+    ASSERT_EQ(run("simplify", in + " " + simp + " --tolerances 8,32").code, 0);
+    const std::string pack_args = " --tile-mb 0.0001 " + in + " " + simp + " ";
+    ASSERT_EQ(run("pack", pack_args + tree).code, 0) << slurp(m_dir / "stderr");
+    auto want = files_under(m_dir / "tree");
+    want.erase("pack-report.json"); // its seconds vary
+    std::vector<fs::path> tiles;
+    for (const auto& e : fs::directory_iterator(m_dir / "tree" / "tiles")) {
+        tiles.push_back(e.path());
+    }
+    std::sort(tiles.begin(), tiles.end());
+    ASSERT_GE(tiles.size(), 3U);
+    const std::string dead = std::to_string(dead_pid()), live = std::to_string(::getpid());
+
+    // A first pack killed before its skeleton: some tiles, temporaries of a
+    // dead run. Before, every rerun exited 2 ("not a Data Tree").
+    fs::copy(m_dir / "tree", m_dir / "killed", fs::copy_options::recursive);
+    const fs::path killed = m_dir / "killed";
+    fs::rename(killed / "skeleton.tls", killed / ("skeleton.tls.tmp-" + dead));
+    fs::remove(killed / "pack-report.json");
+    fs::remove(killed / "tiles" / tiles[0].filename());
+    std::ofstream(killed / "tiles" / (tiles[1].filename().string() + ".tmp-" + dead)) << "half a tile";
+    // Another run's temporary that is alive, and one of another host: not ours to remove.
+    std::ofstream(killed / "tiles" / ("zz.tlt.tmp-" + live)) << "x";
+    std::ofstream(killed / "tiles" / ("zz.tlt.tmp-otherhost-" + dead)) << "x";
+    Result r = run("pack", "--verbose" + pack_args + killed.string());
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_NE(r.out.find("(1 written, " + std::to_string(tiles.size() - 1) + " kept, 0 repaired, 0 removed)"),
+              std::string::npos)
+        << r.out;
+    EXPECT_NE(r.err.find("removed " + (killed / ("skeleton.tls.tmp-" + dead)).string() + ", left by a run that died"),
+              std::string::npos)
+        << r.err;
+    auto got = files_under(killed);
+    got.erase("pack-report.json");
+    EXPECT_EQ(got.erase("tiles/zz.tlt.tmp-" + live), 1U);
+    EXPECT_EQ(got.erase("tiles/zz.tlt.tmp-otherhost-" + dead), 1U);
+    EXPECT_EQ(got, want);
+
+    // A kept tile with a flipped byte (same name, same size) is rewritten;
+    // before, it was kept and verify failed.
+    {
+        std::string bytes = slurp(tiles[2]);
+        bytes[bytes.size() / 2] ^= 0x10;
+        std::ofstream(tiles[2], std::ios::binary) << bytes;
+    }
+    r = run("pack", pack_args + tree);
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_NE(r.out.find("(0 written, " + std::to_string(tiles.size() - 1) + " kept, 1 repaired, 0 removed)"),
+              std::string::npos)
+        << r.out;
+    got = files_under(m_dir / "tree");
+    got.erase("pack-report.json");
+    EXPECT_EQ(got, want);
+    EXPECT_EQ(run("verify", tree + " " + in + " " + out()).code, 0) << slurp(m_dir / "stderr");
+    fs::remove_all(m_dir / "out");
+
+    // A folder without a skeleton that holds a file pack does not write is
+    // still refused: it may be someone's data.
+    fs::remove(killed / "skeleton.tls");
+    std::ofstream(killed / "notes.txt") << "mine";
+    r = run("pack", pack_args + killed.string());
+    EXPECT_EQ(r.code, 2) << r.err;
+    EXPECT_NE(r.err.find("exists and is not a Data Tree"), std::string::npos) << r.err;
+    EXPECT_EQ(slurp(killed / "notes.txt"), "mine");
+
+    // A pack that fails after writing tiles (here: its skeleton cannot be
+    // renamed into place) removes the tiles it created.
+    fs::remove_all(killed);
+    fs::create_directories(killed / "skeleton.tls" / "in-the-way");
+    r = run("pack", pack_args + killed.string());
+    EXPECT_EQ(r.code, 3) << r.err;
+    EXPECT_NE(r.err.find("skeleton.tls: cannot rename into place"), std::string::npos) << r.err;
+    EXPECT_TRUE(fs::is_empty(killed / "tiles"));
+}
+
+TEST_F(Cli, StagesRemoveWhatADeadRunLeftBesideTheirOutput)
+{
+    // Killed runs leave OUTPUT.tmp-<host>-<pid> (and .old- during the swap);
+    // the next run of a stage on the same output removes them, and only them.
+    make_tiger();
+    const std::string dead = std::to_string(dead_pid()), live = std::to_string(::getpid());
+    fs::create_directories(m_dir / ("in.tmp-" + dead) / "tract");
+    fs::create_directories(m_dir / ("in.old-" + dead));
+    fs::create_directories(m_dir / ("in.tmp-" + live));
+    fs::create_directories(m_dir / ("simp.tmp-" + dead));
+    const std::string in = (m_dir / "in").string();
+    const Result r = run("ingest", "--verbose " + tiger_config().string() + " " + in);
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_NE(r.err.find("removed " + (m_dir / ("in.old-" + dead)).string() + ", left by a run that died"),
+              std::string::npos)
+        << r.err;
+    EXPECT_FALSE(fs::exists(m_dir / ("in.tmp-" + dead)));
+    EXPECT_FALSE(fs::exists(m_dir / ("in.old-" + dead)));
+    EXPECT_TRUE(fs::exists(m_dir / ("in.tmp-" + live)));   // a live process's
+    EXPECT_TRUE(fs::exists(m_dir / ("simp.tmp-" + dead))); // another output's: its own stage's business
+    ASSERT_EQ(run("simplify", in + " " + (m_dir / "simp").string() + " --tolerances 8").code, 0);
+    EXPECT_FALSE(fs::exists(m_dir / ("simp.tmp-" + dead)));
+    // export's temporary keeps the extension: x.tmp-<host>-<pid>.gpkg
+    ASSERT_EQ(run("pack", in + " " + (m_dir / "simp").string() + " " + (m_dir / "tree").string()).code, 0);
+    std::ofstream(m_dir / ("x.tmp-" + dead + ".gpkg")) << "half";
+    ASSERT_EQ(run("export", (m_dir / "tree").string() + " " + (m_dir / "x.gpkg").string()).code, 0)
+        << slurp(m_dir / "stderr");
+    EXPECT_FALSE(fs::exists(m_dir / ("x.tmp-" + dead + ".gpkg")));
 }

@@ -236,7 +236,7 @@ TEST_F(PackReal, RepackingAfterOnePartitionChangedRewritesOnlyTheTilesShowingIt)
     counts += std::to_string(n_aff);
     counts += " written, ";
     counts += std::to_string(sk.tiles.size() - n_aff);
-    counts += " kept, ";
+    counts += " kept, 0 repaired, ";
     counts += std::to_string(n_aff);
     counts += " removed)";
     EXPECT_NE(slurp(dir / "log").find(counts), std::string::npos) << slurp(dir / "log");

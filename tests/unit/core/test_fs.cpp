@@ -1,0 +1,111 @@
+// Outputs written under temporary names, and what dead runs left of them:
+// removed by the next run, and only what a dead process of this host left.
+#include "core/errors.hpp"
+#include "core/fs.hpp"
+
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <fstream>
+#include <set>
+#include <string>
+
+namespace fs = std::filesystem;
+using namespace tigerlod;
+
+namespace {
+
+/// The id of a process that has exited and been reaped.
+pid_t dead_pid()
+{
+    const pid_t pid = ::fork();
+    if (pid == 0) {
+        ::_exit(0);
+    }
+    int status = 0;
+    ::waitpid(pid, &status, 0);
+    return pid;
+}
+
+class Fs : public ::testing::Test {
+  protected:
+    void SetUp() override
+    {
+        m_dir = fs::temp_directory_path() / ("tigerlod-fs-" + std::to_string(::getpid()));
+        fs::remove_all(m_dir);
+        fs::create_directories(m_dir);
+    }
+    void TearDown() override { fs::remove_all(m_dir); }
+    void touch(const std::string& name) { std::ofstream(m_dir / name) << "x"; }
+    std::set<std::string> names() const
+    {
+        std::set<std::string> out;
+        for (const auto& e : fs::directory_iterator(m_dir)) {
+            out.insert(e.path().filename().string());
+        }
+        return out;
+    }
+    fs::path m_dir;
+};
+
+} // namespace
+
+TEST_F(Fs, TemporaryNamesCarryHostAndProcess)
+{
+    const std::string mine = temp_sibling(m_dir / "out").filename().string();
+    ASSERT_EQ(mine.rfind("out.tmp-", 0), 0U) << mine;
+    EXPECT_EQ(mine.substr(mine.rfind('-') + 1), std::to_string(::getpid()));
+    EXPECT_EQ(mine.find('.', 4), std::string::npos) << "the host part holds no '.': " << mine;
+    const std::string old = temp_sibling(m_dir / "out", ".old-").filename().string();
+    EXPECT_EQ(old.rfind("out.old-", 0), 0U) << old;
+    const std::string gpkg = temp_sibling_keeping_extension(m_dir / "x.gpkg").filename().string();
+    EXPECT_EQ(gpkg, "x" + mine.substr(3) + ".gpkg");
+}
+
+TEST_F(Fs, OnlyLeftoversOfDeadProcessesOfThisHostAreRemoved)
+{
+    const std::string dead = std::to_string(dead_pid()), live = std::to_string(::getpid());
+    // This host's id, as this process writes it, with a dead process's id.
+    const std::string mine = temp_sibling(m_dir / "out").filename().string();
+    const std::string host = mine.substr(8, mine.rfind('-') - 8);
+    touch("out.tmp-" + host + "-" + dead);                                    // dead, this host: removed
+    fs::create_directories(m_dir / ("out.old-" + host + "-" + dead) / "sub"); // a folder, whole
+    touch("out.tmp-" + dead);                      // a name from before hosts were in it: this host's
+    touch("x.tmp-" + host + "-" + dead + ".gpkg"); // an extension after the id
+    touch("out.tmp-" + host + "-" + live);         // this process: alive
+    touch("out.tmp-" + host + "-1");               // init: alive
+    touch("out.tmp-elsewhere-" + dead);            // another host: cannot tell, kept
+    touch("out.tmp-");                             // not a temporary name
+    touch("out.tmp-12a");
+    touch("out");
+    touch("notes.txt");
+    const auto removed = remove_dead_leftovers(m_dir);
+    EXPECT_EQ(removed.size(), 4U);
+    EXPECT_EQ(names(),
+              (std::set<std::string>{"out.tmp-" + host + "-" + live, "out.tmp-" + host + "-1",
+                                     "out.tmp-elsewhere-" + dead, "out.tmp-", "out.tmp-12a", "out", "notes.txt"}));
+    // With a base, only that name's leftovers.
+    touch("out.tmp-" + dead);
+    touch("outer.tmp-" + dead);
+    EXPECT_EQ(remove_dead_leftovers(m_dir, "out").size(), 1U);
+    EXPECT_TRUE(fs::exists(m_dir / ("outer.tmp-" + dead)));
+    // A folder that does not exist: nothing, no throw.
+    EXPECT_TRUE(remove_dead_leftovers(m_dir / "none").empty());
+}
+
+TEST_F(Fs, AnOutputFolderCleansWhatADeadRunLeftBesideIt)
+{
+    const std::string dead = std::to_string(dead_pid());
+    fs::create_directories(m_dir / ("out.tmp-" + dead));
+    fs::create_directories(m_dir / ("out.old-" + dead));
+    touch("other.tmp-" + dead);
+    {
+        OutputDir out(m_dir / "out", false);
+        EXPECT_EQ(out.removed_leftovers().size(), 2U);
+        write_file(out.path() / "a", "1");
+        out.commit();
+    }
+    EXPECT_EQ(names(), (std::set<std::string>{"out", "other.tmp-" + dead}));
+    EXPECT_THROW(OutputDir(m_dir / "out", false), usage_error);
+}
