@@ -8,6 +8,7 @@
 #include <csignal>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
 #include <iterator>
 #include <optional>
 #include <string>
@@ -81,7 +82,18 @@ bool process_is_gone(long pid)
         return false;
     }
     // EPERM: it exists, run by someone else.
-    return ::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH;
+    if (::kill(static_cast<pid_t>(pid), 0) != 0) {
+        return errno == ESRCH;
+    }
+    // A zombie has exited; only its parent has not reaped it yet (or no one
+    // will, where the parent died too and PID 1 does not reap).
+    std::ifstream stat("/proc/" + std::to_string(pid) + "/stat");
+    std::string line;
+    if (!std::getline(stat, line)) {
+        return false;
+    }
+    const size_t close = line.rfind(')'); // the command may hold spaces and ')'
+    return close != std::string::npos && close + 2 < line.size() && (line[close + 2] == 'Z' || line[close + 2] == 'X');
 }
 
 /// Write `data` to `file`; messages name `name`. Throws environment_error,

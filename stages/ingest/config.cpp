@@ -6,6 +6,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <type_traits>
 #include <set>
 
 namespace fs = std::filesystem;
@@ -51,6 +53,29 @@ class Ctx {
             return node[key].as<T>();
         } catch (const YAML::Exception&) {
             fail(node[key], "'" + key + "' has the wrong type");
+        }
+    }
+    /// A value of the right type (a scalar, a list or a map of them), or
+    /// nothing: fails naming what was wanted.
+    template <class T> void expect(const YAML::Node& node, const std::string& key, const std::string& wanted) const
+    {
+        const YAML::Node value = node[key];
+        if (!value) {
+            return;
+        }
+        bool ok = !value.IsNull();
+        try {
+            if (ok) {
+                (void)value.as<T>();
+            }
+        } catch (const YAML::Exception&) {
+            ok = false;
+        }
+        if constexpr (std::is_same_v<T, std::string>) {
+            ok = ok && value.IsScalar();
+        }
+        if (!ok) {
+            fail(value, "'" + key + "' must be " + wanted);
         }
     }
     std::vector<fs::path> paths(const YAML::Node& node, const std::string& key) const
@@ -112,13 +137,27 @@ IngestConfig load_config(const fs::path& file)
                        {"tolerances_m", "metric", "class_scale", "projection_scale", "max_reach", "point_constraints",
                         "points", "lazy", "compliance", "gl", "pixel_fraction", "tile_pixels", "max_classes",
                         "threads"});
-        // The pipeline turns these into flags, so no stage would see a wrong value.
+        // The pipeline turns these into flags: a value of the wrong type
+        // would reach a stage as a malformed flag (a string in the ladder
+        // as `--tolerances 1,,4`), or not at all (a boolean).
         for (const char* key : {"projection_scale", "point_constraints", "lazy"}) {
             ctx.get<bool>(simp, key, true);
+        }
+        ctx.expect<std::vector<double>>(simp, "tolerances_m", "a list of numbers, e.g. [1, 4, 16, 64]");
+        ctx.expect<std::map<std::string, double>>(simp, "class_scale", "a map of class to number, e.g. {S1400: 0.5}");
+        for (const char* key : {"metric", "points", "compliance", "gl"}) {
+            ctx.expect<std::string>(simp, key, "a string");
+        }
+        ctx.expect<double>(simp, "pixel_fraction", "a number");
+        for (const char* key : {"max_reach", "tile_pixels", "max_classes", "threads"}) {
+            ctx.expect<int>(simp, key, "an integer");
         }
     }
     if (const YAML::Node pack = root["pack"]) { // read by the pipeline; tigerlod-pack validates the values
         ctx.check_keys(pack, "pack", {"tile_mb", "draco_speed", "threads"});
+        ctx.expect<double>(pack, "tile_mb", "a number");
+        ctx.expect<int>(pack, "draco_speed", "an integer");
+        ctx.expect<int>(pack, "threads", "an integer");
     }
     cfg.name = ctx.get<std::string>(root, "name", "");
     if (cfg.name.empty() || cfg.name.find_first_not_of("abcdefghijklmnopqrstuvwxyz0123456789_-") != std::string::npos) {

@@ -94,6 +94,29 @@ TEST_F(Fs, OnlyLeftoversOfDeadProcessesOfThisHostAreRemoved)
     EXPECT_TRUE(remove_dead_leftovers(m_dir / "none").empty());
 }
 
+TEST_F(Fs, AZombieCountsAsDead)
+{
+    // A process killed with its parent is left unreaped where PID 1 does not
+    // reap (containers): it has exited, and its leftovers are removed.
+    const pid_t zombie = ::fork();
+    if (zombie == 0) {
+        ::_exit(0);
+    }
+    for (int i = 0; i < 1000; ++i) {
+        std::ifstream stat("/proc/" + std::to_string(zombie) + "/stat");
+        std::string line;
+        std::getline(stat, line);
+        if (line.find(") Z") != std::string::npos) {
+            break;
+        }
+        ::usleep(1000);
+    }
+    touch("out.tmp-" + std::to_string(zombie));
+    EXPECT_EQ(remove_dead_leftovers(m_dir).size(), 1U);
+    int status = 0;
+    ::waitpid(zombie, &status, 0);
+}
+
 TEST_F(Fs, AnOutputFolderCleansWhatADeadRunLeftBesideIt)
 {
     const std::string dead = std::to_string(dead_pid());

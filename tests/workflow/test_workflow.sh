@@ -1,0 +1,85 @@
+#!/usr/bin/env bash
+# The workflow as a user meets it after a bad night: a run killed with
+# SIGKILL resumes with scripts/workflow alone, a failing stage shows its
+# last log lines on the terminal, and a config the pipeline cannot expand
+# says so in one line. Needs Floyd from ../shared/data (skips, exit 77).
+#
+#   tests/workflow/test_workflow.sh REPO BIN_DIR
+set -uo pipefail
+repo=$(cd "$1" && pwd)
+bin=$(cd "$2" && pwd)
+data=$repo/../shared/data/tiger
+if [ ! -f "$data/tl_2020_51063_edges.zip" ]; then
+  echo "SKIP: $data/tl_2020_51063_edges.zip is absent (../shared/data)"
+  exit 77
+fi
+if ! command -v snakemake >/dev/null; then
+  echo "SKIP: snakemake is not installed (scripts/setup installs it)"
+  exit 77
+fi
+work=$(mktemp -d "${TMPDIR:-/tmp}/tigerlod-workflow-XXXXXX")
+trap 'rm -rf "$work"' EXIT
+cd "$work"
+export TIGERLOD_BIN=$bin TIGERLOD_CORES=1
+failures=0
+fail() {
+  echo "FAIL: $*"
+  failures=$((failures + 1))
+}
+sed "s#\.\./\.\./shared#$repo/../shared#; s/^name: floyd/name: wf/" "$repo/configs/floyd.yaml" >wf.yaml
+
+# 1. Killed with SIGKILL in the middle (simplify running): Snakemake's lock
+# and incomplete markers stay. Before, every rerun failed until a person
+# passed --unlock --rerun-incomplete.
+setsid "$repo/scripts/workflow" wf.yaml >run1.out 2>&1 &
+pid=$!
+for _ in $(seq 1 600); do
+  [ -f out/wf/logs/simplify.log ] && break
+  kill -0 "$pid" 2>/dev/null || break
+  sleep 0.05
+done
+if ! kill -0 "$pid" 2>/dev/null; then
+  fail "the first run ended before simplify began; cannot test a kill"
+  cat run1.out
+fi
+kill -KILL -- -"$pid" 2>/dev/null
+wait "$pid" 2>/dev/null
+[ -n "$(ls -A .snakemake/locks 2>/dev/null)" ] || fail "no Snakemake lock after the kill: the test did not kill a run"
+if ! "$repo/scripts/workflow" wf.yaml >run2.out 2>&1; then
+  fail "the rerun after a kill failed:"
+  cat run2.out
+fi
+grep -q '"clean": true' out/wf/reports/verify-report.json || fail "the resumed run's verify report is not clean"
+grep -q "releasing the lock of a run that died" run2.out || fail "the rerun did not say it released a dead run's lock"
+ls -d out/wf/*.tmp-* 2>/dev/null && fail "temporaries of the killed run are left"
+
+# 2. A rerun with nothing changed does nothing and succeeds.
+"$repo/scripts/workflow" wf.yaml >run3.out 2>&1 || fail "a rerun with nothing changed failed: $(cat run3.out)"
+grep -q "Nothing to be done" run3.out || fail "a rerun with nothing changed ran jobs: $(cat run3.out)"
+
+# 3. A failing stage: its message on the terminal, not only in its log.
+sed "s/^name: wf/name: bad/; s#tl_2020_51063_faces.zip#tl_2020_51063_edges.zip#" wf.yaml >bad.yaml
+if "$repo/scripts/workflow" bad.yaml >bad.out 2>&1; then
+  fail "a run with EDGES given as FACES succeeded"
+fi
+grep -q "pipeline: ingest failed (exit [0-9]); the last lines of out/bad/logs/ingest.log:" bad.out ||
+  fail "no log tail on the terminal: $(cat bad.out)"
+grep -q "tigerlod-ingest: .*tl_2020_51063_edges.zip" bad.out || fail "the stage's own message is not on the terminal"
+
+# 4. Configs the pipeline cannot expand: one line each, no traceback.
+grep -v '^name:' wf.yaml >noname.yaml
+"$repo/scripts/workflow" noname.yaml >noname.out 2>&1
+rc=$?
+[ "$rc" = 2 ] || fail "a config without a name exited $rc, not 2"
+grep -q "pipeline: noname.yaml: 'name' is required" noname.out || fail "no message for a missing name: $(cat noname.out)"
+grep -qi "traceback\|KeyError\|File \"" noname.out && fail "a traceback for a missing name: $(cat noname.out)"
+sed 's/^name: wf/name: str/; s/tolerances_m: \[1, 4, 16, 64\]/tolerances_m: [1, "x", 4]/' wf.yaml >str.yaml
+"$repo/scripts/workflow" str.yaml >str.out 2>&1 && fail "a string in tolerances_m ran"
+grep -q "'tolerances_m' must be a list of numbers" str.out || fail "no message for a string tolerance: $(cat str.out)"
+[ -e out/str/simplified ] && fail "simplify ran with a string tolerance"
+
+if [ "$failures" -gt 0 ]; then
+  echo "$failures failure(s)"
+  exit 1
+fi
+echo "workflow: all checks passed"
