@@ -427,6 +427,18 @@ TEST_F(Cli, EveryValidatedConfigKeyRejectsBadValues)
         {"simplify: {tolerance: [1]}\n", "unknown key 'simplify.tolerance'"},
         {"simplify: {lazy: sometimes}\n", "'lazy' has the wrong type"},
         {"pack: {tile_size: 4}\n", "unknown key 'pack.tile_size'"},
+        // Values the pipeline turns into flags: the wrong type would reach a
+        // stage as a malformed flag (`--tolerances 1,,4`) or not at all.
+        {"simplify: {tolerances_m: [1, x, 4]}\n", "'tolerances_m' must be a list of numbers, e.g. [1, 4, 16, 64]"},
+        {"simplify: {tolerances_m: [1, ~, 4]}\n", "'tolerances_m' must be a list of numbers"},
+        {"simplify: {tolerances_m: 4}\n", "'tolerances_m' must be a list of numbers"},
+        {"simplify: {class_scale: [S1400]}\n", "'class_scale' must be a map of class to number"},
+        {"simplify: {class_scale: {S1400: half}}\n", "'class_scale' must be a map of class to number"},
+        {"simplify: {metric: [l2]}\n", "'metric' must be a string"},
+        {"simplify: {max_reach: 2.5}\n", "'max_reach' must be an integer"},
+        {"simplify: {pixel_fraction: a}\n", "'pixel_fraction' must be a number"},
+        {"pack: {tile_mb: big}\n", "'tile_mb' must be a number"},
+        {"pack: {threads: ~}\n", "'threads' must be an integer"},
     };
     for (const auto& [extra, fragment] : cases) {
         SCOPED_TRACE(extra);
