@@ -6,6 +6,7 @@
 #include <cctype>
 #include <cerrno>
 #include <csignal>
+#include <cstdlib>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -13,6 +14,7 @@
 #include <optional>
 #include <string>
 #include <system_error>
+#include <fcntl.h>
 #include <unistd.h>
 
 namespace fs = std::filesystem;
@@ -96,15 +98,32 @@ bool process_is_gone(long pid)
     return close != std::string::npos && close + 2 < line.size() && (line[close + 2] == 'Z' || line[close + 2] == 'X');
 }
 
-/// Write `data` to `file`; messages name `name`. Throws environment_error,
-/// after removing what was created if the write failed.
+bool durable()
+{
+    static const bool on = [] {
+        const char* v = std::getenv("TIGERLOD_FSYNC");
+        return v == nullptr || std::string_view(v) != "0";
+    }();
+    return on;
+}
+
+/// fsync, where the file system can: EINVAL and EROFS mean it has nothing to
+/// make durable (pipes, special or read-only file systems).
+bool sync_fd(int fd)
+{
+    return ::fsync(fd) == 0 || errno == EINVAL || errno == EROFS;
+}
+
+/// Write `data` to `file` and sync it to disk; messages name `name`. Throws
+/// environment_error, after removing what was created if the write failed.
 void write_to(const fs::path& file, const fs::path& name, std::string_view data)
 {
     std::FILE* f = std::fopen(file.c_str(), "wb");
     if (f == nullptr) {
         throw environment_error(name.string() + ": cannot create: " + std::strerror(errno));
     }
-    const bool ok = std::fwrite(data.data(), 1, data.size(), f) == data.size();
+    bool ok = std::fwrite(data.data(), 1, data.size(), f) == data.size() && std::fflush(f) == 0;
+    ok = ok && (!durable() || sync_fd(::fileno(f)));
     const bool closed = std::fclose(f) == 0;
     if (!ok || !closed) {
         std::error_code ec;
@@ -114,6 +133,23 @@ void write_to(const fs::path& file, const fs::path& name, std::string_view data)
 }
 
 } // namespace
+
+void sync_to_disk(const fs::path& path)
+{
+    if (!durable()) {
+        return;
+    }
+    const int fd = ::open(path.empty() ? "." : path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) {
+        throw environment_error(path.string() + ": cannot open to sync it to disk: " + std::strerror(errno));
+    }
+    const bool ok = sync_fd(fd);
+    const int err = errno;
+    ::close(fd);
+    if (!ok) {
+        throw environment_error(path.string() + ": cannot sync to disk: " + std::strerror(err));
+    }
+}
 
 fs::path temp_sibling(const fs::path& path, std::string_view kind)
 {
@@ -158,6 +194,7 @@ void write_file_atomic(const fs::path& path, std::string_view data)
         fs::remove(tmp, ec);
         throw environment_error(path.string() + ": cannot rename into place: " + ec.message());
     }
+    sync_to_disk(path.parent_path());
 }
 
 void write_file(const fs::path& path, std::string_view data)
@@ -226,6 +263,20 @@ OutputDir::~OutputDir()
 void OutputDir::commit()
 {
     std::error_code ec;
+    // Files were synced as they were written; their folders' entries now,
+    // then the rename's.
+    std::vector<fs::path> folders{m_tmp};
+    for (fs::recursive_directory_iterator it(m_tmp, ec), end; !ec && it != end; it.increment(ec)) {
+        if (it->is_directory(ec)) {
+            folders.push_back(it->path());
+        }
+    }
+    if (ec) {
+        throw environment_error(m_tmp.string() + ": cannot list: " + ec.message());
+    }
+    for (const fs::path& f : folders) {
+        sync_to_disk(f);
+    }
     fs::path old;
     if (fs::exists(m_final)) {
         old = temp_sibling(m_final, ".old-");
@@ -244,6 +295,7 @@ void OutputDir::commit()
         throw environment_error(m_final.string() + ": cannot rename into place: " + ec.message());
     }
     m_committed = true;
+    sync_to_disk(m_final.parent_path());
     if (!old.empty()) {
         fs::remove_all(old, ec);
     }

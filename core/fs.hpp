@@ -30,6 +30,15 @@ std::filesystem::path temp_sibling_keeping_extension(const std::filesystem::path
 std::vector<std::filesystem::path> remove_dead_leftovers(const std::filesystem::path& folder,
                                                          std::string_view base = {});
 
+/// Durability: files are synced to disk before they are renamed into place
+/// and their folders after, so a rename survives power loss, not only a
+/// kill. TIGERLOD_FSYNC=0 in the environment turns syncing off (scratch
+/// outputs; the cost is in BENCHMARKS.md).
+///
+/// Sync a file or folder to disk (fsync); nothing where the file system has
+/// nothing to sync. Throws environment_error.
+void sync_to_disk(const std::filesystem::path& path);
+
 /// Write `data` to `path` through a temporary file and rename. Throws
 /// environment_error on any I/O failure; the temporary is removed then.
 void write_file_atomic(const std::filesystem::path& path, std::string_view data);

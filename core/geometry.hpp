@@ -106,6 +106,18 @@ inline SegmentRelation segment_relation(GridPoint a, GridPoint b, GridPoint c, G
 /// Where point p lies relative to a closed polygon given as boundary segments.
 enum class PointLocation { outside, inside, boundary };
 
+/// The shoelace terms of a point sequence: twice the signed area when it is
+/// closed (first == last), positive counter-clockwise; summed over the pieces
+/// of a closed boundary, too. Exact.
+inline int128 twice_area(std::span<const GridPoint> pts) noexcept
+{
+    int128 a = 0;
+    for (size_t i = 0; i + 1 < pts.size(); ++i) {
+        a += int128{pts[i].x} * pts[i + 1].y - int128{pts[i + 1].x} * pts[i].y;
+    }
+    return a;
+}
+
 /// Whether segment ab crosses the horizontal ray from p to +x (half-open in
 /// y, so a vertex on the ray counts once): the even-odd rule's step, for p
 /// not on ab.

@@ -167,6 +167,34 @@ int ExportStage::run(const StageContext& ctx)
         return line;
     };
     std::set<uint64_t> written;
+    // A unit shows in the map of the node that holds it and, in part, in its
+    // neighbours' (across their outlines); whole there too when it is an
+    // island in a neighbour, but without its own holes. Its own node holds
+    // every chain of its boundary, any other node a subset: each unit is
+    // written once, from the node with the most of its boundary chains (the
+    // first of those).
+    std::map<std::string, std::pair<size_t, uint32_t>> home; // unit -> (boundary chains, node)
+    if (units_layer != nullptr && nodes.size() > 1) {
+        for (uint32_t n : nodes) {
+            datatree::ChainTable t;
+            if (auto st = tree->read_table(n, t); !st.ok()) {
+                throw input_error(st.error);
+            }
+            std::vector<size_t> count(t.strings.size(), 0);
+            for (const auto& c : t.chains) {
+                if (c.left != c.right) {
+                    ++count[c.left];
+                    ++count[c.right];
+                }
+            }
+            for (uint32_t u = 1; u < t.strings.size(); ++u) {
+                auto [it, added] = home.try_emplace(t.strings[u], count[u], n);
+                if (!added && count[u] > it->second.first) {
+                    it->second = {count[u], n};
+                }
+            }
+        }
+    }
     size_t nchains = 0, nunits = 0, incomplete = 0;
     for (uint32_t n : nodes) {
         const auto m = view::read_node(*tree, n, lod);
@@ -196,34 +224,36 @@ int ExportStage::run(const StageContext& ctx)
         }
         if (units_layer != nullptr) {
             for (uint32_t u = 1; u < m.table.strings.size(); ++u) {
-                const auto rings = view::unit_rings(m.table, m.geometry, u);
-                if (rings.empty()) {
-                    continue; // a feature class, or a unit with no chain here
+                if (const auto h = home.find(m.table.strings[u]); h != home.end() && h->second.second != n) {
+                    continue; // written from its own node
                 }
-                bool complete = true;
-                for (const auto& r : rings) {
-                    complete = complete && r.closed;
-                }
-                if (!complete) {
+                const auto unit = view::unit_polygons(m.table, m.geometry, u);
+                if (!unit.complete) {
                     ++incomplete;
                     continue;
                 }
-                std::vector<OGRGeometry*> polys;
-                for (const auto& r : rings) {
+                if (unit.polygons.empty()) {
+                    continue; // a feature class, or a unit with no chain here
+                }
+                auto to_ring = [&](const std::vector<GridPoint>& pts) {
                     auto* ring = new OGRLinearRing;
-                    for (const auto& p : r.points) {
+                    for (const auto& p : pts) {
                         double lon = 0, lat = 0;
                         proj.to_lonlat(p.x, p.y, lon, lat);
                         ring->addPoint(lon, lat);
                     }
+                    return ring;
+                };
+                auto* polygons = new OGRMultiPolygon;
+                for (const auto& up : unit.polygons) {
                     auto* poly = new OGRPolygon;
-                    poly->addRingDirectly(ring);
-                    polys.push_back(poly);
+                    poly->addRingDirectly(to_ring(up.outer));
+                    for (const auto& h : up.holes) {
+                        poly->addRingDirectly(to_ring(h));
+                    }
+                    polygons->addGeometryDirectly(poly);
                 }
-                int valid = 0;
-                OGRGeometry* organized =
-                    OGRGeometryFactory::organizePolygons(polys.data(), static_cast<int>(polys.size()), &valid, nullptr);
-                OGRGeometryH multi = OGR_G_ForceToMultiPolygon(OGRGeometry::ToHandle(organized));
+                OGRGeometryH multi = OGRGeometry::ToHandle(polygons);
                 OGRFeatureH f = OGR_F_Create(OGR_L_GetLayerDefn(units_layer));
                 OGR_F_SetFieldString(f, 0, m.table.strings[u].c_str());
                 OGR_F_SetFieldString(f, 1, code.c_str());
@@ -241,14 +271,16 @@ int ExportStage::run(const StageContext& ctx)
     }
     GDALClose(g.ds);
     g.ds = nullptr;
+    sync_to_disk(tmp);
     std::error_code ec;
     fs::rename(tmp, out, ec);
     if (ec) {
         throw environment_error("export: cannot rename " + tmp.string() + " to " + m_output);
     }
     g.kept = true;
+    sync_to_disk(out.parent_path());
     ctx.log.info("export: done");
-    std::printf("export: %zu nodes, %zu chains, %zu unit polygons (%zu units incomplete in a node, skipped there)\n"
+    std::printf("export: %zu nodes, %zu chains, %zu unit polygons (%zu units not whole in their node, skipped)\n"
                 "outputs in %s\n",
                 nodes.size(), nchains, nunits, incomplete, m_output.c_str());
     return exit_ok;

@@ -1,7 +1,9 @@
 #include "stages/export/tree_view.hpp"
 
 #include "core/errors.hpp"
+#include "core/geometry.hpp"
 
+#include <algorithm>
 #include <charconv>
 #include <cstdio>
 #include <map>
@@ -265,6 +267,103 @@ std::vector<Ring> unit_rings(const datatree::ChainTable& table, const datatree::
         rings.push_back(std::move(ring));
     }
     return rings;
+}
+
+namespace {
+
+/// Split a closed walk (first == last) at every vertex it passes twice into
+/// simple closed loops.
+void split_simple(const std::vector<GridPoint>& walk, std::vector<std::vector<GridPoint>>& out)
+{
+    std::vector<GridPoint> stack;
+    std::map<GridPoint, size_t> at; // a point on the stack -> its index
+    auto emit = [&](size_t from) {
+        std::vector<GridPoint> loop(stack.begin() + static_cast<std::ptrdiff_t>(from), stack.end());
+        loop.push_back(stack[from]);
+        out.push_back(std::move(loop));
+    };
+    for (size_t i = 0; i + 1 < walk.size(); ++i) {
+        const GridPoint p = walk[i];
+        const auto it = at.find(p);
+        if (it == at.end()) {
+            at.emplace(p, stack.size());
+            stack.push_back(p);
+            continue;
+        }
+        const size_t from = it->second;
+        emit(from);
+        for (size_t k = from + 1; k < stack.size(); ++k) {
+            at.erase(stack[k]);
+        }
+        stack.resize(from + 1);
+    }
+    if (!stack.empty()) {
+        emit(0);
+    }
+}
+
+} // namespace
+
+UnitPolygons unit_polygons(const datatree::ChainTable& table, const datatree::Geometry& g, uint32_t unit)
+{
+    UnitPolygons result;
+    std::vector<std::vector<GridPoint>> loops;
+    for (const Ring& r : unit_rings(table, g, unit)) {
+        if (!r.closed) {
+            result.complete = false;
+            return result;
+        }
+        split_simple(r.points, loops);
+    }
+    // With the unit on the left, outer rings run counter-clockwise and holes
+    // clockwise.
+    std::vector<std::pair<int128, size_t>> outers; // |area|, loop
+    std::vector<size_t> holes;
+    for (size_t i = 0; i < loops.size(); ++i) {
+        const int128 a = twice_area(loops[i]);
+        if (a > 0) {
+            outers.emplace_back(a, i);
+        } else if (a < 0) {
+            holes.push_back(i);
+        }
+    }
+    // Smallest first: a hole belongs to the smallest outer ring around it.
+    std::stable_sort(outers.begin(), outers.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    std::vector<std::vector<size_t>> holes_of(outers.size());
+    for (const size_t h : holes) {
+        for (size_t o = 0; o < outers.size(); ++o) {
+            const auto& outer = loops[outers[o].second];
+            // Inside if a vertex of the hole off the outer ring is inside it
+            // (a hole may touch its outer ring, never cross it).
+            PointLocation where = PointLocation::boundary;
+            for (size_t k = 0; k + 1 < loops[h].size() && where == PointLocation::boundary; ++k) {
+                PointInPolygon pip(loops[h][k]);
+                for (size_t j = 0; j + 1 < outer.size(); ++j) {
+                    pip.add_segment(outer[j], outer[j + 1]);
+                }
+                where = pip.location();
+            }
+            if (where == PointLocation::inside) {
+                holes_of[o].push_back(h);
+                break;
+            }
+        }
+    }
+    // In the order the walk found the outer rings: the same for every run.
+    std::vector<size_t> order(outers.size());
+    for (size_t o = 0; o < outers.size(); ++o) {
+        order[o] = o;
+    }
+    std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return outers[a].second < outers[b].second; });
+    for (const size_t o : order) {
+        UnitPolygon p;
+        p.outer = std::move(loops[outers[o].second]);
+        for (const size_t h : holes_of[o]) {
+            p.holes.push_back(std::move(loops[h]));
+        }
+        result.polygons.push_back(std::move(p));
+    }
+    return result;
 }
 
 } // namespace tigerlod::view

@@ -47,4 +47,19 @@ struct Ring {
 };
 std::vector<Ring> unit_rings(const datatree::ChainTable& table, const datatree::Geometry& g, uint32_t unit);
 
+/// One unit as valid OGC polygons: simple outer rings (counter-clockwise),
+/// each with the simple holes (clockwise) that lie in it. A boundary that
+/// passes a vertex twice (a hole touching the shell at a point, two parts
+/// touching at a corner) is split there, so no ring touches itself; rings of
+/// zero area are dropped. Rings are closed (first point == last).
+struct UnitPolygon {
+    std::vector<GridPoint> outer;
+    std::vector<std::vector<GridPoint>> holes;
+};
+struct UnitPolygons {
+    std::vector<UnitPolygon> polygons;
+    bool complete = true; ///< false: a ring did not close (the unit is cut by the node); no polygons then
+};
+UnitPolygons unit_polygons(const datatree::ChainTable& table, const datatree::Geometry& g, uint32_t unit);
+
 } // namespace tigerlod::view

@@ -22,17 +22,6 @@ namespace tigerlod::verify {
 
 namespace {
 
-/// The shoelace terms of a point sequence: twice the signed area when it is
-/// closed (first == last), and summed over a closed boundary's pieces, too.
-int128 twice_area(std::span<const GridPoint> pts)
-{
-    int128 a = 0;
-    for (size_t i = 0; i + 1 < pts.size(); ++i) {
-        a += int128{pts[i].x} * pts[i + 1].y - int128{pts[i + 1].x} * pts[i].y;
-    }
-    return a;
-}
-
 int sign(int128 v)
 {
     return (v > 0) - (v < 0);

@@ -1050,3 +1050,87 @@ TEST_F(Cli, StagesRemoveWhatADeadRunLeftBesideTheirOutput)
         << slurp(m_dir / "stderr");
     EXPECT_FALSE(fs::exists(m_dir / ("x.tmp-" + dead + ".gpkg")));
 }
+
+TEST_F(Cli, ExportWritesEachUnitOnceAsAValidPolygon)
+{
+    // Tract T of county 001: a square with two holes, tract W east of it.
+    // Island I (tract 200) is all of county 002, an enclave: it is whole in
+    // county 001's map too. Triangle H (tract 300, county 001) touches T's
+    // outer ring at V (3, 0): T's boundary passes V twice, and V is inside
+    // a chain of T's shell (the shell's chains end at W's corners). Before, export wrote I twice and T as one
+    // self-touching ring, which GEOS reports invalid.
+    auto p = [](double x, double y) {
+        std::ostringstream o;
+        o.precision(10);
+        o << (-96.0 + 0.001 * x) << " " << (40.0 + 0.001 * y);
+        return o.str();
+    };
+    auto line = [&](double x0, double y0, double x1, double y1) {
+        return "LINESTRING (" + p(x0, y0) + "," + p(x1, y1) + ")";
+    };
+    const std::vector<std::vector<std::string>> edges = {
+        {line(0, 0, 3, 0), "1", "101", "900", "F"},  {line(3, 0, 6, 0), "2", "101", "900", "F"},
+        {line(6, 0, 6, 6), "3", "101", "104", "F"},  {line(6, 6, 0, 6), "4", "101", "900", "F"},
+        {line(0, 6, 0, 0), "5", "101", "900", "F"},  {line(3, 0, 4, 1), "6", "103", "101", "F"},
+        {line(4, 1, 2, 1), "7", "103", "101", "F"},  {line(2, 1, 3, 0), "8", "103", "101", "F"},
+        {line(2, 2, 4, 2), "9", "102", "101", "F"},  {line(4, 2, 4, 4), "10", "102", "101", "F"},
+        {line(4, 4, 2, 4), "11", "102", "101", "F"}, {line(2, 4, 2, 2), "12", "102", "101", "F"},
+        {line(6, 0, 9, 0), "13", "104", "900", "F"}, {line(9, 0, 9, 6), "14", "104", "900", "F"},
+        {line(9, 6, 6, 6), "15", "104", "900", "F"}};
+    write_shp(m_dir / "edges.shp", wkbLineString, {"TLID", "TFIDL", "TFIDR", "MTFCC"}, edges);
+    auto point = [](double x, double y) {
+        char lat[32], lon[32];
+        std::snprintf(lat, sizeof lat, "%+.7f", 40.0 + 0.001 * y);
+        std::snprintf(lon, sizeof lon, "%+.7f", -96.0 + 0.001 * x);
+        return std::pair<std::string, std::string>(lat, lon);
+    };
+    const auto [t_lat, t_lon] = point(1, 4);
+    const auto [i_lat, i_lon] = point(3, 3);
+    const auto [h_lat, h_lon] = point(3, 0.5);
+    const auto [w_lat, w_lon] = point(7.5, 3);
+    const std::string square =
+        "POLYGON ((" + p(0, 0) + "," + p(6, 0) + "," + p(6, 6) + "," + p(0, 6) + "," + p(0, 0) + "))";
+    const std::vector<std::vector<std::string>> faces = {
+        {square, "101", "51", "001", "000100", "1", "1000", t_lat, t_lon, "5"},
+        {square, "102", "51", "002", "000200", "1", "1000", i_lat, i_lon, "5"},
+        {square, "103", "51", "001", "000300", "1", "1000", h_lat, h_lon, "5"},
+        {square, "104", "51", "001", "000400", "1", "1000", w_lat, w_lon, "5"}};
+    write_shp(m_dir / "faces.shp", wkbPolygon, m_face_fields, faces);
+    zip(m_dir / "edges.zip", shp_files(m_dir / "edges.shp"));
+    zip(m_dir / "faces.zip", shp_files(m_dir / "faces.shp"));
+    const fs::path cfg = tiger_config("edges.zip", "faces.zip",
+                                      "levels:\n  - {name: state, fields: [STATEFP20]}\n"
+                                      "  - {name: county, fields: [STATEFP20, COUNTYFP20]}\n"
+                                      "  - {name: tract, fields: [STATEFP20, COUNTYFP20, TRACTCE20]}\n");
+    const std::string in = (m_dir / "in").string(), simp = (m_dir / "simp").string(), tree = (m_dir / "tree").string();
+    ASSERT_EQ(run("ingest", cfg.string() + " " + in).code, 0) << slurp(m_dir / "stderr");
+    ASSERT_EQ(run("simplify", in + " " + simp + " --tolerances 8").code, 0) << slurp(m_dir / "stderr");
+    ASSERT_EQ(run("pack", in + " " + simp + " " + tree).code, 0) << slurp(m_dir / "stderr");
+    ASSERT_EQ(run("verify", tree + " " + in + " " + out()).code, 0) << slurp(m_dir / "stderr");
+    for (const int lod : {0, 1}) {
+        SCOPED_TRACE(lod);
+        const fs::path gpkg = m_dir / ("tracts" + std::to_string(lod) + ".gpkg");
+        ASSERT_EQ(run("export", tree + " " + gpkg.string() + " --level tract --lod " + std::to_string(lod)).code, 0)
+            << slurp(m_dir / "stderr");
+        GDALDatasetH ds = GDALOpenEx(gpkg.c_str(), GDAL_OF_VECTOR, nullptr, nullptr, nullptr);
+        ASSERT_NE(ds, nullptr);
+        OGRLayerH units = GDALDatasetGetLayerByName(ds, "units");
+        ASSERT_NE(units, nullptr);
+        std::map<std::string, int> seen;
+        OGRFeatureH f = nullptr;
+        while ((f = OGR_L_GetNextFeature(units)) != nullptr) {
+            const std::string unit = OGR_F_GetFieldAsString(f, 0);
+            ++seen[unit];
+            OGRGeometryH g = OGR_F_GetGeometryRef(f);
+            EXPECT_TRUE(OGR_G_IsValid(g)) << unit;
+            if (unit == "51001000100") {
+                ASSERT_EQ(OGR_G_GetGeometryCount(g), 1);                          // one polygon
+                EXPECT_EQ(OGR_G_GetGeometryCount(OGR_G_GetGeometryRef(g, 0)), 3); // its shell and two holes
+            }
+            OGR_F_Destroy(f);
+        }
+        GDALClose(ds);
+        EXPECT_EQ(seen, (std::map<std::string, int>{
+                            {"51001000100", 1}, {"51001000300", 1}, {"51001000400", 1}, {"51002000200", 1}}));
+    }
+}
