@@ -141,7 +141,9 @@ Skeleton decode_skeleton(std::span<const std::byte> bytes, const std::string& na
     s.projection_kind = b.get<uint8_t>("projection kind");
     s.utm_north = b.get<uint8_t>("utm_north");
     s.metric = b.get<uint8_t>("metric");
-    b.get<uint8_t>("reserved");
+    if (b.get<uint8_t>("reserved") != 0) {
+        b.fail("reserved byte not 0");
+    }
     s.utm_zone = b.get<int32_t>("utm_zone");
     if (s.projection_kind > 3 || s.metric > 2) {
         b.fail("unknown projection kind or metric");

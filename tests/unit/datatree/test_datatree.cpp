@@ -2,11 +2,13 @@
 // exactly, and every kind of damage is refused with a message, never a crash.
 #include "formats/datatree/datatree.hpp"
 
+#include "core/digest.hpp"
 #include "core/errors.hpp"
 #include "../../support/synthetic_tree.hpp"
 
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <random>
 
 using namespace tigerlod;
@@ -283,6 +285,13 @@ TEST(Skeleton, ShapeErrorsAreCaughtEvenWithAValidChecksum)
     s = t.skeleton;
     s.nodes[0].child_count = 3;
     EXPECT_NE(fault(s).find("not reachable from the root"), std::string::npos);
+    // The reserved byte after the metric, checksum fixed: refused, so that a
+    // valid skeleton re-encodes to its own bytes (found by fuzz_skeleton_fixed).
+    std::string bytes = encode_skeleton(t.skeleton);
+    bytes[27] = 0x40;
+    const uint32_t crc = tigerlod::crc32(as_span(bytes).first(bytes.size() - 4));
+    std::memcpy(bytes.data() + bytes.size() - 4, &crc, 4);
+    EXPECT_NE(error_of([&] { decode_skeleton(as_span(bytes), "sk"); }).find("reserved byte not 0"), std::string::npos);
 }
 
 TEST(Tile, HeaderChecked)
