@@ -32,12 +32,20 @@ void DumpStage::initialize()
 std::string DumpStage::help_notes() const
 {
     return "Exit codes: 0 done; 1 the file is not valid (the message names the file, the node and the fault);\n"
-           "  2 usage error (including an unknown node); 3 environment (cannot read).\n";
+           "  2 usage error (including an unknown node, and an INPUT that does not exist or a folder\n"
+           "  that is not a Data Tree); 3 environment (cannot read).\n";
 }
 
 int DumpStage::run(const StageContext&)
 {
     const fs::path in(m_input);
+    std::error_code ec;
+    if (!fs::exists(in, ec)) {
+        throw usage_error("dump: " + m_input + ": no such file or folder");
+    }
+    if (fs::is_directory(in, ec) && !fs::exists(in / "skeleton.tls", ec)) {
+        throw usage_error("dump: " + m_input + ": a folder without skeleton.tls, not a Data Tree");
+    }
     const bool tree = fs::is_directory(in) || in.filename() == "skeleton.tls";
     if (!tree) {
         if (!m_node.empty()) {

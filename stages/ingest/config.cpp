@@ -122,6 +122,9 @@ IngestConfig load_config(const fs::path& file)
     if (!fs::exists(file)) {
         throw config_error(file.string() + ": no such config file");
     }
+    if (fs::is_directory(file)) {
+        throw config_error(file.string() + ": is a folder, not a config file");
+    }
     YAML::Node root;
     try {
         root = YAML::LoadFile(file.string());
@@ -177,7 +180,8 @@ IngestConfig load_config(const fs::path& file)
         d.edges = ctx.paths(ds, "edges");
         d.faces = ctx.paths(ds, "faces");
         if (d.edges.empty() || d.faces.empty()) {
-            ctx.fail(ds, "a tiger dataset needs 'edges' and 'faces'");
+            ctx.fail(ds, "a tiger dataset needs 'edges' and 'faces' (EDGES alone, as lines without units: "
+                         "kind: lines, inputs: [the EDGES files])");
         }
         d.class_field = ctx.get<std::string>(ds, "class_field", "MTFCC");
         d.intpt_lat_field = ctx.get<std::string>(ds, "intpt_lat_field", "INTPTLAT");

@@ -61,7 +61,8 @@ using FeaturePtr = std::unique_ptr<std::remove_pointer_t<OGRFeatureH>, FeatureDe
 /// One opened vector source and its chosen layer.
 class Source {
   public:
-    Source(const fs::path& path, const std::string& layer_name, const char* role) : m_name(path.filename().string())
+    Source(const fs::path& path, const std::string& layer_name, const char* role)
+        : m_path(path), m_name(path.filename().string())
     {
         // Registering drivers is not thread-safe; sources open on several threads.
         static std::once_flag registered;
@@ -96,7 +97,10 @@ class Source {
         m_layer_name = OGR_L_GetName(m_layer);
         OGRSpatialReferenceH srs = OGR_L_GetSpatialRef(m_layer);
         if (srs != nullptr && OSRIsProjected(srs)) {
-            throw input_error(where() + ": layer has a projected CRS; tigerlod reads lon/lat (NAD83 or WGS84)");
+            throw input_error(where() +
+                              ": layer has a projected CRS; tigerlod reads lon/lat (NAD83 or WGS84): "
+                              "reproject it first, e.g. ogr2ogr -t_srs EPSG:4269 OUT.shp " +
+                              m_path.string());
         }
     }
     std::string where() const { return m_name + " layer '" + m_layer_name + "'"; }
@@ -108,7 +112,20 @@ class Source {
     {
         const int i = OGR_FD_GetFieldIndex(OGR_L_GetLayerDefn(m_layer), field_name.c_str());
         if (i < 0) {
-            throw input_error(where() + ": no field '" + field_name + "' (" + needed_for + ")");
+            std::string hint;
+            if (OGR_FD_GetFieldCount(OGR_L_GetLayerDefn(m_layer)) == 0) {
+                // A shapefile whose .dbf is missing opens with no attributes.
+                hint = "; the layer has no attributes at all";
+                const fs::path& shp = m_path;
+                if (shp.extension() == ".shp" && !fs::exists(fs::path(shp).replace_extension(".dbf")) &&
+                    !fs::exists(fs::path(shp).replace_extension(".DBF"))) {
+                    hint += ": " + fs::path(shp).replace_extension(".dbf").string() +
+                            " (its attributes) is missing beside it";
+                } else {
+                    hint += " (a shapefile without its .dbf?)";
+                }
+            }
+            throw input_error(where() + ": no field '" + field_name + "' (" + needed_for + ")" + hint);
         }
         return i;
     }
@@ -171,6 +188,7 @@ class Source {
     }
 
   private:
+    fs::path m_path;
     std::string m_name, m_layer_name;
     std::unique_ptr<void, DatasetCloser> m_ds;
     OGRLayerH m_layer = nullptr;

@@ -47,6 +47,7 @@ void CommonOptions::initialize(const std::string& stage)
     tolerances.clear();
     std::stringstream ss(m_tolerances);
     std::string item;
+    std::string previous; // as the user wrote it
     while (std::getline(ss, item, ',')) {
         double v = 0;
         const auto [p, ec] = std::from_chars(item.data(), item.data() + item.size(), v);
@@ -57,9 +58,10 @@ void CommonOptions::initialize(const std::string& stage)
             fail("tolerances", "has " + item + "; every tolerance must be > 0");
         }
         if (!tolerances.empty() && v <= tolerances.back()) {
-            fail("tolerances", "must increase: " + item + " follows " + std::to_string(tolerances.back()));
+            fail("tolerances", "must increase: " + item + " follows " + previous);
         }
         tolerances.push_back(v);
+        previous = item;
     }
     if (tolerances.empty()) {
         fail("tolerances", "is empty: give at least one tolerance in metres");

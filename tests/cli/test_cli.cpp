@@ -1134,3 +1134,43 @@ TEST_F(Cli, ExportWritesEachUnitOnceAsAValidPolygon)
                             {"51001000100", 1}, {"51001000300", 1}, {"51001000400", 1}, {"51002000200", 1}}));
     }
 }
+
+TEST_F(Cli, MessagesSayWhatIsWrongAndWhatToDo)
+{
+    make_tiger();
+    // A config path that is a folder: was "internal error".
+    fs::create_directories(m_dir / "cfgdir");
+    expect_failure(run("ingest", (m_dir / "cfgdir").string() + " " + out()), 2,
+                   "cfgdir: is a folder, not a config file");
+    // A shapefile without its .dbf: was "no field 'TLID'" alone.
+    fs::remove(m_dir / "edges.dbf");
+    expect_failure(run("ingest", tiger_config("edges.shp", "faces.zip").string() + " " + out()), 1,
+                   "no field 'TLID' (TIGER EDGES edge id); the layer has no attributes at all: " +
+                       (m_dir / "edges.dbf").string() + " (its attributes) is missing beside it");
+    // A tiger dataset without FACES: says how to read EDGES alone.
+    expect_failure(run("ingest", config("dataset:\n  kind: tiger\n  edges: [edges.zip]\n").string() + " " + out()), 2,
+                   "a tiger dataset needs 'edges' and 'faces' (EDGES alone, as lines without units: kind: lines");
+    // A projected layer: says how to reproject.
+    ASSERT_EQ(std::system(("ogr2ogr -t_srs EPSG:5070 " + (m_dir / "albers.shp").string() + " " +
+                           (m_dir / "faces.shp").string() + " 2>/dev/null")
+                              .c_str()),
+              0);
+    expect_failure(
+        run("ingest", config("dataset:\n  kind: polygons\n  inputs: [albers.shp]\n  code_field: TFID\nlevels:\n  - "
+                             "{name: a, prefix: 1}\n")
+                              .string() +
+                          " " + out()),
+        1,
+        "layer has a projected CRS; tigerlod reads lon/lat (NAD83 or WGS84): reproject it first, e.g. ogr2ogr -t_srs "
+        "EPSG:4269 OUT.shp " +
+            (m_dir / "albers.shp").string());
+    // Tolerances as the user wrote them: was "1 follows 4.000000".
+    for (const std::string tool : {"color", "simplify"}) {
+        expect_failure(run(tool, m_dir.string() + " " + out() + " --tolerances 4,1"), 2,
+                       "option '--tolerances' must increase: 1 follows 4\n");
+    }
+    // dump: a missing store and a missing tree both exit 2 (were 3 and 1).
+    expect_failure(run("dump", (m_dir / "none.tlc").string()), 2, "none.tlc: no such file or folder");
+    expect_failure(run("dump", (m_dir / "cfgdir").string()), 2,
+                   "cfgdir: a folder without skeleton.tls, not a Data Tree");
+}
