@@ -7,6 +7,7 @@
 #include <iostream>
 #include <new>
 #include <sstream>
+#include <string_view>
 
 namespace tigerlod {
 
@@ -202,7 +203,13 @@ int run_stage_impl(Stage& stage, const char* name, const char* description, int 
         StageContext ctx{log};
         return stage.run(ctx);
     } catch (const Error& e) {
-        std::cerr << program << ": " << e.what() << '\n';
+        // Messages thrown as "pack: ..." by a stage: the program name says it once.
+        std::string_view what = e.what();
+        const std::string own = std::string(name) + ": ";
+        if (what.substr(0, own.size()) == own) {
+            what.remove_prefix(own.size());
+        }
+        std::cerr << program << ": " << what << '\n';
         return e.exit_code();
     } catch (const std::bad_alloc&) {
         std::cerr << program << ": out of memory\n";

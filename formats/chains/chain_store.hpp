@@ -20,6 +20,11 @@ namespace tigerlod::chains {
 
 constexpr uint16_t major_version = 1;
 constexpr uint16_t minor_version = 2;
+/// "chain store format 1.2", for --version.
+inline std::string format_version_text()
+{
+    return "chain store format " + std::to_string(major_version) + "." + std::to_string(minor_version);
+}
 
 /// Bits of ChainInfo::flags.
 enum ChainFlags : uint32_t {

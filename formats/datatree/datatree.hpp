@@ -19,6 +19,11 @@ namespace tigerlod::datatree {
 
 constexpr uint16_t major_version = 2;
 constexpr uint16_t minor_version = 0;
+/// "Data Tree format 2.0", for --version.
+inline std::string format_version_text()
+{
+    return "Data Tree format " + std::to_string(major_version) + "." + std::to_string(minor_version);
+}
 constexpr uint32_t no_node = 0xFFFFFFFFU;
 
 /// Where a payload lies: a byte range of a tile file, and its CRC-32.

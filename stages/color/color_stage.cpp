@@ -4,6 +4,7 @@
 #include "formats/chains/chain_store.hpp"
 #include "stages/simplify/color_io.hpp"
 
+#include <GL/osmesa.h>
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -13,6 +14,13 @@ namespace fs = std::filesystem;
 using json = nlohmann::ordered_json;
 
 namespace tigerlod::color {
+
+std::vector<std::string> ColorStage::versions() const
+{
+    return {std::string("OSMesa API ") + std::to_string(OSMESA_MAJOR_VERSION) + "." +
+                std::to_string(OSMESA_MINOR_VERSION) + " (EGL with --gl egl)",
+            chains::format_version_text()};
+}
 
 std::string ColorStage::help_notes() const
 {

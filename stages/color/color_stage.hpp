@@ -18,6 +18,7 @@ class ColorStage final : public Stage {
     void initialize() override { m_common.initialize(name); }
     int run(const StageContext& ctx) override;
     std::string help_notes() const override;
+    std::vector<std::string> versions() const override;
 
   private:
     simplify::CommonOptions m_common;

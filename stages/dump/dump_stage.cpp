@@ -29,6 +29,11 @@ void DumpStage::initialize()
     }
 }
 
+std::vector<std::string> DumpStage::versions() const
+{
+    return {chains::format_version_text(), datatree::format_version_text()};
+}
+
 std::string DumpStage::help_notes() const
 {
     return "Exit codes: 0 done; 1 the file is not valid (the message names the file, the node and the fault);\n"

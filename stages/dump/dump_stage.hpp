@@ -19,6 +19,7 @@ class DumpStage final : public Stage {
     void initialize() override;
     int run(const StageContext& ctx) override;
     std::string help_notes() const override;
+    std::vector<std::string> versions() const override;
 
   private:
     std::string m_input;

@@ -50,6 +50,11 @@ void ExportStage::initialize()
     }
 }
 
+std::vector<std::string> ExportStage::versions() const
+{
+    return {std::string("GDAL ") + GDALVersionInfo("RELEASE_NAME"), datatree::format_version_text()};
+}
+
 std::string ExportStage::help_notes() const
 {
     return "Units whose boundary is not complete in a node (neighbours across its border) get no polygon\n"

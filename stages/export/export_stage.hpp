@@ -20,6 +20,7 @@ class ExportStage final : public Stage {
     void initialize() override;
     int run(const StageContext& ctx) override;
     std::string help_notes() const override;
+    std::vector<std::string> versions() const override;
 
   private:
     std::string m_tree, m_output, m_node, m_level, m_layer = "chains";

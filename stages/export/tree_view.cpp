@@ -80,7 +80,7 @@ std::string skeleton_text(const reader::Tree& tree)
 {
     const auto& s = tree.skeleton();
     std::ostringstream out;
-    out << "data-tree 1.0\n";
+    out << "data-tree " << datatree::major_version << "." << datatree::minor_version << "\n";
     out << "projection " << Projection(projection_of(s)).describe() << "\n";
     out << "metric " << metric_name(s.metric) << "\n";
     out << "levels";

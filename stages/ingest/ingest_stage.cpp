@@ -105,8 +105,7 @@ void IngestStage::initialize()
 std::vector<std::string> IngestStage::versions() const
 {
     return {gdal_version(), std::string("GeographicLib ") + GEOGRAPHICLIB_VERSION_STRING,
-            std::string("chain store format ") + std::to_string(chains::major_version) + "." +
-                std::to_string(chains::minor_version)};
+            chains::format_version_text()};
 }
 
 std::string IngestStage::help_notes() const

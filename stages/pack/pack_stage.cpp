@@ -1,8 +1,10 @@
 #include "stages/pack/pack_stage.hpp"
 
 #include "core/fs.hpp"
+#include "formats/chains/chain_store.hpp"
 #include "stages/pack/packer.hpp"
 
+#include <draco/core/draco_version.h>
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -65,7 +67,8 @@ std::string PackStage::help_notes() const
 
 std::vector<std::string> PackStage::versions() const
 {
-    return {"draco (system package)"};
+    return {std::string("Draco ") + draco::kDracoVersion, chains::format_version_text(),
+            datatree::format_version_text()};
 }
 
 int PackStage::run(const StageContext& ctx)

@@ -7,6 +7,8 @@
 #include "gl/context.hpp"
 #include "stages/simplify/color_io.hpp"
 
+#include <GeographicLib/Config.h>
+#include <GL/osmesa.h>
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -75,6 +77,13 @@ void SimplifyStage::initialize()
         throw usage_error("simplify: options '--lazy' and '--exhaustive' exclude each other");
     }
     o.lazy = !m_exhaustive;
+}
+
+std::vector<std::string> SimplifyStage::versions() const
+{
+    return {std::string("OSMesa API ") + std::to_string(OSMESA_MAJOR_VERSION) + "." +
+                std::to_string(OSMESA_MINOR_VERSION) + " (EGL with --gl egl)",
+            std::string("GeographicLib ") + GEOGRAPHICLIB_VERSION_STRING, chains::format_version_text()};
 }
 
 std::string SimplifyStage::help_notes() const

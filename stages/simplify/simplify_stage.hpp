@@ -18,6 +18,7 @@ class SimplifyStage final : public Stage {
     void initialize() override;
     int run(const StageContext& ctx) override;
     std::string help_notes() const override;
+    std::vector<std::string> versions() const override;
 
   private:
     CommonOptions m_common;

@@ -5,6 +5,7 @@
 #include "stages/simplify/stage_options.hpp"
 #include "stages/verify/verifier.hpp"
 
+#include <GeographicLib/Config.h>
 #include <gdal.h>
 #include <nlohmann/json.hpp>
 #include <ogr_api.h>
@@ -58,6 +59,13 @@ void VerifyStage::initialize()
         throw usage_error("verify: " + m_original + ": not a folder");
     }
     simplify::parse_class_scale(m_class_scale, "verify"); // validated before any data is read
+}
+
+std::vector<std::string> VerifyStage::versions() const
+{
+    return {std::string("GDAL ") + GDALVersionInfo("RELEASE_NAME"),
+            std::string("GeographicLib ") + GEOGRAPHICLIB_VERSION_STRING, chains::format_version_text(),
+            datatree::format_version_text()};
 }
 
 std::string VerifyStage::help_notes() const

@@ -20,6 +20,7 @@ class VerifyStage final : public Stage {
     void initialize() override;
     int run(const StageContext& ctx) override;
     std::string help_notes() const override;
+    std::vector<std::string> versions() const override;
 
   private:
     std::string m_tree, m_original, m_output, m_class_scale, m_points, m_compare;
