@@ -15,7 +15,7 @@
 // Output: one JSON object on stdout.
 #include "core/bytes.hpp"
 #include "reader/reader.hpp"
-#include "stages/export/tree_view.hpp"
+#include "reader/tree_view.hpp"
 
 #include <zstd.h>
 

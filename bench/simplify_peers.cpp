@@ -9,7 +9,7 @@
 // exactly over the whole level (partitions together).
 #include "core/segment_grid.hpp"
 #include "formats/chains/chain_store.hpp"
-#include "stages/simplify/metric.hpp"
+#include "core/metric.hpp"
 
 #include <CGAL/Constrained_Delaunay_triangulation_2.h>
 #include <CGAL/Constrained_triangulation_plus_2.h>
@@ -85,7 +85,7 @@ std::pair<size_t, size_t> check(const std::vector<Chain>& cs)
     return {between, self};
 }
 
-Chain douglas_peucker(const Chain& pts, const simplify::Tolerance& tol)
+Chain douglas_peucker(const Chain& pts, const Tolerance& tol)
 {
     std::vector<uint8_t> keep(pts.size(), 0);
     keep.front() = keep.back() = 1;
@@ -97,10 +97,10 @@ Chain douglas_peucker(const Chain& pts, const simplify::Tolerance& tol)
         size_t far = 0;
         bool all_in = true;
         for (size_t i = a + 1; i < b; ++i) {
-            if (!simplify::within(pts[i], pts[a], pts[b], tol)) {
+            if (!within(pts[i], pts[a], pts[b], tol)) {
                 all_in = false;
             }
-            const double d = simplify::distance(pts[i], pts[a], pts[b], simplify::Metric::l2);
+            const double d = distance(pts[i], pts[a], pts[b], Metric::l2);
             if (d > best) {
                 best = d;
                 far = i;
@@ -240,7 +240,7 @@ int main(int argc, char** argv)
         const double eps = std::stod(argv[4]) / l.grid_m;
         const auto t0 = std::chrono::steady_clock::now();
         if (method == "dp") {
-            const simplify::Tolerance tol(eps, simplify::Metric::l2);
+            const Tolerance tol(eps, Metric::l2);
             for (const auto& c : l.chains) {
                 out.push_back(douglas_peucker(c, tol));
             }

@@ -72,7 +72,7 @@ int ColorStage::run(const StageContext& ctx)
     json report;
     report["schema"] = "tigerlod.color-report/1";
     report["input"] = m_common.input;
-    report["metric"] = simplify::metric_name(m_common.options.metric);
+    report["metric"] = metric_name(m_common.options.metric);
     report["pixel_fraction"] = m_common.options.color.pixel_fraction;
     report["tile_pixels"] = m_common.options.color.tile_pixels;
     report["max_classes_allowed"] = m_common.options.color.max_classes;

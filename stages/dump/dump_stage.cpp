@@ -1,7 +1,7 @@
 #include "stages/dump/dump_stage.hpp"
 
 #include "formats/chains/chain_store.hpp"
-#include "stages/export/tree_view.hpp"
+#include "reader/tree_view.hpp"
 
 #include <filesystem>
 #include <iostream>

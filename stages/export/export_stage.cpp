@@ -1,7 +1,7 @@
 #include "stages/export/export_stage.hpp"
 
 #include "core/fs.hpp"
-#include "stages/export/tree_view.hpp"
+#include "reader/tree_view.hpp"
 
 #include <gdal.h>
 #include <ogr_api.h>

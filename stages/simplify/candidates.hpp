@@ -4,7 +4,7 @@
 /// shortcuts of a chain, and the point constraints that cull them.
 
 #include "core/geometry.hpp"
-#include "stages/simplify/metric.hpp"
+#include "core/metric.hpp"
 
 #include <cstdint>
 #include <span>

@@ -7,7 +7,7 @@
 
 #include "core/errors.hpp"
 #include "core/geometry.hpp"
-#include "stages/simplify/metric.hpp"
+#include "core/metric.hpp"
 
 #include <cstdint>
 #include <span>

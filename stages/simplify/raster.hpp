@@ -11,7 +11,7 @@
 
 #include "gl/context.hpp"
 #include "stages/simplify/coloring.hpp"
-#include "stages/simplify/metric.hpp"
+#include "core/metric.hpp"
 
 #include <cstdint>
 #include <memory>

@@ -5,7 +5,7 @@
 
 #include "formats/chains/chain_store.hpp"
 #include "stages/simplify/coloring.hpp"
-#include "stages/simplify/metric.hpp"
+#include "core/metric.hpp"
 #include "stages/simplify/raster.hpp"
 
 #include <functional>

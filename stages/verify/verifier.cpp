@@ -6,8 +6,8 @@
 #include "core/projection.hpp"
 #include "core/segment_grid.hpp"
 #include "formats/chains/chain_store.hpp"
-#include "stages/export/tree_view.hpp"
-#include "stages/simplify/metric.hpp"
+#include "reader/tree_view.hpp"
+#include "core/metric.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -153,7 +153,7 @@ class Verifier {
   public:
     Verifier(const reader::Tree& tree, const fs::path& original, const Options& options)
         : m_tree(tree), m_sk(tree.skeleton()), m_original(original), m_options(options),
-          m_proj(view::projection_of(m_sk)), m_metric(static_cast<simplify::Metric>(m_sk.metric))
+          m_proj(view::projection_of(m_sk)), m_metric(static_cast<Metric>(m_sk.metric))
     {
         m_opt = options.tolerance;
         m_opt.metric = m_metric;
@@ -515,12 +515,12 @@ class Verifier {
                 continue;
             }
             // Check 2: every skipped vertex within eps (exact), and the reverse direction.
-            const simplify::Tolerance tol(k == 0 ? 0.0 : eps.at(o.store)[o.index], m_metric);
+            const Tolerance tol(k == 0 ? 0.0 : eps.at(o.store)[o.index], m_metric);
             bool exceeded = false;
             for (size_t i = 0; i + 1 < pts.size() && !exceeded; ++i) {
                 for (size_t m = at[i] + 1; m < at[i + 1]; ++m) {
                     worst = std::max(worst, point_segment_distance(orig[m], pts[i], pts[i + 1]));
-                    if (!simplify::within(orig[m], pts[i], pts[i + 1], tol)) {
+                    if (!within(orig[m], pts[i], pts[i + 1], tol)) {
                         violation("eps_exceeded", {e.id}, orig[m],
                                   "original vertex " + std::to_string(m) + " farther than eps " +
                                       std::to_string(tol.eps * m_sk.grid_m()) + " m (grid units " +
@@ -529,7 +529,7 @@ class Verifier {
                         break;
                     }
                 }
-                if (!exceeded && m_metric != simplify::Metric::l2 && at[i + 1] > at[i] + 1) {
+                if (!exceeded && m_metric != Metric::l2 && at[i + 1] > at[i] + 1) {
                     exceeded = reverse_exceeded(orig.subspan(at[i], at[i + 1] - at[i] + 1), pts[i], pts[i + 1], tol);
                     if (exceeded) {
                         violation("eps_exceeded", {e.id}, pts[i],
@@ -627,7 +627,7 @@ class Verifier {
     /// projection and half-way between, within eps of the original subchain.
     /// In double precision; an excess below 1e-9 of eps is not reported.
     bool reverse_exceeded(std::span<const GridPoint> sub, GridPoint a, GridPoint b,
-                          const simplify::Tolerance& tol) const
+                          const Tolerance& tol) const
     {
         const double dx = double(b.x) - a.x, dy = double(b.y) - a.y, len2 = dx * dx + dy * dy;
         std::vector<double> ts{0.0, 1.0};
@@ -657,7 +657,7 @@ class Verifier {
     {
         auto d = [&](double t) {
             const double px = a.x + t * (double(b.x) - a.x) - qx, py = a.y + t * (double(b.y) - a.y) - qy;
-            return m_metric == simplify::Metric::l1 ? std::abs(px) + std::abs(py)
+            return m_metric == Metric::l1 ? std::abs(px) + std::abs(py)
                                                     : std::max(std::abs(px), std::abs(py));
         };
         double lo = 0, hi = 1;
@@ -678,7 +678,7 @@ class Verifier {
     const Options& m_options;
     simplify::SimplifyOptions m_opt;
     Projection m_proj;
-    simplify::Metric m_metric;
+    Metric m_metric;
     Report m_report;
 };
 

@@ -1,4 +1,4 @@
-#include "stages/export/tree_view.hpp"
+#include "reader/tree_view.hpp"
 
 #include "core/errors.hpp"
 #include "core/geometry.hpp"

@@ -1,7 +1,7 @@
 // Unit polygons rebuilt from a node's chains: valid OGC polygons whatever the
 // order of the chains, where a unit's boundary passes a vertex twice.
 #include "core/geometry.hpp"
-#include "stages/export/tree_view.hpp"
+#include "reader/tree_view.hpp"
 
 #include <gtest/gtest.h>
 

@@ -13,7 +13,7 @@
 #include <optional>
 #include <string>
 
-namespace tigerlod::simplify {
+namespace tigerlod {
 
 enum class Metric : uint8_t { l2 = 0, l1 = 1, linf = 2 };
 
@@ -40,4 +40,4 @@ bool within(GridPoint p, GridPoint a, GridPoint b, const Tolerance& tol) noexcep
 /// reports and the conflict graph; never for decisions that must be exact).
 double distance(GridPoint p, GridPoint a, GridPoint b, Metric m) noexcept;
 
-} // namespace tigerlod::simplify
+} // namespace tigerlod

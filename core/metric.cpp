@@ -1,9 +1,9 @@
-#include "stages/simplify/metric.hpp"
+#include "core/metric.hpp"
 
 #include <algorithm>
 #include <cmath>
 
-namespace tigerlod::simplify {
+namespace tigerlod {
 
 const char* metric_name(Metric m) noexcept
 {
@@ -194,4 +194,4 @@ double distance(GridPoint p, GridPoint a, GridPoint b, Metric m) noexcept
     return best;
 }
 
-} // namespace tigerlod::simplify
+} // namespace tigerlod

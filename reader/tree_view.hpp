@@ -2,7 +2,7 @@
 /// @file tree_view.hpp
 /// A Data Tree as people read it: the skeleton and payloads as text, payloads
 /// as GeoJSON in lon/lat, and units' polygons rebuilt from their chains.
-/// Used by tigerlod-dump and tigerlod-export.
+/// Used by tigerlod-dump, -export and -verify and by the benchmarks.
 
 #include "core/projection.hpp"
 #include "reader/reader.hpp"
