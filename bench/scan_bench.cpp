@@ -6,8 +6,8 @@
 // and runs found, and a hash of them, so two builds or two kernels of the scan
 // can be compared for speed and for identical answers on the same stores.
 #include "formats/chains/chain_store.hpp"
-#include "stages/simplify/candidates.hpp"
-#include "stages/simplify/simplifier.hpp"
+#include "simplification/candidates.hpp"
+#include "simplification/simplifier.hpp"
 
 #include <algorithm>
 #include <chrono>

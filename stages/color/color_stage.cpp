@@ -2,7 +2,7 @@
 
 #include "core/fs.hpp"
 #include "formats/chains/chain_store.hpp"
-#include "stages/simplify/color_io.hpp"
+#include "simplification/color_io.hpp"
 
 #include <GL/osmesa.h>
 #include <nlohmann/json.hpp>

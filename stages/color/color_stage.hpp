@@ -4,7 +4,7 @@
 /// every tolerance of the ladder.
 
 #include "core/stage.hpp"
-#include "stages/simplify/stage_options.hpp"
+#include "simplification/stage_options.hpp"
 
 namespace tigerlod::color {
 

@@ -5,7 +5,7 @@
 #include "core/parallel.hpp"
 #include "core/serial_queue.hpp"
 #include "gl/context.hpp"
-#include "stages/simplify/color_io.hpp"
+#include "simplification/color_io.hpp"
 
 #include <GeographicLib/Config.h>
 #include <GL/osmesa.h>
@@ -93,122 +93,6 @@ std::string SimplifyStage::help_notes() const
            "  OUTPUT/simplify-report.json              per tolerance: vertices, candidates, bans, repairs, seconds\n"
            "Exit codes: 0 done; 1 bad input data (corrupt store, a tile past 255 classes, bad points file);\n"
            "  2 usage error; 3 environment (no OpenGL context, cannot write).\n";
-}
-
-namespace {
-
-std::vector<std::string> split_csv_line(const std::string& line)
-{
-    std::vector<std::string> out;
-    std::string cur;
-    bool quoted = false;
-    for (char c : line) {
-        if (c == '"') {
-            quoted = !quoted;
-        } else if (c == ',' && !quoted) {
-            out.push_back(cur);
-            cur.clear();
-        } else if (c != '\r') {
-            cur += c;
-        }
-    }
-    out.push_back(cur);
-    return out;
-}
-
-} // namespace
-
-std::vector<LonLat> read_points(const std::string& path)
-{
-    std::ifstream in(path, std::ios::binary);
-    if (!in) {
-        throw usage_error(path + ": cannot open the points file");
-    }
-    std::stringstream ss;
-    ss << in.rdbuf();
-    const std::string text = ss.str();
-    std::vector<LonLat> out;
-    auto check = [&](double lon, double lat, const std::string& where) {
-        if (!(lon >= -180 && lon <= 180 && lat >= -90 && lat <= 90)) {
-            throw input_error(path + ": " + where + ": lon/lat (" + std::to_string(lon) + ", " + std::to_string(lat) +
-                              ") out of range");
-        }
-        out.push_back({lon, lat});
-    };
-    const auto first = text.find_first_not_of(" \t\r\n");
-    if (first != std::string::npos && text[first] == '{') {
-        json j;
-        try {
-            j = json::parse(text);
-        } catch (const json::exception& e) {
-            throw input_error(path + ": invalid GeoJSON: " + e.what());
-        }
-        const json features =
-            j.value("type", "") == "FeatureCollection" ? j.value("features", json::array()) : json::array({j});
-        size_t i = 0;
-        for (const auto& f : features) {
-            const std::string where = "feature " + std::to_string(i++);
-            const json& g = f.contains("geometry") ? f["geometry"] : f;
-            try {
-                const std::string type = g.at("type");
-                if (type == "Point") {
-                    check(g.at("coordinates").at(0), g.at("coordinates").at(1), where);
-                } else if (type == "MultiPoint") {
-                    for (const auto& c : g.at("coordinates")) {
-                        check(c.at(0), c.at(1), where);
-                    }
-                } else {
-                    throw input_error(path + ": " + where + ": geometry type " + type +
-                                      ", expected Point or MultiPoint");
-                }
-            } catch (const json::exception& e) {
-                throw input_error(path + ": " + where + ": " + e.what());
-            }
-        }
-        return out;
-    }
-    std::istringstream lines(text);
-    std::string line;
-    size_t lineno = 0;
-    int ilon = -1, ilat = -1;
-    while (std::getline(lines, line)) {
-        ++lineno;
-        if (line.find_first_not_of(" \t\r") == std::string::npos) {
-            continue;
-        }
-        const auto cols = split_csv_line(line);
-        if (ilon < 0) {
-            for (int c = 0; c < int(cols.size()); ++c) {
-                std::string h = cols[size_t(c)];
-                std::transform(h.begin(), h.end(), h.begin(), [](unsigned char ch) { return std::tolower(ch); });
-                if (h == "lon" || h == "lng" || h == "longitude" || h == "x") {
-                    ilon = c;
-                } else if (h == "lat" || h == "latitude" || h == "y") {
-                    ilat = c;
-                }
-            }
-            if (ilon < 0 || ilat < 0) {
-                throw input_error(path + ": line " + std::to_string(lineno) +
-                                  ": the header needs lon and lat columns (lon/lng/longitude/x, lat/latitude/y)");
-            }
-            continue;
-        }
-        const std::string where = "line " + std::to_string(lineno);
-        if (int(cols.size()) <= std::max(ilon, ilat)) {
-            throw input_error(path + ": " + where + ": too few columns");
-        }
-        try {
-            size_t p1 = 0, p2 = 0;
-            const double lon = std::stod(cols[size_t(ilon)], &p1), lat = std::stod(cols[size_t(ilat)], &p2);
-            if (p1 != cols[size_t(ilon)].size() || p2 != cols[size_t(ilat)].size()) {
-                throw std::invalid_argument("trailing text");
-            }
-            check(lon, lat, where);
-        } catch (const std::logic_error&) {
-            throw input_error(path + ": " + where + ": lon/lat are not numbers");
-        }
-    }
-    return out;
 }
 
 int SimplifyStage::run(const StageContext& ctx)

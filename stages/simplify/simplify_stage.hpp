@@ -4,7 +4,7 @@
 /// tolerance of the ladder, on OpenGL.
 
 #include "core/stage.hpp"
-#include "stages/simplify/stage_options.hpp"
+#include "simplification/stage_options.hpp"
 
 namespace tigerlod::simplify {
 
@@ -32,10 +32,5 @@ class SimplifyStage final : public Stage {
     int m_max_reach = 0;
     int m_window_pixels = 1024;
 }; // class SimplifyStage
-
-/// Read user point constraints: GeoJSON (Point / MultiPoint features) or CSV
-/// with lon and lat columns (header names lon/lng/longitude/x and lat/latitude/y).
-/// Throws input_error naming the file and line or feature.
-std::vector<LonLat> read_points(const std::string& path);
 
 } // namespace tigerlod::simplify

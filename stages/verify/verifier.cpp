@@ -626,8 +626,7 @@ class Verifier {
     /// forward one): points of the segment, at every original vertex's
     /// projection and half-way between, within eps of the original subchain.
     /// In double precision; an excess below 1e-9 of eps is not reported.
-    bool reverse_exceeded(std::span<const GridPoint> sub, GridPoint a, GridPoint b,
-                          const Tolerance& tol) const
+    bool reverse_exceeded(std::span<const GridPoint> sub, GridPoint a, GridPoint b, const Tolerance& tol) const
     {
         const double dx = double(b.x) - a.x, dy = double(b.y) - a.y, len2 = dx * dx + dy * dy;
         std::vector<double> ts{0.0, 1.0};
@@ -657,8 +656,7 @@ class Verifier {
     {
         auto d = [&](double t) {
             const double px = a.x + t * (double(b.x) - a.x) - qx, py = a.y + t * (double(b.y) - a.y) - qy;
-            return m_metric == Metric::l1 ? std::abs(px) + std::abs(py)
-                                                    : std::max(std::abs(px), std::abs(py));
+            return m_metric == Metric::l1 ? std::abs(px) + std::abs(py) : std::max(std::abs(px), std::abs(py));
         };
         double lo = 0, hi = 1;
         for (int i = 0; i < 60; ++i) {

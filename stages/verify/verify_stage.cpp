@@ -1,8 +1,8 @@
 #include "stages/verify/verify_stage.hpp"
 
 #include "core/fs.hpp"
-#include "stages/simplify/simplify_stage.hpp"
-#include "stages/simplify/stage_options.hpp"
+#include "simplification/stage_options.hpp"
+#include "simplification/stage_options.hpp"
 #include "stages/verify/verifier.hpp"
 
 #include <GeographicLib/Config.h>

@@ -756,7 +756,8 @@ TEST_F(Cli, ColorAndSimplifyRejectBadInput)
     expect_failure(run("simplify", in + " --tolerances 8 --colors " + colors), 1,
                    "51063.colors.json: not a colours file");
     std::ofstream(m_dir / "colors" / "eps-8m" / "tract" / "51063.colors.json")
-        << R"({"schema": "tigerlod.colors/1", "eps_m": 8, "metric": "l2", "pixel": 1, "tiles": []})";
+        << R"({"schema": "tigerlod.colors/1", "level": "tract", "partition": "51063", "eps_m": 8, "metric": "l2",)"
+           R"( "pixel": 1, "splits": 0, "conflict_edges": 0, "tiles": []})";
     expect_failure(run("simplify", in + " --tolerances 8 --colors " + colors), 2, "made at eps");
     expect_failure(run("simplify", in + " --compliance occlusion"), 2, "must be ssbo or readback");
     expect_failure(run("simplify", in + " --lazy --exhaustive"), 2, "'--lazy' and '--exhaustive' exclude each other");

@@ -3,12 +3,12 @@
 #include "core/errors.hpp"
 #include "core/segment_grid.hpp"
 #include "gl/context.hpp"
-#include "stages/simplify/candidates.hpp"
-#include "stages/simplify/cell_cover.hpp"
-#include "stages/simplify/coloring.hpp"
-#include "stages/simplify/near_parts.hpp"
-#include "stages/simplify/raster.hpp"
-#include "stages/simplify/simplifier.hpp"
+#include "simplification/candidates.hpp"
+#include "simplification/cell_cover.hpp"
+#include "simplification/coloring.hpp"
+#include "simplification/near_parts.hpp"
+#include "simplification/raster.hpp"
+#include "simplification/simplifier.hpp"
 
 #include <gtest/gtest.h>
 

@@ -7,7 +7,7 @@
 #include "stages/ingest/config.hpp"
 #include "stages/ingest/map_builder.hpp"
 #include "stages/ingest/sources.hpp"
-#include "stages/simplify/simplifier.hpp"
+#include "simplification/simplifier.hpp"
 
 #include <gtest/gtest.h>
 

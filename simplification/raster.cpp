@@ -1,7 +1,7 @@
-#include "stages/simplify/raster.hpp"
+#include "simplification/raster.hpp"
 
 #include "core/errors.hpp"
-#include "stages/simplify/cell_cover.hpp"
+#include "simplification/cell_cover.hpp"
 
 #include <algorithm>
 #include <chrono>

@@ -4,7 +4,7 @@
 /// their inputs and outputs.
 
 #include "core/stage.hpp"
-#include "stages/simplify/simplifier.hpp"
+#include "simplification/simplifier.hpp"
 
 #include <filesystem>
 #include <map>
@@ -60,5 +60,10 @@ std::vector<StoreFile> list_stores(const std::filesystem::path& input, const std
 /// names (another partition's under this name) or is in another projection
 /// or grid than ingest wrote the others in.
 void check_store(const chains::ChainStore& store, const StoreFile& file);
+
+/// Read user point constraints: GeoJSON (Point / MultiPoint features) or CSV
+/// with lon and lat columns (header names lon/lng/longitude/x and lat/latitude/y).
+/// Throws input_error naming the file and line or feature.
+std::vector<LonLat> read_points(const std::string& path);
 
 } // namespace tigerlod::simplify

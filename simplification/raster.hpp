@@ -10,7 +10,7 @@
 /// county at a 25 cm pixel never pays for clearing billions of pixels.
 
 #include "gl/context.hpp"
-#include "stages/simplify/coloring.hpp"
+#include "simplification/coloring.hpp"
 #include "core/metric.hpp"
 
 #include <cstdint>

@@ -4,7 +4,7 @@
 /// back: chain indices of a store to and from its stable chain ids.
 
 #include "formats/chains/chain_store.hpp"
-#include "stages/simplify/coloring.hpp"
+#include "simplification/coloring.hpp"
 #include "core/metric.hpp"
 
 #include <filesystem>

@@ -1,8 +1,8 @@
-#include "stages/simplify/coloring.hpp"
+#include "simplification/coloring.hpp"
 
 #include "core/errors.hpp"
 #include "core/radix_sort.hpp"
-#include "stages/simplify/cell_cover.hpp"
+#include "simplification/cell_cover.hpp"
 
 #include <algorithm>
 #include <bitset>

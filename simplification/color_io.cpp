@@ -1,4 +1,4 @@
-#include "stages/simplify/color_io.hpp"
+#include "simplification/color_io.hpp"
 
 #include "core/errors.hpp"
 #include "formats/colors/colors.hpp"

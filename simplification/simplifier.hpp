@@ -4,9 +4,9 @@
 /// compliance and an exact safety net (see README.md beside this file).
 
 #include "formats/chains/chain_store.hpp"
-#include "stages/simplify/coloring.hpp"
+#include "simplification/coloring.hpp"
 #include "core/metric.hpp"
-#include "stages/simplify/raster.hpp"
+#include "simplification/raster.hpp"
 
 #include <functional>
 #include <map>

@@ -1,11 +1,11 @@
-#include "stages/simplify/simplifier.hpp"
+#include "simplification/simplifier.hpp"
 
 #include "core/parallel.hpp"
 #include "core/projection.hpp"
 #include "core/segment_grid.hpp"
-#include "stages/simplify/candidates.hpp"
-#include "stages/simplify/cell_cover.hpp"
-#include "stages/simplify/near_parts.hpp"
+#include "simplification/candidates.hpp"
+#include "simplification/cell_cover.hpp"
+#include "simplification/near_parts.hpp"
 
 #include <algorithm>
 #include <chrono>

@@ -1,4 +1,4 @@
-#include "stages/simplify/candidates.hpp"
+#include "simplification/candidates.hpp"
 
 #include <algorithm>
 #include <array>
