@@ -121,18 +121,6 @@ std::string IngestStage::help_notes() const
 
 int IngestStage::run(const StageContext& ctx)
 {
-#ifdef __GLIBC__
-    // One malloc arena for every thread: the levels' threads then reuse what
-    // the interning and the merge freed; and blocks of 1 MiB or more mapped
-    // on their own, so that freeing one gives it back (glibc's default raises
-    // that threshold to 32 MiB as large blocks are freed). Tract set, peak
-    // RSS: 281-297 MiB with the defaults, 244-248 with both (time within the
-    // noise).
-    if (std::getenv("MALLOC_ARENA_MAX") == nullptr) {
-        mallopt(M_ARENA_MAX, 1);
-        mallopt(M_MMAP_THRESHOLD, 1 << 20);
-    }
-#endif
     IngestConfig cfg = load_config(m_config);
     if (m_halo_m >= 0) {
         cfg.halo_m = m_halo_m;
