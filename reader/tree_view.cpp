@@ -3,10 +3,17 @@
 #include "core/errors.hpp"
 #include "core/geometry.hpp"
 
+#include <cpl_conv.h>
+#include <cpl_string.h>
+#include <gdal.h>
+#include <ogr_api.h>
+#include <ogr_srs_api.h>
+
 #include <algorithm>
 #include <charconv>
 #include <cstdio>
 #include <map>
+#include <mutex>
 #include <sstream>
 
 namespace tigerlod::view {
@@ -157,53 +164,61 @@ std::string node_text(const reader::Tree& tree, const NodeMap& m)
     return out.str();
 }
 
-namespace {
-
-std::string json_string(const std::string& s)
+void write_node_geojson(const reader::Tree& tree, const NodeMap& m, const std::string& path)
 {
-    std::string out = "\"";
-    for (char c : s) {
-        if (c == '"' || c == '\\') {
-            out += '\\';
-            out += c;
-        } else if (static_cast<unsigned char>(c) < 0x20) {
-            char b[8];
-            std::snprintf(b, sizeof b, "\\u%04x", c);
-            out += b;
-        } else {
-            out += c;
-        }
-    }
-    return out + "\"";
-}
-
-} // namespace
-
-std::string node_geojson(const reader::Tree& tree, const NodeMap& m)
-{
+    // GDAL's GeoJSON driver, the writer export uses too.
+    static std::once_flag registered;
+    std::call_once(registered, [] { GDALAllRegister(); });
     const Projection proj(projection_of(tree.skeleton()));
-    std::string out = "{\"type\":\"FeatureCollection\",\"features\":[\n";
-    for (size_t i = 0; i < m.table.chains.size(); ++i) {
-        const auto& c = m.table.chains[i];
-        out += i ? ",\n" : "";
-        out += "{\"type\":\"Feature\",\"properties\":{\"id\":" + std::to_string(c.id) +
-               ",\"left\":" + json_string(m.table.strings[c.left]) +
-               ",\"right\":" + json_string(m.table.strings[c.right]) +
-               ",\"class\":" + json_string(m.table.strings[c.feature_class]) +
-               ",\"closed\":" + ((c.flags & 1U) ? "true" : "false") +
-               "},\"geometry\":{\"type\":\"LineString\",\"coordinates\":[";
-        const auto pts = m.geometry.chain(i);
-        for (size_t k = 0; k < pts.size(); ++k) {
-            double lon = 0, lat = 0;
-            proj.to_lonlat(pts[k].x, pts[k].y, lon, lat);
-            char b[64];
-            std::snprintf(b, sizeof b, "%s[%.7f,%.7f]", k ? "," : "", lon, lat);
-            out += b;
-        }
-        out += "]}}";
+    GDALDriverH driver = GDALGetDriverByName("GeoJSON");
+    GDALDatasetH ds = driver ? GDALCreate(driver, path.c_str(), 0, 0, 0, GDT_Unknown, nullptr) : nullptr;
+    if (ds == nullptr) {
+        throw environment_error(path + ": cannot write GeoJSON: " + CPLGetLastErrorMsg());
     }
-    out += "\n]}\n";
-    return out;
+    OGRSpatialReferenceH srs = OSRNewSpatialReference(nullptr);
+    OSRImportFromEPSG(srs, 4269);
+    OSRSetAxisMappingStrategy(srs, OAMS_TRADITIONAL_GIS_ORDER);
+    char** options = CSLSetNameValue(nullptr, "COORDINATE_PRECISION", "7");
+    OGRLayerH layer = GDALDatasetCreateLayer(ds, "chains", srs, wkbLineString, options);
+    CSLDestroy(options);
+    OSRDestroySpatialReference(srs);
+    bool ok = layer != nullptr;
+    auto field = [&](const char* name, OGRFieldType type, OGRFieldSubType sub = OFSTNone) {
+        if (!ok) {
+            return;
+        }
+        OGRFieldDefnH fd = OGR_Fld_Create(name, type);
+        OGR_Fld_SetSubType(fd, sub);
+        ok = OGR_L_CreateField(layer, fd, TRUE) == OGRERR_NONE;
+        OGR_Fld_Destroy(fd);
+    };
+    field("id", OFTInteger64);
+    field("left", OFTString);
+    field("right", OFTString);
+    field("class", OFTString);
+    field("closed", OFTInteger, OFSTBoolean);
+    for (size_t i = 0; ok && i < m.table.chains.size(); ++i) {
+        const auto& c = m.table.chains[i];
+        OGRFeatureH f = OGR_F_Create(OGR_L_GetLayerDefn(layer));
+        OGR_F_SetFieldInteger64(f, 0, static_cast<GIntBig>(c.id));
+        OGR_F_SetFieldString(f, 1, m.table.strings[c.left].c_str());
+        OGR_F_SetFieldString(f, 2, m.table.strings[c.right].c_str());
+        OGR_F_SetFieldString(f, 3, m.table.strings[c.feature_class].c_str());
+        OGR_F_SetFieldInteger(f, 4, (c.flags & 1U) ? 1 : 0);
+        OGRGeometryH line = OGR_G_CreateGeometry(wkbLineString);
+        for (const auto& p : m.geometry.chain(i)) {
+            double lon = 0, lat = 0;
+            proj.to_lonlat(p.x, p.y, lon, lat);
+            OGR_G_AddPoint_2D(line, lon, lat);
+        }
+        OGR_F_SetGeometryDirectly(f, line);
+        ok = OGR_L_CreateFeature(layer, f) == OGRERR_NONE;
+        OGR_F_Destroy(f);
+    }
+    GDALClose(ds);
+    if (!ok) {
+        throw environment_error(path + ": cannot write GeoJSON: " + CPLGetLastErrorMsg());
+    }
 }
 
 std::vector<Ring> unit_rings(const datatree::ChainTable& table, const datatree::Geometry& g, uint32_t unit)

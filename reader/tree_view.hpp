@@ -34,8 +34,11 @@ NodeMap read_node(const reader::Tree& tree, uint32_t node, uint32_t lod);
 /// A node's map as text: one line per chain with its id, units, class, flags and points.
 std::string node_text(const reader::Tree& tree, const NodeMap& m);
 
-/// A node's map as a GeoJSON FeatureCollection of LineStrings in lon/lat.
-std::string node_geojson(const reader::Tree& tree, const NodeMap& m);
+/// Write a node's map to `path` (a file, or /vsistdout/) as GeoJSON through
+/// GDAL's driver, as tigerlod-export writes: LineStrings in lon/lat (NAD83,
+/// 7 decimals) with id, left, right, class and closed. Throws
+/// environment_error if GDAL cannot write.
+void write_node_geojson(const reader::Tree& tree, const NodeMap& m, const std::string& path);
 
 /// One unit's polygon rings rebuilt from the chains that have it on one side,
 /// oriented so the unit is on the left (counter-clockwise outer rings),

@@ -69,7 +69,12 @@ int DumpStage::run(const StageContext&)
         return exit_ok;
     }
     const auto m = view::read_node(*t, view::find_node(t->skeleton(), m_node), static_cast<uint32_t>(m_lod));
-    std::cout << (m_geojson ? view::node_geojson(*t, m) : view::node_text(*t, m));
+    if (m_geojson) {
+        std::cout.flush();
+        view::write_node_geojson(*t, m, "/vsistdout/");
+    } else {
+        std::cout << view::node_text(*t, m);
+    }
     return exit_ok;
 }
 

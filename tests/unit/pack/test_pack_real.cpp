@@ -307,8 +307,19 @@ TEST_F(PackReal, DumpAndExport)
     EXPECT_NE(skel.find("levels state county tract block_group block\nlods 0 4 64\n"), std::string::npos);
     ASSERT_EQ(run("dump", "--node 51063 --lod 2 " + d + "/tree", dir / "out"), 0);
     EXPECT_EQ(slurp(dir / "out").rfind("node 2 code=51063 lod 2 eps=64 chains=", 0), 0U) << slurp(dir / "out");
+    const std::string text = slurp(dir / "out");
+    const size_t at = text.find("chains=") + 7;
+    const size_t chains = std::stoul(text.substr(at, text.find_first_of(" \n", at) - at));
+    // GeoJSON through GDAL's driver: one LineString feature per chain.
     ASSERT_EQ(run("dump", "--node 51063 --geojson " + d + "/tree", dir / "out"), 0);
-    EXPECT_EQ(slurp(dir / "out").rfind("{\"type\":\"FeatureCollection\"", 0), 0U);
+    const std::string geojson = slurp(dir / "out");
+    EXPECT_NE(geojson.find("\"type\": \"FeatureCollection\""), std::string::npos) << geojson.substr(0, 200);
+    size_t features = 0;
+    for (size_t p = geojson.find("{ \"type\": \"Feature\","); p != std::string::npos;
+         p = geojson.find("{ \"type\": \"Feature\",", p + 1)) {
+        ++features;
+    }
+    EXPECT_EQ(features, chains);
     EXPECT_EQ(run("dump", "--node 99999 " + d + "/tree", dir / "out"), 2);
     EXPECT_NE(slurp(dir / "out").find("no node '99999'"), std::string::npos);
     // Every block of Floyd County comes back as a valid polygon at the 64 m LOD.
