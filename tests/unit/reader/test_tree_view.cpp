@@ -1,11 +1,15 @@
 // Unit polygons rebuilt from a node's chains: valid OGC polygons whatever the
 // order of the chains, where a unit's boundary passes a vertex twice.
 #include "core/geometry.hpp"
+#include "reader/reader.hpp"
 #include "reader/tree_view.hpp"
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <numeric>
 #include <set>
 
@@ -136,4 +140,37 @@ TEST(UnitPolygons, AnOpenBoundaryIsIncomplete)
     const std::vector<Chain> chains = {{{{0, 0}, {2, 0}, {2, 2}}, U, X}, {{{2, 2}, {0, 2}}, U, X}};
     EXPECT_FALSE(polygons(chains, {0, 1}, 0, U).complete);
     EXPECT_TRUE(polygons(chains, {0, 1}, 0, U).polygons.empty());
+}
+
+// Format golden: a Data Tree checked in at format 2.0 (tests/data/formats/
+// data-tree-2.0, packed from the small-map golden) opens, its skeleton
+// re-encodes to the same bytes, and every node at every LOD decodes to the
+// same text. When the format's version changes, the tree stays: the test
+// then says whether the new reader still reads it.
+
+namespace {
+std::string slurp_file(const std::filesystem::path& p)
+{
+    std::ifstream in(p, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+} // namespace
+
+TEST(FormatGolden, DataTree20ReadsAsItsText)
+{
+    const std::filesystem::path dir = std::filesystem::path(TIGERLOD_SOURCE_DIR) / "tests/data/formats/data-tree-2.0";
+    std::string error;
+    const auto tree = reader::Tree::open(dir, error);
+    ASSERT_TRUE(tree) << error;
+    const std::string bytes = slurp_file(dir / "skeleton.tls");
+    EXPECT_EQ(datatree::encode_skeleton(tree->skeleton()), bytes);
+    EXPECT_EQ(view::skeleton_text(*tree), slurp_file(dir / "skeleton.txt"));
+    std::string nodes;
+    for (uint32_t n = 0; n < tree->skeleton().nodes.size(); ++n) {
+        for (uint32_t lod = 0; lod < tree->skeleton().lod_eps_m.size(); ++lod) {
+            nodes += view::node_text(*tree, view::read_node(*tree, n, lod));
+        }
+    }
+    EXPECT_EQ(nodes, slurp_file(dir / "nodes.txt"));
+    EXPECT_EQ(tree->skeleton().nodes.size(), 3U);
 }
