@@ -7,6 +7,8 @@
 
 #include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 
 using namespace tigerlod;
 using namespace tigerlod::chains;
@@ -172,4 +174,34 @@ TEST(ChainStore, UnitLocationUsesChainsWithTheUnitOnOneSideOnly)
     EXPECT_EQ(unit_location(s, A, {5, 11}), PointLocation::outside);
     EXPECT_EQ(unit_location(s, A, {10, 5}), PointLocation::boundary);
     EXPECT_EQ(unit_location(s, B, {5, 5}), PointLocation::outside); // B's boundary here is one open chain
+}
+
+// Format golden: chain store files checked in at format 1.2 (tests/data/
+// formats/chain-store-1.2, written by tigerlod-ingest and -simplify from the
+// small-map golden) still read, as the same text, and re-encode to the same
+// bytes. When the format's version changes, these files stay: the test then
+// says whether the new reader still reads them.
+
+namespace {
+std::string slurp_file(const std::filesystem::path& p)
+{
+    std::ifstream in(p, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+} // namespace
+
+TEST(FormatGolden, ChainStore12ReadsAsItsTextAndReencodesToItsBytes)
+{
+    const std::filesystem::path dir = std::filesystem::path(TIGERLOD_SOURCE_DIR) / "tests/data/formats/chain-store-1.2";
+    size_t files = 0;
+    for (const char* name : {"unit-1", "unit-1-eps-8m"}) {
+        SCOPED_TRACE(name);
+        const auto tlc = dir / (std::string(name) + ".tlc");
+        const auto store = chains::read(tlc);
+        EXPECT_EQ(store.minor, 2U);
+        EXPECT_EQ(chains::to_text(store), slurp_file(dir / (std::string(name) + ".txt")));
+        EXPECT_EQ(chains::encode(store), slurp_file(tlc));
+        ++files;
+    }
+    EXPECT_EQ(files, 2U);
 }

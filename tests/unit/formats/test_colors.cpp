@@ -2,13 +2,8 @@
 // and every refusal the SPEC lists.
 #include "core/errors.hpp"
 #include "formats/colors/colors.hpp"
-#include "formats/chains/chain_store.hpp"
 
 #include <gtest/gtest.h>
-
-#include <filesystem>
-#include <fstream>
-#include <iterator>
 
 using namespace tigerlod;
 
@@ -84,34 +79,4 @@ TEST(Colors, EveryFaultIsNamed)
                   .find("a tile has 3 chains and 3 classes"),
               std::string::npos);
     EXPECT_EQ(fault(good), "");
-}
-
-// Format golden: chain store files checked in at format 1.2 (tests/data/
-// formats/chain-store-1.2, written by tigerlod-ingest and -simplify from the
-// small-map golden) still read, as the same text, and re-encode to the same
-// bytes. When the format's version changes, these files stay: the test then
-// says whether the new reader still reads them.
-
-namespace {
-std::string slurp_file(const std::filesystem::path& p)
-{
-    std::ifstream in(p, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-} // namespace
-
-TEST(FormatGolden, ChainStore12ReadsAsItsTextAndReencodesToItsBytes)
-{
-    const std::filesystem::path dir = std::filesystem::path(TIGERLOD_SOURCE_DIR) / "tests/data/formats/chain-store-1.2";
-    size_t files = 0;
-    for (const char* name : {"unit-1", "unit-1-eps-8m"}) {
-        SCOPED_TRACE(name);
-        const auto tlc = dir / (std::string(name) + ".tlc");
-        const auto store = chains::read(tlc);
-        EXPECT_EQ(store.minor, 2U);
-        EXPECT_EQ(chains::to_text(store), slurp_file(dir / (std::string(name) + ".txt")));
-        EXPECT_EQ(chains::encode(store), slurp_file(tlc));
-        ++files;
-    }
-    EXPECT_EQ(files, 2U);
 }
