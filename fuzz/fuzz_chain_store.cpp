@@ -3,8 +3,8 @@
 // the input's bytes need before parsing. Any input either fails with
 // format_error or decodes to a store whose encoding is a fixed point
 // (encode, decode, encode gives the same bytes).
-#include "core/digest.hpp"
 #include "core/errors.hpp"
+#include "fuzz/fixed_checksum.hpp"
 #include "formats/chains/chain_store.hpp"
 
 #include <cstddef>
@@ -18,15 +18,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
     if (size < 28) {
         return 0;
     }
-    std::string bytes(reinterpret_cast<const char*>(data), size);
-    const uint64_t file_size = size;
-    for (int i = 0; i < 8; ++i) {
-        bytes[16 + i] = static_cast<char>((file_size >> (8 * i)) & 0xFF);
-    }
-    const uint32_t crc = crc32(std::as_bytes(std::span(bytes.data(), size - 4)));
-    for (int i = 0; i < 4; ++i) {
-        bytes[size - 4 + i] = static_cast<char>((crc >> (8 * i)) & 0xFF);
-    }
+    const std::string bytes = tigerlod::fuzz::with_size_and_crc(data, size);
     try {
         const auto store = chains::decode(std::as_bytes(std::span(bytes.data(), size)), "fuzz");
         const std::string once = chains::encode(store);

@@ -3,6 +3,7 @@
 // documented exit code, a message naming the file and fault, and nothing
 // half-written.
 #include "formats/chains/chain_store.hpp"
+#include "../support/processes.hpp"
 
 #include <cpl_conv.h>
 #include <gdal.h>
@@ -954,18 +955,6 @@ TEST_F(Cli, PackDumpExportAndVerifyRejectBadInput)
 
 namespace {
 
-/// The id of a process that has exited and been reaped.
-pid_t dead_pid()
-{
-    const pid_t pid = ::fork();
-    if (pid == 0) {
-        ::_exit(0);
-    }
-    int status = 0;
-    ::waitpid(pid, &status, 0);
-    return pid;
-}
-
 /// Every file under `dir`, by path relative to it, with its bytes.
 std::map<std::string, std::string> files_under(const fs::path& dir)
 {
@@ -996,7 +985,7 @@ TEST_F(Cli, PackResumesAKilledFirstRunAndRepairsDamagedTiles)
     }
     std::sort(tiles.begin(), tiles.end());
     ASSERT_GE(tiles.size(), 3U);
-    const std::string dead = std::to_string(dead_pid()), live = std::to_string(::getpid());
+    const std::string dead = std::to_string(tigerlod::testing::dead_pid()), live = std::to_string(::getpid());
 
     // A first pack killed before its skeleton: some tiles, temporaries of a
     // dead run. Before, every rerun exited 2 ("not a Data Tree").
@@ -1065,7 +1054,7 @@ TEST_F(Cli, StagesRemoveWhatADeadRunLeftBesideTheirOutput)
     // Killed runs leave OUTPUT.tmp-<host>-<pid> (and .old- during the swap);
     // the next run of a stage on the same output removes them, and only them.
     make_tiger();
-    const std::string dead = std::to_string(dead_pid()), live = std::to_string(::getpid());
+    const std::string dead = std::to_string(tigerlod::testing::dead_pid()), live = std::to_string(::getpid());
     fs::create_directories(m_dir / ("in.tmp-" + dead) / "tract");
     fs::create_directories(m_dir / ("in.old-" + dead));
     fs::create_directories(m_dir / ("in.tmp-" + live));

@@ -3,6 +3,8 @@
 #include "core/errors.hpp"
 #include "core/fs.hpp"
 
+#include "../../support/processes.hpp"
+
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -15,18 +17,6 @@ namespace fs = std::filesystem;
 using namespace tigerlod;
 
 namespace {
-
-/// The id of a process that has exited and been reaped.
-pid_t dead_pid()
-{
-    const pid_t pid = ::fork();
-    if (pid == 0) {
-        ::_exit(0);
-    }
-    int status = 0;
-    ::waitpid(pid, &status, 0);
-    return pid;
-}
 
 class Fs : public ::testing::Test {
   protected:
@@ -65,7 +55,7 @@ TEST_F(Fs, TemporaryNamesCarryHostAndProcess)
 
 TEST_F(Fs, OnlyLeftoversOfDeadProcessesOfThisHostAreRemoved)
 {
-    const std::string dead = std::to_string(dead_pid()), live = std::to_string(::getpid());
+    const std::string dead = std::to_string(tigerlod::testing::dead_pid()), live = std::to_string(::getpid());
     // This host's id, as this process writes it, with a dead process's id.
     const std::string mine = temp_sibling(m_dir / "out").filename().string();
     const std::string host = mine.substr(8, mine.rfind('-') - 8);
@@ -119,7 +109,7 @@ TEST_F(Fs, AZombieCountsAsDead)
 
 TEST_F(Fs, AnOutputFolderCleansWhatADeadRunLeftBesideIt)
 {
-    const std::string dead = std::to_string(dead_pid());
+    const std::string dead = std::to_string(tigerlod::testing::dead_pid());
     fs::create_directories(m_dir / ("out.tmp-" + dead));
     fs::create_directories(m_dir / ("out.old-" + dead));
     touch("other.tmp-" + dead);
