@@ -166,7 +166,9 @@ std::vector<fs::path> remove_dead_leftovers(const fs::path& folder, std::string_
     std::vector<fs::path> removed;
     std::error_code ec;
     std::vector<fs::path> found;
-    for (fs::directory_iterator it(folder, ec), end; !ec && it != end; it.increment(ec)) {
+    // An empty folder is the current one, as a file name with no folder part has it.
+    for (fs::directory_iterator it(folder.empty() ? fs::path(".") : folder, ec), end; !ec && it != end;
+         it.increment(ec)) {
         found.push_back(it->path());
     }
     std::sort(found.begin(), found.end());
@@ -242,8 +244,7 @@ OutputDir::OutputDir(fs::path final_path, bool overwrite, const std::vector<fs::
         throw usage_error(m_final.string() + " exists. Use --overwrite to replace it.");
     }
     m_tmp = temp_sibling(m_final, ".tmp-");
-    m_removed = remove_dead_leftovers(m_final.parent_path().empty() ? fs::path(".") : m_final.parent_path(),
-                                      m_final.filename().string());
+    m_removed = remove_dead_leftovers(m_final.parent_path(), m_final.filename().string());
     std::error_code ec;
     fs::remove_all(m_tmp, ec);
     fs::create_directories(m_tmp, ec);

@@ -23,7 +23,7 @@ std::filesystem::path temp_sibling_keeping_extension(const std::filesystem::path
 
 /// Remove what dead runs left in `folder`: entries named as temp_sibling and
 /// temp_sibling_keeping_extension name them, written by a process of this
-/// host that no longer exists. With `base` given, only leftovers of that
+/// host that no longer exists (an empty `folder` is the current one). With `base` given, only leftovers of that
 /// name (`<base>.tmp-...`, `<base>.old-...`). Entries of live processes, of
 /// other hosts and of any other name are left alone. Returns what it
 /// removed; throws nothing (what cannot be removed stays).

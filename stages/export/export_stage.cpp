@@ -130,8 +130,7 @@ int ExportStage::run(const StageContext& ctx)
     const fs::path out(m_output);
     const bool gpkg = out.extension() == ".gpkg";
     const fs::path tmp = temp_sibling_keeping_extension(out);
-    log_removed_leftovers(ctx.log, remove_dead_leftovers(out.parent_path().empty() ? fs::path(".") : out.parent_path(),
-                                                         out.stem().string()));
+    log_removed_leftovers(ctx.log, remove_dead_leftovers(out.parent_path(), out.stem().string()));
     GDALAllRegister();
     GDALDriverH driver = GDALGetDriverByName(gpkg ? "GPKG" : "GeoJSON");
     TempDataset g;

@@ -78,6 +78,11 @@ sed 's/^name: wf/name: str/; s/tolerances_m: \[1, 4, 16, 64\]/tolerances_m: [1, 
 grep -q "'tolerances_m' must be a list of numbers" str.out || fail "no message for a string tolerance: $(cat str.out)"
 [ -e out/str/simplified ] && fail "simplify ran with a string tolerance"
 
+"$repo/scripts/workflow" nothere.yaml >missing.out 2>&1
+rc=$?
+[ "$rc" = 2 ] || fail "a config that does not exist exited $rc, not 2"
+grep -q "workflow: nothere.yaml: no such config file" missing.out || fail "no message for a missing config: $(cat missing.out)"
+
 if [ "$failures" -gt 0 ]; then
   echo "$failures failure(s)"
   exit 1

@@ -80,6 +80,14 @@ TEST_F(Fs, OnlyLeftoversOfDeadProcessesOfThisHostAreRemoved)
     touch("outer.tmp-" + dead);
     EXPECT_EQ(remove_dead_leftovers(m_dir, "out").size(), 1U);
     EXPECT_TRUE(fs::exists(m_dir / ("outer.tmp-" + dead)));
+    // No folder part: the current folder, as for an output named without one.
+    touch("out.tmp-" + dead);
+    const fs::path cwd = fs::current_path();
+    fs::current_path(m_dir);
+    const auto here = remove_dead_leftovers("", "out");
+    fs::current_path(cwd);
+    ASSERT_EQ(here.size(), 1U);
+    EXPECT_FALSE(fs::exists(m_dir / ("out.tmp-" + dead)));
     // A folder that does not exist: nothing, no throw.
     EXPECT_TRUE(remove_dead_leftovers(m_dir / "none").empty());
 }

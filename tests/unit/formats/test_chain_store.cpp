@@ -2,13 +2,13 @@
 #include "core/errors.hpp"
 #include "formats/chains/chain_store.hpp"
 
+#include "../../support/run_tool.hpp"
+
 #include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <cstring>
 #include <filesystem>
-#include <fstream>
-#include <iterator>
 
 using namespace tigerlod;
 using namespace tigerlod::chains;
@@ -182,14 +182,6 @@ TEST(ChainStore, UnitLocationUsesChainsWithTheUnitOnOneSideOnly)
 // bytes. When the format's version changes, these files stay: the test then
 // says whether the new reader still reads them.
 
-namespace {
-std::string slurp_file(const std::filesystem::path& p)
-{
-    std::ifstream in(p, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-} // namespace
-
 TEST(FormatGolden, ChainStore12ReadsAsItsTextAndReencodesToItsBytes)
 {
     const std::filesystem::path dir = std::filesystem::path(TIGERLOD_SOURCE_DIR) / "tests/data/formats/chain-store-1.2";
@@ -199,8 +191,8 @@ TEST(FormatGolden, ChainStore12ReadsAsItsTextAndReencodesToItsBytes)
         const auto tlc = dir / (std::string(name) + ".tlc");
         const auto store = chains::read(tlc);
         EXPECT_EQ(store.minor, 2U);
-        EXPECT_EQ(chains::to_text(store), slurp_file(dir / (std::string(name) + ".txt")));
-        EXPECT_EQ(chains::encode(store), slurp_file(tlc));
+        EXPECT_EQ(chains::to_text(store), tigerlod::testing::slurp(dir / (std::string(name) + ".txt")));
+        EXPECT_EQ(chains::encode(store), tigerlod::testing::slurp(tlc));
         ++files;
     }
     EXPECT_EQ(files, 2U);

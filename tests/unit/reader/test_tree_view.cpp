@@ -4,12 +4,12 @@
 #include "reader/reader.hpp"
 #include "reader/tree_view.hpp"
 
+#include "../../support/run_tool.hpp"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <filesystem>
-#include <fstream>
-#include <iterator>
 #include <numeric>
 #include <set>
 
@@ -148,29 +148,21 @@ TEST(UnitPolygons, AnOpenBoundaryIsIncomplete)
 // same text. When the format's version changes, the tree stays: the test
 // then says whether the new reader still reads it.
 
-namespace {
-std::string slurp_file(const std::filesystem::path& p)
-{
-    std::ifstream in(p, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-} // namespace
-
 TEST(FormatGolden, DataTree20ReadsAsItsText)
 {
     const std::filesystem::path dir = std::filesystem::path(TIGERLOD_SOURCE_DIR) / "tests/data/formats/data-tree-2.0";
     std::string error;
     const auto tree = reader::Tree::open(dir, error);
     ASSERT_TRUE(tree) << error;
-    const std::string bytes = slurp_file(dir / "skeleton.tls");
+    const std::string bytes = tigerlod::testing::slurp(dir / "skeleton.tls");
     EXPECT_EQ(datatree::encode_skeleton(tree->skeleton()), bytes);
-    EXPECT_EQ(view::skeleton_text(*tree), slurp_file(dir / "skeleton.txt"));
+    EXPECT_EQ(view::skeleton_text(*tree), tigerlod::testing::slurp(dir / "skeleton.txt"));
     std::string nodes;
     for (uint32_t n = 0; n < tree->skeleton().nodes.size(); ++n) {
         for (uint32_t lod = 0; lod < tree->skeleton().lod_eps_m.size(); ++lod) {
             nodes += view::node_text(*tree, view::read_node(*tree, n, lod));
         }
     }
-    EXPECT_EQ(nodes, slurp_file(dir / "nodes.txt"));
+    EXPECT_EQ(nodes, tigerlod::testing::slurp(dir / "nodes.txt"));
     EXPECT_EQ(tree->skeleton().nodes.size(), 3U);
 }
