@@ -1,6 +1,7 @@
 #include "simplification/stage_options.hpp"
 
 #include "core/errors.hpp"
+#include "core/metric.hpp"
 #include "core/projection.hpp"
 
 #include <nlohmann/json.hpp>
@@ -92,6 +93,70 @@ void CommonOptions::initialize(const std::string& stage)
     options.color.max_classes = static_cast<uint32_t>(m_max_classes);
     options.color.metric = options.metric;
     options.threads = m_threads == 0 ? std::max(1U, std::thread::hardware_concurrency()) : unsigned(m_threads);
+}
+
+json CommonOptions::manifest_options() const
+{
+    return {{"tolerances_m", tolerances},
+            {"metric", metric_name(options.metric)},
+            {"class_scale", options.class_scale},
+            {"projection_scale", options.projection_scale},
+            {"pixel_fraction", options.color.pixel_fraction},
+            {"tile_pixels", options.color.tile_pixels},
+            {"max_classes", options.color.max_classes},
+            {"level", level}};
+}
+
+void CommonOptions::check_colors(const Manifest& colors, const Manifest& ingest) const
+{
+    require_made_from(colors, "ingest", ingest);
+    const json mine = manifest_options();
+    const json theirs = colors.doc.value("options", json::object());
+    for (const auto& [key, value] : mine.items()) {
+        if (key == "tolerances_m" || key == "level") {
+            continue;
+        }
+        if (!theirs.contains(key) || theirs.at(key) != value) {
+            throw usage_error("simplify: --colors " + colors.folder.string() + " was made with " + key + " " +
+                              (theirs.contains(key) ? theirs.at(key).dump() : std::string("unset")) +
+                              ", this run has " + value.dump() +
+                              ": run tigerlod-color with the options given here, or give these its options");
+        }
+    }
+    const json ladder = theirs.value("tolerances_m", json::array());
+    for (const double eps : tolerances) {
+        if (std::find(ladder.begin(), ladder.end(), json(eps)) == ladder.end()) {
+            throw usage_error("simplify: --colors " + colors.folder.string() + " has no colours at tolerance " +
+                              json(eps).dump() + " m (its ladder: " + ladder.dump() +
+                              "): run tigerlod-color with this run's --tolerances");
+        }
+    }
+    const std::string their_level = theirs.value("level", "");
+    if (!their_level.empty() && their_level != level) {
+        throw usage_error("simplify: --colors " + colors.folder.string() + " holds level '" + their_level +
+                          "' only; this run needs " + (level.empty() ? std::string("every level") : "'" + level + "'"));
+    }
+}
+
+SimplifyOptions tolerance_contract(const json& o, const std::string& where)
+{
+    SimplifyOptions s;
+    try {
+        const auto metric = parse_metric(o.at("metric").get<std::string>());
+        if (!metric) {
+            throw input_error(where + ": unknown metric " + o.at("metric").dump());
+        }
+        s.metric = *metric;
+        s.class_scale = o.at("class_scale").get<std::map<std::string, double>>();
+        s.projection_scale = o.at("projection_scale").get<bool>();
+        s.point_constraints = o.at("point_constraints").get<bool>();
+        for (const auto& p : o.at("points").at("lonlat")) {
+            s.user_points.push_back({p.at(0).get<double>(), p.at(1).get<double>()});
+        }
+    } catch (const json::exception& e) {
+        throw input_error(where + ": the options of tigerlod-simplify: " + e.what());
+    }
+    return s;
 }
 
 std::map<std::string, double> parse_class_scale(const std::string& list, const std::string& stage)

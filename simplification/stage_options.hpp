@@ -3,6 +3,7 @@
 /// Options shared by tigerlod-color and tigerlod-simplify, and the layout of
 /// their inputs and outputs.
 
+#include "core/manifest.hpp"
 #include "core/stage.hpp"
 #include "simplification/simplifier.hpp"
 
@@ -27,6 +28,15 @@ class CommonOptions {
     /// Validate and resolve; throws usage_error naming the option.
     void initialize(const std::string& stage);
 
+    /// The options of this run that shape color's outputs (simplify's too),
+    /// for manifest.json: the ladder, the tolerance rule, the rendering
+    /// options and the level. Never the thread count.
+    nlohmann::ordered_json manifest_options() const;
+    /// Throws usage_error unless `colors`, tigerlod-color's manifest, was made
+    /// with these options (its ladder holding every tolerance of this run),
+    /// and input_error unless it was made from `ingest`.
+    void check_colors(const Manifest& colors, const Manifest& ingest) const;
+
     std::vector<double> tolerances; ///< increasing, > 0, metres
     SimplifyOptions options;
     std::string input, output, level;
@@ -42,6 +52,12 @@ class CommonOptions {
     int m_max_classes = 255;
     int m_threads = 0;
 }; // class CommonOptions
+
+/// The tolerance contract simplify's manifest records (metric, class scale,
+/// projection scale, point constraints and the user points themselves), as
+/// tigerlod-verify needs it: a SimplifyOptions with those set. Throws
+/// input_error naming the manifest if one is missing or malformed.
+SimplifyOptions tolerance_contract(const nlohmann::ordered_json& simplify_options, const std::string& where);
 
 /// Folder name of a tolerance: "eps-1m", "eps-0.5m".
 std::string tolerance_dir(double eps_m);

@@ -27,6 +27,7 @@ std::string ColorStage::help_notes() const
     return "Outputs:\n"
            "  OUTPUT/eps-<E>m/<level>/<partition>.colors.json  tiles and the class of each chain per tile\n"
            "  OUTPUT/color-report.json                         per tolerance: tiles, classes (max, mean), splits\n"
+           "  OUTPUT/manifest.json                             the input's manifest digest and the options used\n"
            "tigerlod-simplify --colors OUTPUT uses them; it needs the same tolerance, metric and pixel options.\n"
            "Exit codes: 0 done; 1 bad input data (corrupt store, a tile past the class limit even at the\n"
            "  smallest tile); 2 usage error; 3 environment (cannot write).\n";
@@ -36,6 +37,7 @@ int ColorStage::run(const StageContext& ctx)
 {
     refuse_to_replace_inputs(m_common.output, {m_common.input});
     const auto stores = simplify::list_stores(m_common.input, m_common.level);
+    const Manifest ingest = read_manifest(m_common.input, "ingest");
     OutputDir out(m_common.output, m_common.overwrite, {m_common.input});
     log_removed_leftovers(ctx.log, out.removed_leftovers());
     struct Total {
@@ -89,6 +91,10 @@ int ColorStage::run(const StageContext& ctx)
     }
     report["tolerances"] = std::move(tols);
     write_file_atomic(out.path() / "color-report.json", report.dump(2) + "\n");
+    json manifest = new_manifest("color", versions());
+    add_input(manifest, "ingest", ingest);
+    manifest["options"] = m_common.manifest_options();
+    write_file_atomic(out.path() / "manifest.json", manifest_text(manifest));
     out.commit();
     std::printf("color: %zu stores\n", stores.size());
     for (size_t ti = 0; ti < totals.size(); ++ti) {

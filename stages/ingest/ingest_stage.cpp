@@ -3,6 +3,7 @@
 #include "core/digest.hpp"
 #include "core/errors.hpp"
 #include "core/fs.hpp"
+#include "core/manifest.hpp"
 #include "formats/chains/chain_store.hpp"
 #include "stages/ingest/config.hpp"
 #include "stages/ingest/map_builder.hpp"
@@ -276,11 +277,7 @@ int IngestStage::run(const StageContext& ctx)
     report["problem_samples"] = samples;
     write_file_atomic(out.path() / "ingest-report.json", report.dump(2) + "\n");
 
-    json manifest;
-    manifest["schema"] = "tigerlod.manifest/1";
-    manifest["stage"] = "ingest";
-    manifest["version"] = tigerlod_version();
-    manifest["libraries"] = versions();
+    json manifest = new_manifest("ingest", versions());
     json inputs = json::array();
     const std::vector<std::string> sha = digests.get();
     for (size_t i = 0; i < input_files.size(); ++i) {
@@ -299,7 +296,7 @@ int IngestStage::run(const StageContext& ctx)
                            {"projection", projection.describe()},
                            {"halo_m", cfg.halo_m},
                            {"max_problem_samples", m_max_problem_samples}};
-    write_file_atomic(out.path() / "manifest.json", manifest.dump(2) + "\n");
+    write_file_atomic(out.path() / "manifest.json", manifest_text(manifest));
 
     const double seconds = t_build - t0;
     json phases = json::object();

@@ -1,6 +1,7 @@
 #include "stages/pack/pack_stage.hpp"
 
 #include "core/fs.hpp"
+#include "core/manifest.hpp"
 #include "formats/chains/chain_store.hpp"
 #include "stages/pack/packer.hpp"
 
@@ -61,6 +62,8 @@ std::string PackStage::help_notes() const
            "  OUTPUT/skeleton.tls        the skeleton (formats/datatree/SPEC.md)\n"
            "  OUTPUT/tiles/*.tlt         tile files, named by their content\n"
            "  OUTPUT/pack-report.json    nodes, tiles, bytes and vertices per LOD, skeleton fraction\n"
+           "  OUTPUT/manifest.json       inputs' manifest digests, options, and simplify's options (verify's "
+           "contract)\n"
            "Exit codes: 0 done; 1 bad input data (corrupt or inconsistent stores); 2 usage error;\n"
            "  3 environment (cannot read or write).\n";
 }
@@ -79,25 +82,19 @@ int PackStage::run(const StageContext& ctx)
     options.draco_speed = m_draco_speed;
     options.threads =
         m_threads > 0 ? static_cast<unsigned>(m_threads) : std::max(1U, std::thread::hardware_concurrency());
-    const PackedTree tree = build_tree(m_original, m_simplified, options);
-    // The ladder simplify finished: a tolerance folder lost since (or a
-    // run that never finished) would give a tree with an LOD fewer.
-    const fs::path report_path = fs::path(m_simplified) / "simplify-report.json";
+    // The manifests first: simplify's output must have been made from this
+    // ingest output, and its ladder is the one simplify finished (a tolerance
+    // folder lost since would give a tree with an LOD fewer).
+    const Manifest ingest = read_manifest(m_original, "ingest");
+    const Manifest simplified = read_manifest(m_simplified, "simplify");
+    require_made_from(simplified, "ingest", ingest);
     std::vector<double> ladder;
     try {
-        std::ifstream in(report_path);
-        if (!in) {
-            throw input_error("no simplify-report.json: not a finished tigerlod-simplify output folder");
-        }
-        const json report = json::parse(in);
-        for (const auto& t : report.at("tolerances")) {
-            ladder.push_back(t.at("eps_m").get<double>());
-        }
+        ladder = simplified.option("tolerances_m").get<std::vector<double>>();
     } catch (const json::exception& e) {
-        throw input_error(report_path.string() + ": " + e.what());
-    } catch (const input_error& e) {
-        throw input_error(m_simplified + ": " + e.what());
+        throw input_error((fs::path(m_simplified) / "manifest.json").string() + ": tolerances_m: " + e.what());
     }
+    const PackedTree tree = build_tree(m_original, m_simplified, options);
     std::vector<double> found(tree.skeleton.lod_eps_m.begin() + 1, tree.skeleton.lod_eps_m.end());
     std::sort(ladder.begin(), ladder.end());
     if (found != ladder) {
@@ -110,13 +107,20 @@ int PackStage::run(const StageContext& ctx)
             }
             return out.empty() ? std::string("none") : out + " m";
         };
-        throw input_error(m_simplified + ": simplify-report.json lists the tolerances " + list(ladder) +
+        throw input_error(m_simplified + ": its manifest lists the tolerances " + list(ladder) +
                           ", but the eps-<E>m folders hold " + list(found) +
                           "; re-run tigerlod-simplify rather than pack a partial ladder");
     }
     ctx.log.info("pack: built " + std::to_string(tree.skeleton.nodes.size()) + " nodes in " +
                  std::to_string(tree.skeleton.tiles.size()) + " tiles");
-    const WriteStats ws = write_tree(m_output, tree);
+    // The tree's manifest carries simplify's tolerance contract, so that
+    // tigerlod-verify checks the tree against the options it was made with.
+    json manifest = new_manifest("pack", versions());
+    add_input(manifest, "ingest", ingest);
+    add_input(manifest, "simplify", simplified);
+    manifest["options"] = {{"tile_mb", m_tile_mb}, {"draco_speed", m_draco_speed}};
+    manifest["simplify"] = simplified.doc.at("options");
+    const WriteStats ws = write_tree(m_output, tree, manifest_text(manifest));
     log_removed_leftovers(ctx.log, ws.leftovers_removed);
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 

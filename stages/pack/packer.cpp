@@ -479,7 +479,7 @@ bool holds_exactly(const fs::path& path, std::string_view bytes)
 
 } // namespace
 
-WriteStats write_tree(const fs::path& dir, const PackedTree& tree)
+WriteStats write_tree(const fs::path& dir, const PackedTree& tree, std::string_view manifest)
 {
     WriteStats st;
     std::error_code ec;
@@ -514,6 +514,12 @@ WriteStats write_tree(const fs::path& dir, const PackedTree& tree)
             }
             st.tree_bytes += tile.size;
         }
+        // The manifest before the skeleton, which is the commit point: a run
+        // killed between them leaves the old skeleton beside the new
+        // manifest, and verify refuses the pair until pack runs again (the
+        // manifest then names another ingest or simplify output than the
+        // skeleton was packed from only if the inputs changed).
+        write_file_atomic(dir / "manifest.json", manifest);
         const std::string skeleton = datatree::encode_skeleton(tree.skeleton);
         write_file_atomic(dir / "skeleton.tls", skeleton);
         st.skeleton_bytes = skeleton.size();
@@ -540,7 +546,7 @@ WriteStats write_tree(const fs::path& dir, const PackedTree& tree)
 bool is_pack_leftover(const fs::path& dir)
 {
     // skeleton.tls is written last: without it, pack's own files are its
-    // temporaries, its report and tiles/ holding only tiles.
+    // temporaries, its manifest, its report and tiles/ holding only tiles.
     auto temporary_of = [](const std::string& name, const std::string& of) { return name.rfind(of + ".tmp-", 0) == 0; };
     std::error_code ec;
     for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
@@ -553,8 +559,8 @@ bool is_pack_leftover(const fs::path& dir)
                     return false;
                 }
             }
-        } else if (!(name == "pack-report.json" || temporary_of(name, "pack-report.json") ||
-                     temporary_of(name, "skeleton.tls"))) {
+        } else if (!(name == "pack-report.json" || temporary_of(name, "pack-report.json") || name == "manifest.json" ||
+                     temporary_of(name, "manifest.json") || temporary_of(name, "skeleton.tls"))) {
             return false;
         }
     }

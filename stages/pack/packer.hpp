@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace tigerlod::pack {
@@ -61,16 +62,17 @@ struct WriteStats {
 /// left (temporaries) is removed. Tile files are named by their content: a
 /// file that holds exactly its tile's bytes is kept, one of the name with
 /// other bytes (damaged) is rewritten, a missing one written, each under a
-/// temporary name and renamed; then the skeleton is replaced atomically;
+/// temporary name and renamed; then `manifest` is written to manifest.json
+/// and the skeleton is replaced atomically;
 /// then tile files it no longer names are removed. If writing fails, the
 /// tile files this call created are removed again and the old tree, if
 /// any, is as it was.
-WriteStats write_tree(const std::filesystem::path& dir, const PackedTree& tree);
+WriteStats write_tree(const std::filesystem::path& dir, const PackedTree& tree, std::string_view manifest);
 
 /// Whether `dir` (a folder without skeleton.tls) holds only what a pack
 /// that did not finish leaves: tiles/ with tile files and their
-/// temporaries, pack-report.json, and temporaries of the skeleton and the
-/// report. Such a folder is resumed; any other is refused.
+/// temporaries, pack-report.json, manifest.json, and temporaries of the
+/// skeleton, the manifest and the report. Such a folder is resumed; any other is refused.
 bool is_pack_leftover(const std::filesystem::path& dir);
 
 } // namespace tigerlod::pack

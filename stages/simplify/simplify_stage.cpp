@@ -1,5 +1,6 @@
 #include "stages/simplify/simplify_stage.hpp"
 
+#include "core/digest.hpp"
 #include "core/errors.hpp"
 #include "core/fs.hpp"
 #include "core/parallel.hpp"
@@ -21,6 +22,7 @@
 #include <fstream>
 #include <functional>
 #include <mutex>
+#include <optional>
 #include <sstream>
 #include <thread>
 
@@ -91,6 +93,7 @@ std::string SimplifyStage::help_notes() const
     return "Outputs:\n"
            "  OUTPUT/eps-<E>m/<level>/<partition>.tlc  the owned chains simplified at tolerance E (chain store 1.1)\n"
            "  OUTPUT/simplify-report.json              per tolerance: vertices, candidates, bans, repairs, seconds\n"
+           "  OUTPUT/manifest.json                     inputs' manifest digests; the options and user points used\n"
            "Exit codes: 0 done; 1 bad input data (corrupt store, a tile past 255 classes, bad points file);\n"
            "  2 usage error; 3 environment (no OpenGL context, cannot write).\n";
 }
@@ -102,8 +105,16 @@ int SimplifyStage::run(const StageContext& ctx)
     const std::vector<fs::path> reads{m_common.input, m_colors};
     refuse_to_replace_inputs(m_common.output, reads);
     const auto stores = list_stores(m_common.input, m_common.level);
+    const Manifest ingest = read_manifest(m_common.input, "ingest");
+    std::optional<Manifest> colored;
+    if (!m_colors.empty()) {
+        colored = read_manifest(m_colors, "color");
+        m_common.check_colors(*colored, ingest);
+    }
+    std::string points_sha256;
     if (!m_points.empty()) {
         o.user_points = read_points(m_points);
+        points_sha256 = sha256_file(m_points);
     }
     OutputDir out(m_common.output, m_common.overwrite, reads);
     log_removed_leftovers(ctx.log, out.removed_leftovers());
@@ -289,6 +300,27 @@ int SimplifyStage::run(const StageContext& ctx)
     report["tolerances"] = std::move(tols);
     report["seconds"] = seconds;
     write_file_atomic(out.path() / "simplify-report.json", report.dump(2) + "\n");
+    json manifest = new_manifest("simplify", versions());
+    add_input(manifest, "ingest", ingest);
+    if (colored) {
+        add_input(manifest, "color", *colored);
+    }
+    // What verify needs to check the result is here, the user points
+    // themselves included: a tree is verified against the contract it was
+    // made under, never one retyped by hand.
+    json options = m_common.manifest_options();
+    json lonlat = json::array();
+    for (const auto& p : o.user_points) {
+        lonlat.push_back({p.lon, p.lat});
+    }
+    options["max_reach"] = o.max_reach;
+    options["point_constraints"] = o.point_constraints;
+    options["points"] = {{"file", m_points}, {"sha256", points_sha256}, {"lonlat", std::move(lonlat)}};
+    options["lazy"] = o.lazy;
+    options["compliance"] = m_compliance;
+    options["window_pixels"] = m_window_pixels;
+    manifest["options"] = std::move(options);
+    write_file_atomic(out.path() / "manifest.json", manifest_text(manifest));
     out.commit();
 
     {

@@ -576,6 +576,9 @@ class Verifier {
                 }
             }
         }
+        if (!m_options.tolerance.point_constraints) {
+            return r; // simplify was run without point constraints: points may change side
+        }
         // Every point strictly inside its own unit (a neighbour's unit is
         // checked in the node of the partition that owns it), and inside no
         // other unit of the node: a hole or an island that a shortcut passed

@@ -52,7 +52,10 @@ struct LevelLod {
 };
 
 struct Options {
-    simplify::SimplifyOptions tolerance; ///< class_scale, projection_scale as simplify had them
+    /// The contract simplify worked to (its manifest, through the tree's):
+    /// class_scale, projection_scale, point_constraints (false: points are
+    /// not checked). The metric and the ladder are the skeleton's.
+    simplify::SimplifyOptions tolerance;
     std::vector<simplify::LonLat> user_points;
     unsigned threads = 1;
     size_t max_items = 10000; ///< violations listed one by one at most; all are counted

@@ -1,7 +1,7 @@
 #include "stages/verify/verify_stage.hpp"
 
 #include "core/fs.hpp"
-#include "simplification/stage_options.hpp"
+#include "core/manifest.hpp"
 #include "simplification/stage_options.hpp"
 #include "stages/verify/verifier.hpp"
 
@@ -28,10 +28,6 @@ void VerifyStage::add_args(ArgSet& args)
     args.positional("TREE", &m_tree, "a Data Tree folder (tigerlod-pack)");
     args.positional("ORIGINAL", &m_original, "the tigerlod-ingest output the tree was built from");
     args.positional("OUTPUT", &m_output, "a folder for verify-report.json and violations.gpkg (written atomically)");
-    args.group("Tolerances (as tigerlod-simplify had them)");
-    args.add("class-scale", &m_class_scale, "eps scaled by feature class, e.g. S1400=0.5,H3010=2", "LIST");
-    args.add("no-projection-scale", &m_no_projection_scale, "eps in projected metres, not ground metres");
-    args.add("points", &m_points, "user points (GeoJSON points or CSV lon,lat) that must stay in their unit", "FILE");
     args.group("Report");
     args.add("compare", &m_compare, "an earlier verify-report.json: report new and fixed violations and vertex counts",
              "FILE");
@@ -52,13 +48,9 @@ void VerifyStage::initialize()
     if (!m_compare.empty() && !fs::is_regular_file(m_compare)) {
         throw usage_error("verify: --compare " + m_compare + ": no such file");
     }
-    if (!m_points.empty() && !fs::is_regular_file(m_points)) {
-        throw usage_error("verify: --points " + m_points + ": no such file");
-    }
     if (!fs::is_directory(m_original)) {
         throw usage_error("verify: " + m_original + ": not a folder");
     }
-    simplify::parse_class_scale(m_class_scale, "verify"); // validated before any data is read
 }
 
 std::vector<std::string> VerifyStage::versions() const
@@ -162,20 +154,27 @@ int VerifyStage::run(const StageContext& ctx)
             throw input_error("verify: --compare " + m_compare + ": " + e.what());
         }
     }
+    // The tree's manifest says what it was made from and under which
+    // contract (simplify's options, its user points included): the tree is
+    // checked against that, and against the ingest output it was packed from.
+    const Manifest packed = read_manifest(m_tree, "pack");
+    const Manifest ingest = read_manifest(m_original, "ingest");
+    require_made_from(packed, "ingest", ingest);
+    if (!packed.doc.contains("simplify")) {
+        throw input_error((fs::path(m_tree) / "manifest.json").string() + ": no 'simplify' section");
+    }
     std::string error;
     const auto tree = reader::Tree::open(m_tree, error);
-    // --compare and --points are read whole above: an output over them replaces them only on success.
+    // --compare is read whole above: an output over it replaces it only on success.
     OutputDir out(m_output, m_overwrite, {m_tree, m_original});
     log_removed_leftovers(ctx.log, out.removed_leftovers());
     Options options;
     options.threads =
         m_threads > 0 ? static_cast<unsigned>(m_threads) : std::max(1U, std::thread::hardware_concurrency());
     options.max_items = static_cast<size_t>(m_max_items);
-    options.tolerance.projection_scale = !m_no_projection_scale;
-    options.tolerance.class_scale = simplify::parse_class_scale(m_class_scale, "verify");
-    if (!m_points.empty()) {
-        options.user_points = simplify::read_points(m_points);
-    }
+    options.tolerance =
+        simplify::tolerance_contract(packed.doc.at("simplify"), (fs::path(m_tree) / "manifest.json").string());
+    options.user_points = options.tolerance.user_points;
     Report r;
     if (!tree) {
         // An unreadable skeleton is the tree's failure: one violation, nothing else can be checked.
@@ -191,6 +190,10 @@ int VerifyStage::run(const StageContext& ctx)
     report["tree"] = m_tree;
     report["original"] = m_original;
     report["clean"] = r.total() == 0;
+    report["contract"] = {{"class_scale", options.tolerance.class_scale},
+                          {"projection_scale", options.tolerance.projection_scale},
+                          {"point_constraints", options.tolerance.point_constraints},
+                          {"user_points", options.user_points.size()}};
     report["checked"] = {
         {"nodes", r.nodes}, {"lods", r.lods}, {"chains", r.chains}, {"segments", r.segments}, {"points", r.points}};
     json counts = json::object();

@@ -23,8 +23,7 @@ class VerifyStage final : public Stage {
     std::vector<std::string> versions() const override;
 
   private:
-    std::string m_tree, m_original, m_output, m_class_scale, m_points, m_compare;
-    bool m_no_projection_scale = false;
+    std::string m_tree, m_original, m_output, m_compare;
     bool m_overwrite = false;
     int m_threads = 0;
     int m_max_items = 10000;

@@ -675,10 +675,22 @@ TEST_F(Cli, ColorAndSimplifyRunTheLadderDeterministically)
     const Result d = run("dump", (m_dir / "simp" / "eps-8m" / "block" / "510639202001.tlc").string());
     EXPECT_EQ(d.code, 0);
     EXPECT_NE(d.out.find("simplified eps_m=8 metric=0"), std::string::npos) << d.out;
-    // Colours made at other options are refused.
-    expect_failure(run("simplify", in + " " + (m_dir / "simp3").string() + " --tolerances 2 --colors " + colors), 2,
-                   "run tigerlod-color with the same options");
+    // Colours made at other options, or from another ingest output, are
+    // refused by their manifest before anything is read.
+    const std::string simp3 = (m_dir / "simp3").string();
+    expect_failure(run("simplify", in + " " + simp3 + " --tolerances 2 --colors " + colors), 2,
+                   "has no colours at tolerance 2.0 m (its ladder: [1.0,8.0])");
+    expect_failure(run("simplify", in + " " + simp3 + " --tolerances 8 --tile-pixels 2048 --colors " + colors), 2,
+                   "was made with tile_pixels 4096, this run has 2048");
+    expect_failure(run("simplify", in + " " + simp3 + " --tolerances 8 --class-scale S1400=2 --colors " + colors), 2,
+                   "was made with class_scale {}, this run has {\"S1400\":2.0}");
+    ASSERT_EQ(run("ingest", tiger_config().string() + " " + (m_dir / "in2").string() + " --halo-m 900").code, 0);
+    expect_failure(run("simplify", (m_dir / "in2").string() + " " + simp3 + " --tolerances 8 --colors " + colors), 1,
+                   "colors was made by tigerlod-color from another ingest output than " + (m_dir / "in2").string());
     EXPECT_FALSE(fs::exists(m_dir / "simp3"));
+    // The manifests say the same whatever the threads.
+    EXPECT_EQ(slurp(m_dir / "simp" / "manifest.json").substr(0, 200),
+              slurp(m_dir / "simp2" / "manifest.json").substr(0, 200));
 }
 
 TEST_F(Cli, SimplifyGivesTheSameStoresOnEglAndWithASmallFramebuffer)
@@ -750,8 +762,10 @@ TEST_F(Cli, ColorAndSimplifyRejectBadInput)
     // Colours: a folder without the store's file, and a corrupt file.
     const std::string colors = (m_dir / "colors").string();
     ASSERT_EQ(run("color", (m_dir / "in").string() + " " + colors + " --tolerances 8").code, 0);
-    expect_failure(run("simplify", in + " --tolerances 8 --colors " + (m_dir / "nocolors").string()), 2,
-                   "cannot open the colours file");
+    expect_failure(run("simplify", in + " --tolerances 8 --colors " + (m_dir / "nocolors").string()), 1,
+                   "nocolors: no manifest.json: not a finished tigerlod-color output");
+    fs::rename(m_dir / "colors" / "eps-8m" / "tract" / "51063.colors.json", m_dir / "keep.json");
+    expect_failure(run("simplify", in + " --tolerances 8 --colors " + colors), 2, "cannot open the colours file");
     std::ofstream(m_dir / "colors" / "eps-8m" / "tract" / "51063.colors.json")
         << "{\"schema\": \"tigerlod.colors/1\", ";
     expect_failure(run("simplify", in + " --tolerances 8 --colors " + colors), 1,
@@ -836,6 +850,64 @@ TEST_F(Cli, NoStageWritesOverItsInputs)
     EXPECT_EQ(run("verify", tree + " " + in + " " + out()).code, 0) << slurp(m_dir / "stderr");
 }
 
+TEST_F(Cli, VerifyChecksATreeAgainstTheContractItsManifestsCarry)
+{
+    // Before manifests, verify took simplify's options again by hand: a
+    // mismatch gave false violations or false passes, and a tree was checked
+    // against whatever ingest output it was given.
+    make_tiger();
+    const std::string in = (m_dir / "in").string(), simp = (m_dir / "simp").string(), tree = (m_dir / "tree").string();
+    ASSERT_EQ(run("ingest", tiger_config().string() + " " + in).code, 0);
+    std::ofstream(m_dir / "points.csv") << "lon,lat\n-95.99,40.001\n";
+    const std::string points = (m_dir / "points.csv").string();
+    ASSERT_EQ(run("simplify", in + " " + simp + " --tolerances 8,32 --class-scale S1400=0.5 --points " + points).code,
+              0);
+    ASSERT_EQ(run("pack", in + " " + simp + " " + tree).code, 0);
+    for (const char* f : {"simp/manifest.json", "tree/manifest.json"}) {
+        EXPECT_NE(slurp(m_dir / f).find("\"schema\": \"tigerlod.manifest/1\""), std::string::npos) << f;
+    }
+    // The tree's manifest carries simplify's options, the points themselves included.
+    const std::string tree_manifest = slurp(m_dir / "tree" / "manifest.json");
+    for (const char* part :
+         {"\"stage\": \"pack\"", "\"S1400\": 0.5", "\"lonlat\": [", "-95.99", "\"point_constraints\": true"}) {
+        EXPECT_NE(tree_manifest.find(part), std::string::npos) << part << "\n" << tree_manifest;
+    }
+    const Result v = run("verify", tree + " " + in + " " + (m_dir / "v1").string());
+    ASSERT_EQ(v.code, 0) << v.err;
+    const std::string report = slurp(m_dir / "v1" / "verify-report.json");
+    EXPECT_NE(report.find("\"contract\": {\n    \"class_scale\": {\n      \"S1400\": 0.5\n    },\n    "
+                          "\"projection_scale\": true,\n    \"point_constraints\": true,\n    \"user_points\": 1"),
+              std::string::npos)
+        << report;
+
+    // Another ingest output than the one the tree and the simplified stores were made from.
+    const std::string in2 = (m_dir / "in2").string();
+    ASSERT_EQ(run("ingest", tiger_config().string() + " " + in2 + " --halo-m 900").code, 0);
+    expect_failure(run("verify", tree + " " + in2 + " " + (m_dir / "v2").string()), 1,
+                   "tree was made by tigerlod-pack from another ingest output than " + in2);
+    EXPECT_FALSE(fs::exists(m_dir / "v2"));
+    expect_failure(run("pack", in2 + " " + simp + " " + (m_dir / "tree2").string()), 1,
+                   "simp was made by tigerlod-simplify from another ingest output than " + in2);
+    // The same ingest run again gives the same manifest: it is accepted.
+    ASSERT_EQ(run("ingest", tiger_config().string() + " " + in2 + " --overwrite").code, 0);
+    EXPECT_EQ(slurp(m_dir / "in" / "manifest.json"), slurp(m_dir / "in2" / "manifest.json"));
+    EXPECT_EQ(run("verify", tree + " " + in2 + " " + (m_dir / "v2").string()).code, 0);
+
+    // Without point constraints simplify lets points change side; the tree's
+    // contract says so, and verify does not count them.
+    ASSERT_EQ(run("simplify", in + " " + (m_dir / "free").string() + " --tolerances 8 --no-point-constraints").code, 0);
+    ASSERT_EQ(run("pack", in + " " + (m_dir / "free").string() + " " + (m_dir / "tree3").string()).code, 0);
+    ASSERT_EQ(run("verify", (m_dir / "tree3").string() + " " + in + " " + (m_dir / "v3").string()).code, 0);
+    const std::string free_report = slurp(m_dir / "v3" / "verify-report.json");
+    EXPECT_NE(free_report.find("\"point_constraints\": false"), std::string::npos) << free_report;
+    EXPECT_NE(free_report.find("\"points\": 0"), std::string::npos) << free_report;
+
+    // A tree without a manifest (packed before manifests) is refused, naming it.
+    fs::remove(m_dir / "tree" / "manifest.json");
+    expect_failure(run("verify", tree + " " + in + " " + (m_dir / "v4").string()), 1,
+                   "tree: no manifest.json: not a finished tigerlod-pack output");
+}
+
 TEST_F(Cli, PackRefusesALadderWithATolerancePartMissing)
 {
     make_tiger();
@@ -846,11 +918,11 @@ TEST_F(Cli, PackRefusesALadderWithATolerancePartMissing)
     fs::copy(m_dir / "simp", m_dir / "part", fs::copy_options::recursive);
     fs::remove_all(m_dir / "part" / "eps-32m");
     expect_failure(run("pack", in + " " + (m_dir / "part").string() + " " + out()), 1,
-                   "simplify-report.json lists the tolerances 8, 32 m, but the eps-<E>m folders hold 8 m");
-    // A folder without its report: not a finished simplify output.
-    fs::remove(m_dir / "simp" / "simplify-report.json");
+                   "its manifest lists the tolerances 8, 32 m, but the eps-<E>m folders hold 8 m");
+    // A folder without its manifest: not a finished simplify output.
+    fs::remove(m_dir / "simp" / "manifest.json");
     expect_failure(run("pack", in + " " + simp + " " + out()), 1,
-                   "no simplify-report.json: not a finished tigerlod-simplify output folder");
+                   "simp: no manifest.json: not a finished tigerlod-simplify output");
 }
 
 TEST_F(Cli, ColorAndSimplifyReadOnlyTheStoresIngestWrote)
@@ -914,8 +986,9 @@ TEST_F(Cli, PackDumpExportAndVerifyRejectBadInput)
     expect_failure(run("pack", pack_args + " --draco-speed 11"), 2, "option '--draco-speed' must be in 0..10");
     expect_failure(run("pack", pack_args + " --threads -1"), 2, "option '--threads' must be in 0..1024");
     expect_failure(run("pack", in + " " + (m_dir / "nosimp").string() + " " + out()), 1,
-                   "nosimp: not a tigerlod-simplify output folder");
-    expect_failure(run("pack", in + " " + in + " " + out()), 1, "no eps-<E>m folders: not a tigerlod-simplify output");
+                   "nosimp: no manifest.json: not a finished tigerlod-simplify output");
+    expect_failure(run("pack", in + " " + in + " " + out()), 1,
+                   "in/manifest.json: written by tigerlod-ingest, not tigerlod-simplify");
     // dump
     expect_failure(run("dump", tree + " --lod 1"), 2, "'--lod' and '--geojson' need '--node'");
     expect_failure(run("dump", tree + " --node root --lod -1"), 2, "option '--lod' must be >= 0");
@@ -938,9 +1011,10 @@ TEST_F(Cli, PackDumpExportAndVerifyRejectBadInput)
     no_export();
     // verify
     const std::string verify_args = tree + " " + in + " " + out();
-    expect_failure(run("verify", verify_args + " --class-scale S1400"), 2, "expected CLASS=FACTOR");
-    expect_failure(run("verify", verify_args + " --points " + (m_dir / "nopoints.csv").string()), 2,
-                   "--points " + (m_dir / "nopoints.csv").string() + ": no such file");
+    // Simplify's options come from the tree's manifest, never by hand.
+    expect_failure(run("verify", verify_args + " --class-scale S1400=0.5"), 2, "unknown option '--class-scale'");
+    expect_failure(run("verify", verify_args + " --points " + (m_dir / "points.csv").string()), 2,
+                   "unknown option '--points'");
     expect_failure(run("verify", verify_args + " --compare " + (m_dir / "old.json").string()), 2, "no such file");
     std::ofstream(m_dir / "old.json") << R"({"schema": "tigerlod.color-report/1"})";
     expect_failure(run("verify", verify_args + " --compare " + (m_dir / "old.json").string()), 1,

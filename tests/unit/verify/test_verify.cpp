@@ -104,7 +104,7 @@ class Verify : public ::testing::Test {
             tamper(tree, payloads);
             pack::layout_tiles(tree, payloads, 1ULL << 30);
         }
-        pack::write_tree(dir / "tree", tree);
+        pack::write_tree(dir / "tree", tree, "{}\n");
         std::string error;
         const auto t = reader::Tree::open(dir / "tree", error);
         EXPECT_TRUE(t) << error;
