@@ -66,6 +66,7 @@ std::string VerifyStage::help_notes() const
            "  OUTPUT/verify-report.json  counts checked, violations by kind and by level and LOD, each violation\n"
            "                             with node, chain ids, kind and lon/lat (schema: stages/verify/REPORT.md)\n"
            "  OUTPUT/violations.gpkg     the violations as points, for QGIS\n"
+           "  OUTPUT/manifest.json       the tree's and the original's manifest digests, the options\n"
            "Exit codes: 0 clean; 1 a violation was found (or the tree is unreadable); 2 usage error;\n"
            "  3 environment (cannot write).\n";
 }
@@ -292,6 +293,11 @@ int VerifyStage::run(const StageContext& ctx)
     }
     write_file_atomic(out.path() / "verify-report.json", report.dump(2) + "\n");
     write_gpkg(out.path() / "violations.gpkg", r);
+    json manifest = new_manifest("verify", versions());
+    add_input(manifest, "pack", packed);
+    add_input(manifest, "ingest", ingest);
+    manifest["options"] = {{"max_items", m_max_items}, {"compare", m_compare}};
+    write_file_atomic(out.path() / "manifest.json", manifest_text(manifest));
     out.commit();
 
     // One screen for people.

@@ -875,6 +875,7 @@ TEST_F(Cli, VerifyChecksATreeAgainstTheContractItsManifestsCarry)
     const Result v = run("verify", tree + " " + in + " " + (m_dir / "v1").string());
     ASSERT_EQ(v.code, 0) << v.err;
     const std::string report = slurp(m_dir / "v1" / "verify-report.json");
+    EXPECT_NE(slurp(m_dir / "v1" / "manifest.json").find("\"stage\": \"verify\""), std::string::npos);
     EXPECT_NE(report.find("\"contract\": {\n    \"class_scale\": {\n      \"S1400\": 0.5\n    },\n    "
                           "\"projection_scale\": true,\n    \"point_constraints\": true,\n    \"user_points\": 1"),
               std::string::npos)
