@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <charconv>
+#include <cmath>
 #include <cstdio>
 #include <exception>
 #include <iostream>
@@ -21,7 +22,48 @@ void ArgSet::group(std::string heading)
     m_group = std::move(heading);
 }
 
-void ArgSet::add(std::string name, Target target, std::string help, std::string value_name)
+bool Limits::contains(double v) const noexcept
+{
+    if (std::isnan(v) || (integer && v != std::floor(v))) {
+        return false;
+    }
+    return (min_open ? v > min : v >= min) && (max_open ? v < max : v <= max);
+}
+
+std::string Limits::text() const
+{
+    auto num = [](double v) {
+        std::ostringstream s;
+        s << v;
+        return s.str();
+    };
+    const bool has_min = std::isfinite(min), has_max = std::isfinite(max);
+    if (has_min && has_max) {
+        if (integer) {
+            return "in " + num(min) + ".." + num(max);
+        }
+        return std::string("in ") + (min_open ? "(" : "[") + num(min) + ", " + num(max) + (max_open ? ")" : "]");
+    }
+    if (has_min) {
+        return std::string(min_open ? "> " : ">= ") + num(min);
+    }
+    if (has_max) {
+        return std::string(max_open ? "< " : "<= ") + num(max);
+    }
+    return {};
+}
+
+std::string choices_text(const std::vector<std::string>& choices)
+{
+    std::string out;
+    for (size_t i = 0; i < choices.size(); ++i) {
+        out += (i == 0 ? "" : i + 1 == choices.size() ? " or " : ", ") + choices[i];
+    }
+    return out;
+}
+
+void ArgSet::add(std::string name, Target target, std::string help, std::string value_name, Limits limits,
+                 std::vector<std::string> choices)
 {
     std::string def = std::visit(
         [](auto* p) -> std::string {
@@ -37,7 +79,17 @@ void ArgSet::add(std::string name, Target target, std::string help, std::string 
             }
         },
         target);
-    m_options.push_back({std::move(name), std::move(help), std::move(value_name), m_group, target, def});
+    m_options.push_back(
+        {std::move(name), std::move(help), std::move(value_name), m_group, target, def, limits, std::move(choices)});
+}
+
+void ArgSet::describe_default(const std::string& name, std::string text)
+{
+    for (auto& o : m_options) {
+        if (o.name == name) {
+            o.default_text = std::move(text);
+        }
+    }
 }
 
 void ArgSet::positional(std::string name, std::string* target, std::string help)
@@ -95,9 +147,17 @@ void ArgSet::parse(const std::string& stage, const std::vector<std::string>& arg
                 [&](auto* p) {
                     using T = std::remove_pointer_t<decltype(p)>;
                     if constexpr (std::is_same_v<T, std::string>) {
+                        if (!it->choices.empty() &&
+                            std::find(it->choices.begin(), it->choices.end(), value) == it->choices.end()) {
+                            throw usage_error(stage + ": option '--" + name + "' must be " + choices_text(it->choices) +
+                                              ", not '" + value + "'");
+                        }
                         *p = value;
                     } else if constexpr (!std::is_same_v<T, bool>) {
                         *p = parse_number<T>(stage, name, value);
+                        if (!it->limits.contains(static_cast<double>(*p))) {
+                            throw usage_error(stage + ": option '--" + name + "' must be " + it->limits.text());
+                        }
                     }
                 },
                 it->target);
@@ -167,6 +227,16 @@ int run_stage_impl(Stage& stage, const char* name, const char* description, int 
         args.add("verbose", &verbose,
                  "log progress to stderr, each line with the elapsed time and the memory resident then");
         stage.add_args(args);
+        std::string config_file;
+        const std::string section = stage.config_section();
+        if (!section.empty()) {
+            args.group("Config");
+            args.add("config", &config_file,
+                     "take options from the '" + section +
+                         "' section of this config file (keys in configs/README.md); options given on the command "
+                         "line win",
+                     "FILE");
+        }
         std::vector<std::string> argv_list(argv + 1, argv + argc);
         for (auto& a : argv_list) { // -h and -v as short forms
             if (a == "-h") {
@@ -195,6 +265,20 @@ int run_stage_impl(Stage& stage, const char* name, const char* description, int 
                 std::cout << "  " << line << '\n';
             }
             return exit_ok;
+        }
+        if (!section.empty()) {
+            // The config's flags first: the command line's own come after and win.
+            for (size_t i = 0; i < argv_list.size(); ++i) {
+                if (argv_list[i] == "--config" && i + 1 < argv_list.size()) {
+                    config_file = argv_list[i + 1];
+                } else if (argv_list[i].rfind("--config=", 0) == 0) {
+                    config_file = argv_list[i].substr(9);
+                }
+            }
+            if (!config_file.empty()) {
+                auto from_config = stage.config_args(config_file);
+                argv_list.insert(argv_list.begin(), from_config.begin(), from_config.end());
+            }
         }
         args.parse(name, argv_list);
         stage.initialize();

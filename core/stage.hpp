@@ -10,11 +10,31 @@
 #include "core/log.hpp"
 
 #include <filesystem>
+#include <limits>
 #include <string>
 #include <variant>
 #include <vector>
 
 namespace tigerlod {
+
+/// The values a numeric option (or config key) may take.
+struct Limits {
+    double min = -std::numeric_limits<double>::infinity();
+    double max = std::numeric_limits<double>::infinity();
+    bool min_open = false, max_open = false; ///< the bound itself excluded
+    bool integer = false;
+    bool contains(double v) const noexcept;
+    /// How a message says it, after "must be ": "in 64..16384", "in (0, 0.5]",
+    /// ">= 0", "> 0"; empty when anything goes.
+    std::string text() const;
+};
+
+/// "a, b or c": how a message lists the values an option may take.
+std::string choices_text(const std::vector<std::string>& choices);
+
+/// The worker threads every stage takes: 0 for all cores, at most 1024.
+/// Outputs never depend on it.
+inline constexpr Limits thread_limits{0, 1024, false, false, true};
 
 /// The options and positional arguments of one stage.
 class ArgSet {
@@ -24,8 +44,14 @@ class ArgSet {
     /// Start a new heading in --help.
     void group(std::string heading);
     /// Declare `--name` bound to `target`; its current value is the default.
-    /// bool options are flags and take no value.
-    void add(std::string name, Target target, std::string help, std::string value_name = "");
+    /// bool options are flags and take no value. A number outside `limits`,
+    /// or text not among `choices` (when given), is a usage_error naming
+    /// the option.
+    void add(std::string name, Target target, std::string help, std::string value_name = "", Limits limits = {},
+             std::vector<std::string> choices = {});
+    /// What --help says the default of `--name` is, in place of its initial
+    /// value (an option that overrides a config key: "ingest.halo_m").
+    void describe_default(const std::string& name, std::string text);
     /// Declare a positional argument (all are required, in order).
     void positional(std::string name, std::string* target, std::string help);
 
@@ -39,6 +65,8 @@ class ArgSet {
         std::string name, help, value_name, group;
         Target target;
         std::string default_text;
+        Limits limits;
+        std::vector<std::string> choices;
     };
     struct Positional {
         std::string name, help;
@@ -72,6 +100,13 @@ class Stage {
     virtual std::vector<std::string> versions() const { return {}; }
     /// Extra text for --help after the options (e.g. notes on outputs).
     virtual std::string help_notes() const { return {}; }
+    /// The config section this stage takes with `--config FILE` ("" for
+    /// none): run_stage declares the option, and puts config_args(FILE)
+    /// before the command line's own arguments, so that flags given there win.
+    virtual std::string config_section() const { return {}; }
+    /// The section's keys as this stage's flags. Throws config_error naming
+    /// the file, line and key.
+    virtual std::vector<std::string> config_args(const std::filesystem::path& /*file*/) const { return {}; }
 }; // class Stage
 
 namespace detail {

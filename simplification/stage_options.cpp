@@ -1,5 +1,6 @@
 #include "simplification/stage_options.hpp"
 
+#include "config/schema.hpp"
 #include "core/errors.hpp"
 #include "core/metric.hpp"
 #include "core/projection.hpp"
@@ -24,21 +25,17 @@ void CommonOptions::add(ArgSet& args)
     args.positional("INPUT", &input, "a tigerlod-ingest output folder (INPUT/<level>/<partition>.tlc)");
     args.positional("OUTPUT", &output, "the output folder, written under a temporary name and renamed on success");
     args.group("Tolerances");
-    args.add("tolerances", &m_tolerances, "the ladder: increasing tolerances in ground metres, comma-separated",
-             "LIST");
-    args.add("metric", &m_metric, "distance metric of the tolerance: l2, l1 or linf", "NAME");
-    args.add("class-scale", &m_class_scale, "scale eps by feature class, e.g. S1400=0.5,H3010=2 (other classes: 1)",
-             "LIST");
-    args.add("no-projection-scale", &m_no_projection_scale,
-             "use eps in projected metres; by default it is corrected by the local projection scale\n"
-             "      so it means ground metres everywhere");
+    config::add_option(args, "simplify.tolerances_m", &m_tolerances);
+    config::add_option(args, "simplify.metric", &m_metric);
+    config::add_option(args, "simplify.class_scale", &m_class_scale);
+    config::add_option(args, "simplify.projection_scale", &m_no_projection_scale);
     args.group("Rendering");
-    args.add("pixel-fraction", &m_pixel_fraction, "pixel size as a fraction of the smallest eps (at most 0.5)", "F");
-    args.add("tile-pixels", &m_tile_pixels, "render tile width and height in pixels (64..16384)", "N");
-    args.add("max-classes", &m_max_classes, "stencil classes per tile (2..255); a tile needing more is split", "N");
+    config::add_option(args, "simplify.pixel_fraction", &m_pixel_fraction);
+    config::add_option(args, "simplify.tile_pixels", &m_tile_pixels);
+    config::add_option(args, "simplify.max_classes", &m_max_classes);
     args.group("Run");
     args.add("level", &level, "only this level (default: all)", "NAME");
-    args.add("threads", &m_threads, "worker threads, 0 for all cores", "N");
+    config::add_option(args, "simplify.threads", &m_threads);
     args.add("overwrite", &overwrite, "replace OUTPUT if it exists");
 }
 
@@ -69,25 +66,9 @@ void CommonOptions::initialize(const std::string& stage)
     if (tolerances.empty()) {
         fail("tolerances", "is empty: give at least one tolerance in metres");
     }
-    const auto metric = parse_metric(m_metric);
-    if (!metric) {
-        fail("metric", "must be l2, l1 or linf, not '" + m_metric + "'");
-    }
-    options.metric = *metric;
+    options.metric = *parse_metric(m_metric); // one of the option's choices
     options.class_scale = parse_class_scale(m_class_scale, stage);
     options.projection_scale = !m_no_projection_scale;
-    if (!(m_pixel_fraction > 0 && m_pixel_fraction <= 0.5)) {
-        fail("pixel-fraction", "must be in (0, 0.5]");
-    }
-    if (m_tile_pixels < 64 || m_tile_pixels > 16384) {
-        fail("tile-pixels", "must be in 64..16384");
-    }
-    if (m_max_classes < 2 || m_max_classes > 255) {
-        fail("max-classes", "must be in 2..255");
-    }
-    if (m_threads < 0 || m_threads > 256) {
-        fail("threads", "must be in 0..256");
-    }
     options.color.pixel_fraction = m_pixel_fraction;
     options.color.tile_pixels = static_cast<uint32_t>(m_tile_pixels);
     options.color.max_classes = static_cast<uint32_t>(m_max_classes);

@@ -1,5 +1,6 @@
 #include "stages/color/color_stage.hpp"
 
+#include "config/config_file.hpp"
 #include "core/fs.hpp"
 #include "formats/chains/chain_store.hpp"
 #include "simplification/color_io.hpp"
@@ -14,6 +15,11 @@ namespace fs = std::filesystem;
 using json = nlohmann::ordered_json;
 
 namespace tigerlod::color {
+
+std::vector<std::string> ColorStage::config_args(const fs::path& file) const
+{
+    return config::stage_args(file, name);
+}
 
 std::vector<std::string> ColorStage::versions() const
 {

@@ -19,6 +19,8 @@ class ColorStage final : public Stage {
     int run(const StageContext& ctx) override;
     std::string help_notes() const override;
     std::vector<std::string> versions() const override;
+    std::string config_section() const override { return "simplify"; }
+    std::vector<std::string> config_args(const std::filesystem::path& file) const override;
 
   private:
     simplify::CommonOptions m_common;

@@ -2,6 +2,7 @@
 
 #include "core/digest.hpp"
 #include "core/errors.hpp"
+#include "config/schema.hpp"
 #include "core/fs.hpp"
 #include "core/manifest.hpp"
 #include "formats/chains/chain_store.hpp"
@@ -81,26 +82,16 @@ void IngestStage::add_args(ArgSet& args)
     args.add("validate", &m_validate,
              "resolve the config, open every input and check its layers and fields, print the resolved\n"
              "      options, and exit without reading features or writing anything");
-    args.add("halo-m", &m_halo_m, "halo distance in metres (overrides ingest.halo_m; default 1000)", "M");
-    args.add("threads", &m_threads, "worker threads, 0 for all cores (overrides ingest.threads)", "N");
-    args.add("max-problem-samples", &m_max_problem_samples, "problems listed with their location in the report", "N");
+    config::add_option(args, "ingest.halo_m", &m_halo_m);
+    args.describe_default("halo-m", "the config's ingest.halo_m, else 1000");
+    config::add_option(args, "ingest.threads", &m_threads);
+    args.describe_default("threads", "the config's ingest.threads, else 0");
+    args.add("max-problem-samples", &m_max_problem_samples, "problems listed with their location in the report", "N",
+             Limits{0, std::numeric_limits<double>::infinity(), false, false, true});
     args.add("whole-map", &m_whole_map,
              "build a polygons dataset of several files, or a TIGER dataset of several counties, as one\n"
              "      map in memory, not region by region\n"
              "      (the same output; memory then follows the dataset, not its largest region)");
-}
-
-void IngestStage::initialize()
-{
-    if (m_halo_m != -1.0 && !(m_halo_m >= 0)) {
-        throw usage_error("ingest: option '--halo-m' must be >= 0");
-    }
-    if (m_threads < -1 || m_threads > 256) {
-        throw usage_error("ingest: option '--threads' must be in 0..256");
-    }
-    if (m_max_problem_samples < 0) {
-        throw usage_error("ingest: option '--max-problem-samples' must be >= 0");
-    }
 }
 
 std::vector<std::string> IngestStage::versions() const

@@ -16,7 +16,6 @@ class IngestStage final : public Stage {
         "Read TIGER/Line EDGES+FACES, polygon layers or line layers named by a config, snap, project,\n"
         "check the planar map with exact predicates, and write one chain store per (level, partition).";
     void add_args(ArgSet& args) override;
-    void initialize() override;
     int run(const StageContext& ctx) override;
     std::vector<std::string> versions() const override;
     std::string help_notes() const override;

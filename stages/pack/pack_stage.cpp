@@ -1,5 +1,7 @@
 #include "stages/pack/pack_stage.hpp"
 
+#include "config/config_file.hpp"
+#include "config/schema.hpp"
 #include "core/fs.hpp"
 #include "core/manifest.hpp"
 #include "formats/chains/chain_store.hpp"
@@ -27,22 +29,13 @@ void PackStage::add_args(ArgSet& args)
     args.positional("SIMPLIFIED", &m_simplified, "a tigerlod-simplify output folder: one LOD per eps-<E>m folder");
     args.positional("OUTPUT", &m_output, "the Data Tree folder, created or updated in place");
     args.group("Packing");
-    args.add("tile-mb", &m_tile_mb, "target tile file size in MiB: a subtree up to it is one tile", "MB");
-    args.add("draco-speed", &m_draco_speed, "Draco encoder speed, 0 (smallest) .. 10 (fastest)", "N");
-    args.add("threads", &m_threads, "worker threads, 0 for all cores", "N");
+    config::add_option(args, "pack.tile_mb", &m_tile_mb);
+    config::add_option(args, "pack.draco_speed", &m_draco_speed);
+    config::add_option(args, "pack.threads", &m_threads);
 }
 
 void PackStage::initialize()
 {
-    if (!(m_tile_mb > 0) || !std::isfinite(m_tile_mb) || m_tile_mb > 4096) {
-        throw usage_error("pack: option '--tile-mb' must be in (0, 4096]");
-    }
-    if (m_draco_speed < 0 || m_draco_speed > 10) {
-        throw usage_error("pack: option '--draco-speed' must be in 0..10");
-    }
-    if (m_threads < 0 || m_threads > 1024) {
-        throw usage_error("pack: option '--threads' must be in 0..1024");
-    }
     refuse_to_replace_inputs(m_output, {m_original, m_simplified});
     const fs::path out(m_output);
     std::error_code ec;
@@ -66,6 +59,11 @@ std::string PackStage::help_notes() const
            "contract)\n"
            "Exit codes: 0 done; 1 bad input data (corrupt or inconsistent stores); 2 usage error;\n"
            "  3 environment (cannot read or write).\n";
+}
+
+std::vector<std::string> PackStage::config_args(const fs::path& file) const
+{
+    return config::stage_args(file, name);
 }
 
 std::vector<std::string> PackStage::versions() const

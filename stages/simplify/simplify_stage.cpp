@@ -1,5 +1,7 @@
 #include "stages/simplify/simplify_stage.hpp"
 
+#include "config/config_file.hpp"
+#include "config/schema.hpp"
 #include "core/digest.hpp"
 #include "core/errors.hpp"
 #include "core/fs.hpp"
@@ -35,24 +37,14 @@ void SimplifyStage::add_args(ArgSet& args)
 {
     m_common.add(args);
     args.group("Simplification");
-    args.add("max-reach", &m_max_reach, "longest shortcut in vertices, 0 for no cap (the paper's heuristic)", "N");
-    args.add("no-point-constraints", &m_no_point_constraints,
-             "do not keep the units' internal points and user points on their side");
-    args.add("points", &m_points, "user point constraints: GeoJSON points or CSV with lon,lat columns", "FILE");
-    args.add("lazy", &m_lazy,
-             "draw only the shortcuts starting at a vertex of the current shortest paths, round after\n"
-             "      round (the default: same result, fewer segments drawn)");
-    args.add("exhaustive", &m_exhaustive, "draw every shortcut the far rule cannot settle, in one round (same result)");
-    args.add("compliance", &m_compliance,
-             "ssbo: one pass setting a flag per shortcut in a storage buffer; readback: the paper's\n"
-             "      unique-colour read-back loop (Algorithm 5.1)",
-             "MODE");
-    args.add("gl", &m_gl, "OpenGL backend: osmesa (llvmpipe, everywhere) or egl (a GPU, or Mesa's device)", "NAME");
-    args.add("window-pixels", &m_window_pixels,
-             "the small framebuffer's width and height (8..16384): a tile whose tested parts fit in it\n"
-             "      is drawn there, the others in one of --tile-pixels (stores measured identical from 64\n"
-             "      to 4096)",
-             "N");
+    config::add_option(args, "simplify.max_reach", &m_max_reach);
+    config::add_option(args, "simplify.point_constraints", &m_no_point_constraints);
+    config::add_option(args, "simplify.points", &m_points);
+    args.add("lazy", &m_lazy, "the default, said explicitly: see --exhaustive");
+    config::add_option(args, "simplify.lazy", &m_exhaustive);
+    config::add_option(args, "simplify.compliance", &m_compliance);
+    config::add_option(args, "simplify.gl", &m_gl);
+    config::add_option(args, "simplify.window_pixels", &m_window_pixels);
     args.add("colors", &m_colors, "use the tiles and classes tigerlod-color wrote to DIR instead of computing them",
              "DIR");
 }
@@ -60,18 +52,6 @@ void SimplifyStage::add_args(ArgSet& args)
 void SimplifyStage::initialize()
 {
     m_common.initialize(name);
-    if (m_max_reach < 0) {
-        throw usage_error("simplify: option '--max-reach' must be >= 0");
-    }
-    if (m_compliance != "ssbo" && m_compliance != "readback") {
-        throw usage_error("simplify: option '--compliance' must be ssbo or readback, not '" + m_compliance + "'");
-    }
-    if (!gl::parse_backend(m_gl)) {
-        throw usage_error("simplify: option '--gl' must be osmesa or egl, not '" + m_gl + "'");
-    }
-    if (m_window_pixels < 8 || m_window_pixels > 16384) {
-        throw usage_error("simplify: option '--window-pixels' must be in 8..16384");
-    }
     auto& o = m_common.options;
     o.max_reach = static_cast<uint32_t>(m_max_reach);
     o.point_constraints = !m_no_point_constraints;
@@ -79,6 +59,11 @@ void SimplifyStage::initialize()
         throw usage_error("simplify: options '--lazy' and '--exhaustive' exclude each other");
     }
     o.lazy = !m_exhaustive;
+}
+
+std::vector<std::string> SimplifyStage::config_args(const fs::path& file) const
+{
+    return config::stage_args(file, name);
 }
 
 std::vector<std::string> SimplifyStage::versions() const

@@ -1,5 +1,7 @@
 #include "stages/verify/verify_stage.hpp"
 
+#include "config/config_file.hpp"
+#include "config/schema.hpp"
 #include "core/fs.hpp"
 #include "core/manifest.hpp"
 #include "simplification/stage_options.hpp"
@@ -31,26 +33,25 @@ void VerifyStage::add_args(ArgSet& args)
     args.group("Report");
     args.add("compare", &m_compare, "an earlier verify-report.json: report new and fixed violations and vertex counts",
              "FILE");
-    args.add("max-items", &m_max_items, "violations listed one by one at most (all are counted)", "N");
+    config::add_option(args, "verify.max_items", &m_max_items);
     args.group("Run");
-    args.add("threads", &m_threads, "worker threads, 0 for all cores; the report does not depend on it", "N");
+    config::add_option(args, "verify.threads", &m_threads);
     args.add("overwrite", &m_overwrite, "replace OUTPUT if it exists");
 }
 
 void VerifyStage::initialize()
 {
-    if (m_threads < 0 || m_threads > 1024) {
-        throw usage_error("verify: option '--threads' must be in 0..1024");
-    }
-    if (m_max_items < 0) {
-        throw usage_error("verify: option '--max-items' must be >= 0");
-    }
     if (!m_compare.empty() && !fs::is_regular_file(m_compare)) {
         throw usage_error("verify: --compare " + m_compare + ": no such file");
     }
     if (!fs::is_directory(m_original)) {
         throw usage_error("verify: " + m_original + ": not a folder");
     }
+}
+
+std::vector<std::string> VerifyStage::config_args(const fs::path& file) const
+{
+    return config::stage_args(file, name);
 }
 
 std::vector<std::string> VerifyStage::versions() const

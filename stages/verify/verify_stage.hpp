@@ -21,6 +21,8 @@ class VerifyStage final : public Stage {
     int run(const StageContext& ctx) override;
     std::string help_notes() const override;
     std::vector<std::string> versions() const override;
+    std::string config_section() const override { return "verify"; }
+    std::vector<std::string> config_args(const std::filesystem::path& file) const override;
 
   private:
     std::string m_tree, m_original, m_output, m_compare;

@@ -2,6 +2,7 @@
 // stderr, determinism, and every kind of bad input failing with the
 // documented exit code, a message naming the file and fault, and nothing
 // half-written.
+#include "config/schema.hpp"
 #include "formats/chains/chain_store.hpp"
 #include "../support/processes.hpp"
 
@@ -457,27 +458,28 @@ TEST_F(Cli, EveryValidatedConfigKeyRejectsBadValues)
         {"levels:\n  - {name: Bad-Name, code: US}\n", "levels[0].name is required"},
         {"levels: []\n", "'levels' must be a non-empty list"},
         {"projection: {kind: mercator}\n", "'projection.kind' must be albers, lcc, tm or utm, got 'mercator'"},
-        {"projection: {kind: utm, utm_zone: 61}\n", "'utm_zone' must be in 1..60"},
-        {"projection: {stdlat1: 95}\n", "standard parallels must lie in (-90, 90)"},
-        {"projection: {lat0: abc}\n", "'lat0' has the wrong type"},
-        {"ingest: {threads: -1}\n", "'ingest.threads' must be in 0..256"},
+        {"projection: {kind: utm, utm_zone: 61}\n", "'projection.utm_zone' must be in 1..60"},
+        {"projection: {stdlat1: 95}\n", "'projection.stdlat1' must be in (-90, 90)"},
+        {"projection: {lat0: abc}\n", "'projection.lat0' must be a number"},
+        {"ingest: {threads: -1}\n", "'ingest.threads' must be in 0..1024"},
         {"ingest: {halo_m: -5}\n", "'ingest.halo_m' must be >= 0"},
         {"projection: {nope: 1}\n", "unknown key 'projection.nope'"},
         {"simplify: {tolerance: [1]}\n", "unknown key 'simplify.tolerance'"},
-        {"simplify: {lazy: sometimes}\n", "'lazy' has the wrong type"},
+        {"simplify: {lazy: sometimes}\n", "'simplify.lazy' must be true or false"},
         {"pack: {tile_size: 4}\n", "unknown key 'pack.tile_size'"},
         // Values the pipeline turns into flags: the wrong type would reach a
         // stage as a malformed flag (`--tolerances 1,,4`) or not at all.
-        {"simplify: {tolerances_m: [1, x, 4]}\n", "'tolerances_m' must be a list of numbers, e.g. [1, 4, 16, 64]"},
-        {"simplify: {tolerances_m: [1, ~, 4]}\n", "'tolerances_m' must be a list of numbers"},
-        {"simplify: {tolerances_m: 4}\n", "'tolerances_m' must be a list of numbers"},
-        {"simplify: {class_scale: [S1400]}\n", "'class_scale' must be a map of class to number"},
-        {"simplify: {class_scale: {S1400: half}}\n", "'class_scale' must be a map of class to number"},
-        {"simplify: {metric: [l2]}\n", "'metric' must be a string"},
-        {"simplify: {max_reach: 2.5}\n", "'max_reach' must be an integer"},
-        {"simplify: {pixel_fraction: a}\n", "'pixel_fraction' must be a number"},
-        {"pack: {tile_mb: big}\n", "'tile_mb' must be a number"},
-        {"pack: {threads: ~}\n", "'threads' must be an integer"},
+        {"simplify: {tolerances_m: [1, x, 4]}\n",
+         "'simplify.tolerances_m' must be a list of numbers, e.g. [1, 4, 16, 64]"},
+        {"simplify: {tolerances_m: [1, ~, 4]}\n", "'simplify.tolerances_m' must be a list of numbers"},
+        {"simplify: {tolerances_m: 4}\n", "'simplify.tolerances_m' must be a list of numbers"},
+        {"simplify: {class_scale: [S1400]}\n", "'simplify.class_scale' must be a map of class to number"},
+        {"simplify: {class_scale: {S1400: half}}\n", "'simplify.class_scale' must be a map of class to number"},
+        {"simplify: {metric: [l2]}\n", "'simplify.metric' must be l2, l1 or linf"},
+        {"simplify: {max_reach: 2.5}\n", "'simplify.max_reach' must be an integer"},
+        {"simplify: {pixel_fraction: a}\n", "'simplify.pixel_fraction' must be a number"},
+        {"pack: {tile_mb: big}\n", "'pack.tile_mb' must be a number"},
+        {"pack: {threads: ~}\n", "'pack.threads' must be an integer"},
     };
     for (const auto& [extra, fragment] : cases) {
         SCOPED_TRACE(extra);
@@ -503,8 +505,8 @@ TEST_F(Cli, EveryValidatedConfigKeyRejectsBadValues)
         expect_failure(run("ingest", config(body).string() + " " + out()), 2, fragment);
     }
     expect_failure(run("ingest", config("dataset: {kind: tiger, edges: [edges.zip], faces: [faces.zip]}\n").string() +
-                                     " " + out() + " --threads 999"),
-                   2, "option '--threads' must be in 0..256");
+                                     " " + out() + " --threads 2000"),
+                   2, "option '--threads' must be in 0..1024");
     expect_failure(run("ingest", tiger_config().string() + " " + out() + " --threads two"), 2,
                    "option '--threads' needs a number, got 'two'");
     expect_failure(run("ingest", tiger_config().string() + " " + out() + " --max-problem-samples -1"), 2,
@@ -756,7 +758,7 @@ TEST_F(Cli, ColorAndSimplifyRejectBadInput)
         expect_failure(run(tool, in + " --pixel-fraction 0.9"), 2, "option '--pixel-fraction' must be in (0, 0.5]");
         expect_failure(run(tool, in + " --tile-pixels 10"), 2, "option '--tile-pixels' must be in 64..16384");
         expect_failure(run(tool, in + " --max-classes 300"), 2, "option '--max-classes' must be in 2..255");
-        expect_failure(run(tool, in + " --threads 999"), 2, "option '--threads' must be in 0..256");
+        expect_failure(run(tool, in + " --threads 2000"), 2, "option '--threads' must be in 0..1024");
     }
     expect_failure(run("simplify", in + " --max-reach -1"), 2, "option '--max-reach' must be >= 0");
     // Colours: a folder without the store's file, and a corrupt file.
@@ -848,6 +850,60 @@ TEST_F(Cli, NoStageWritesOverItsInputs)
     EXPECT_TRUE(fs::exists(m_dir / "colors" / "color-report.json"));
     EXPECT_TRUE(fs::exists(m_dir / "simp" / "simplify-report.json"));
     EXPECT_EQ(run("verify", tree + " " + in + " " + out()).code, 0) << slurp(m_dir / "stderr");
+}
+
+TEST_F(Cli, EveryConfigKeyOfAStageIsOneOfItsOptions)
+{
+    // The schema says which stage takes a key as which option; each stage's
+    // --help shows that option with the key it mirrors.
+    size_t checked = 0;
+    for (const auto& k : tigerlod::config::keys()) {
+        std::istringstream stages(k.stages);
+        for (std::string stage; stages >> stage;) {
+            const Result r = run(stage, "--help");
+            ASSERT_EQ(r.code, 0);
+            EXPECT_NE(r.out.find("  --" + k.flag + (k.type == tigerlod::config::Type::boolean ? "\n" : " ")),
+                      std::string::npos)
+                << stage << " has no --" << k.flag;
+            EXPECT_NE(r.out.find("config: " + k.name), std::string::npos) << stage << " " << k.name;
+            ++checked;
+        }
+    }
+    EXPECT_GE(checked, 25U);
+}
+
+TEST_F(Cli, StagesTakeTheirSectionFromTheConfigAndTheCommandLineWins)
+{
+    make_tiger();
+    const std::string in = (m_dir / "in").string();
+    ASSERT_EQ(run("ingest", tiger_config().string() + " " + in).code, 0);
+    const fs::path cfg = tiger_config("edges.zip", "faces.zip",
+                                      "simplify:\n  tolerances_m: [8, 32]\n  tile_pixels: 2048\n"
+                                      "pack:\n  tile_mb: 0.5\nverify:\n  max_items: 3\n");
+    const std::string with = " --config " + cfg.string();
+    ASSERT_EQ(run("color", in + " " + (m_dir / "c1").string() + with).code, 0);
+    EXPECT_TRUE(fs::exists(m_dir / "c1" / "eps-8m") && fs::exists(m_dir / "c1" / "eps-32m"));
+    EXPECT_NE(slurp(m_dir / "c1" / "manifest.json").find("\"tile_pixels\": 2048"), std::string::npos);
+    // A flag on the command line wins over the config's key.
+    ASSERT_EQ(run("color", in + " " + (m_dir / "c2").string() + with + " --tolerances 8").code, 0);
+    EXPECT_TRUE(fs::exists(m_dir / "c2" / "eps-8m"));
+    EXPECT_FALSE(fs::exists(m_dir / "c2" / "eps-32m"));
+    // simplify with the same config takes color's output: the options agree.
+    const std::string simp = (m_dir / "simp").string(), tree = (m_dir / "tree").string();
+    const Result s = run("simplify", in + " " + simp + with + " --colors " + (m_dir / "c1").string());
+    ASSERT_EQ(s.code, 0) << s.err;
+    ASSERT_EQ(run("pack", in + " " + simp + " " + tree + with).code, 0);
+    EXPECT_NE(slurp(m_dir / "tree" / "manifest.json").find("\"tile_mb\": 0.5"), std::string::npos);
+    ASSERT_EQ(run("verify", tree + " " + in + " " + (m_dir / "v").string() + with).code, 0);
+    EXPECT_NE(slurp(m_dir / "v" / "manifest.json").find("\"max_items\": 3"), std::string::npos);
+    // A bad value in the config: the file, the line, the key; nothing written.
+    const fs::path bad = tiger_config("edges.zip", "faces.zip", "simplify:\n  tile_pixels: 10\n");
+    expect_failure(run("color", in + " " + out() + " --config " + bad.string()), 2,
+                   bad.string() + ":7: 'simplify.tile_pixels' must be in 64..16384");
+    expect_failure(run("pack", in + " " + simp + " " + out() + " --config " + (m_dir / "none.yaml").string()), 2,
+                   "none.yaml: no such config file");
+    // Stages without a section take no --config.
+    expect_failure(run("export", tree + " " + (m_dir / "x.gpkg").string() + with), 2, "unknown option '--config'");
 }
 
 TEST_F(Cli, VerifyChecksATreeAgainstTheContractItsManifestsCarry)

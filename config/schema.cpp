@@ -1,0 +1,285 @@
+#include "config/schema.hpp"
+
+#include <algorithm>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+
+namespace tigerlod::config {
+
+namespace {
+
+constexpr double inf = std::numeric_limits<double>::infinity();
+
+Key section(std::string name, std::string doc)
+{
+    return {std::move(name), Type::mapping, std::move(doc), "", {}, {}, "", true, ""};
+}
+
+Key entry(std::string name, Type type, std::string doc, std::string def, Limits limits = {},
+          std::vector<std::string> choices = {}, std::string flag = "", std::string stages = "", bool flag_when = true)
+{
+    return {std::move(name), type,      std::move(doc),   std::move(def), limits, std::move(choices),
+            std::move(flag), flag_when, std::move(stages)};
+}
+
+constexpr Limits integer(double min, double max = inf)
+{
+    return {min, max, false, false, true};
+}
+
+std::vector<Key> make_keys()
+{
+    const std::string both = "color simplify";
+    return {
+        entry("name", Type::text, "required; lowercase letters, digits, `_`, `-`; outputs go to `out/<name>/`", ""),
+        entry("description", Type::text, "free text", ""),
+        section("dataset", "what to read"),
+        entry("dataset.kind", Type::choice,
+              "`tiger` (EDGES + FACES), `polygons` (any polygon layer: tracts, TopoJSON) or `lines` (any line "
+              "layer: contours, rivers)",
+              "required", {}, {"tiger", "polygons", "lines"}),
+        entry("dataset.edges", Type::paths, "tiger: TIGER/Line EDGES files (`.zip` is read through `/vsizip/`)",
+              "required for tiger"),
+        entry("dataset.faces", Type::paths, "tiger: TIGER/Line FACES files, the same counties as `edges`",
+              "required for tiger"),
+        entry("dataset.inputs", Type::paths, "polygons, lines: files GDAL reads", "required for those"),
+        entry("dataset.layer", Type::text, "the layer to read when a file holds several", "the only layer"),
+        entry("dataset.code_field", Type::text,
+              "polygons: the attribute with each unit's finest code (e.g. `GEOID10`, us-atlas `id`)",
+              "required for polygons"),
+        entry("dataset.class_field", Type::text,
+              "attribute stored as each chain's feature class (the class covering most of the chain)",
+              "tiger: `MTFCC`"),
+        entry("dataset.intpt_lat_field", Type::text,
+              "attribute with a unit's internal point latitude; a unit without one gets a computed point",
+              "tiger: `INTPTLAT`"),
+        entry("dataset.intpt_lon_field", Type::text, "the same for longitude; goes with `intpt_lat_field`",
+              "tiger: `INTPTLON`"),
+        section("dataset.fetch", "`{npm: PACKAGE@VERSION, into: FOLDER}`: the pipeline fetches the package into "
+                                 "FOLDER before ingest (the default config's us-atlas)"),
+        entry("dataset.fetch.npm", Type::text, "the npm package and version, e.g. `us-atlas@3.0.1`", "required"),
+        entry("dataset.fetch.into", Type::text, "the folder it goes into, relative to the config", "required"),
+        entry("levels", Type::levels,
+              "semantic levels, coarsest first, each unit of a level inside one unit of the level before (ingest "
+              "stops with exit 1 naming the level, the unit, its two parents and where they are when the data "
+              "says otherwise; a `code` level after the first, or a `prefix` no longer than the one before, is a "
+              "config error, under `--validate` too); each `{name, ...}` with exactly one of `code` (a constant: "
+              "one unit, e.g. the nation), `fields` (attributes concatenated, TIGER FACES) or `prefix` (the first "
+              "N characters of `code_field`)",
+              "tiger: state > county > tract > block_group > block with 2020 codes; lines: one level `lines`"),
+        section("projection", "the projection onto ingest's integer grid"),
+        entry("projection.kind", Type::choice, "the projection", "`albers`", {}, {"albers", "lcc", "tm", "utm"}),
+        entry("projection.lon0", Type::number, "central meridian, degrees", "-96", {-180, 180}),
+        entry("projection.lat0", Type::number, "latitude of the origin of y, degrees", "23", {-90, 90}),
+        entry("projection.stdlat1", Type::number, "first standard parallel (albers, lcc)", "29.5",
+              {-90, 90, true, true}),
+        entry("projection.stdlat2", Type::number, "second standard parallel (albers, lcc)", "45.5",
+              {-90, 90, true, true}),
+        entry("projection.k0", Type::number, "scale on the standard parallels or central meridian", "1", {0, 10, true}),
+        entry("projection.utm_zone", Type::integer, "utm zone", "", integer(1, 60)),
+        entry("projection.utm_north", Type::boolean, "utm: northern hemisphere", "true"),
+        entry("projection.false_easting", Type::number, "metres added to x", "0"),
+        entry("projection.false_northing", Type::number, "metres added to y", "0"),
+        entry("projection.grid_m", Type::number, "integer grid step in metres", "0.01", {0.0001, 1000}),
+        section("ingest", "tigerlod-ingest"),
+        entry("ingest.halo_m", Type::number, "halo distance in metres: at least twice the largest tolerance", "1000",
+              {0, inf}, {}, "halo-m"),
+        entry("ingest.threads", Type::integer, "worker threads, 0 for all cores; outputs do not depend on it", "0",
+              thread_limits, {}, "threads"),
+        section("simplify", "tigerlod-color and tigerlod-simplify"),
+        entry("simplify.tolerances_m", Type::numbers,
+              "the ladder: increasing tolerances in ground metres; at most half of `ingest.halo_m`", "`[1, 4, 16, 64]`",
+              {0, inf, true}, {}, "tolerances", both),
+        entry("simplify.metric", Type::choice, "distance metric of the tolerance", "`l2`", {}, {"l2", "l1", "linf"},
+              "metric", both),
+        entry("simplify.class_scale", Type::class_map, "feature class -> eps multiplier, e.g. `{S1400: 0.5}`", "none",
+              {0, inf, true}, {}, "class-scale", both),
+        entry("simplify.projection_scale", Type::boolean,
+              "eps in projected metres, not ground metres through the local projection scale", "`true`", {}, {},
+              "no-projection-scale", both, false),
+        entry("simplify.max_reach", Type::integer, "longest shortcut in vertices (0: no cap)", "0", integer(0), {},
+              "max-reach", "simplify"),
+        entry("simplify.point_constraints", Type::boolean, "the units' internal points and user points may change side",
+              "`true`", {}, {}, "no-point-constraints", "simplify", false),
+        entry("simplify.points", Type::path,
+              "user point constraints: GeoJSON points or CSV with lon,lat (relative to the config)", "none", {}, {},
+              "points", "simplify"),
+        entry("simplify.lazy", Type::boolean,
+              "draw every shortcut the far rule cannot settle in one round, not round by round only those from "
+              "vertices of the current shortest paths (the same result, more segments drawn)",
+              "`true`", {}, {}, "exhaustive", "simplify", false),
+        entry("simplify.compliance", Type::choice,
+              "how the shortcuts' compliance is read back: `ssbo` sets a flag per shortcut in a storage buffer in one "
+              "pass, `readback` is the paper's unique-colour loop (Algorithm 5.1); the same result",
+              "`ssbo`", {}, {"ssbo", "readback"}, "compliance", "simplify"),
+        entry("simplify.gl", Type::choice,
+              "OpenGL backend: `osmesa` (llvmpipe, everywhere) or `egl` (a GPU, or Mesa's device); the same result",
+              "`osmesa`", {}, {"osmesa", "egl"}, "gl", "simplify"),
+        entry("simplify.pixel_fraction", Type::number, "pixel size as a fraction of the smallest eps", "0.25",
+              {0, 0.5, true}, {}, "pixel-fraction", both),
+        entry("simplify.tile_pixels", Type::integer, "render tile width and height in pixels", "4096",
+              integer(64, 16384), {}, "tile-pixels", both),
+        entry("simplify.max_classes", Type::integer, "stencil classes per tile; a tile needing more is split", "255",
+              integer(2, 255), {}, "max-classes", both),
+        entry("simplify.window_pixels", Type::integer,
+              "the small framebuffer's width and height: a tile whose tested parts fit in it is drawn there, the "
+              "others in one of `tile_pixels` (the same result)",
+              "1024", integer(8, 16384), {}, "window-pixels", "simplify"),
+        entry("simplify.threads", Type::integer, "worker threads, 0 for all cores; outputs do not depend on it", "0",
+              thread_limits, {}, "threads", both),
+        section("pack", "tigerlod-pack"),
+        entry("pack.tile_mb", Type::number, "target tile file size in MiB: a subtree whose payloads fit is one tile",
+              "4", {0, 4096, true}, {}, "tile-mb", "pack"),
+        entry("pack.draco_speed", Type::integer,
+              "Draco encoder speed, 0 (smallest) .. 10 (fastest); no effect on the size of our lossless integer "
+              "payloads, measured",
+              "0", integer(0, 10), {}, "draco-speed", "pack"),
+        entry("pack.threads", Type::integer, "worker threads, 0 for all cores; outputs do not depend on it", "0",
+              thread_limits, {}, "threads", "pack"),
+        section("verify", "tigerlod-verify (the tolerance contract comes from the tree's manifest, not from here)"),
+        entry("verify.max_items", Type::integer, "violations listed one by one at most (all are counted)", "10000",
+              integer(0), {}, "max-items", "verify"),
+        entry("verify.threads", Type::integer, "worker threads, 0 for all cores; the report does not depend on it", "0",
+              thread_limits, {}, "threads", "verify"),
+    };
+}
+
+std::string type_text(const Key& k)
+{
+    switch (k.type) {
+    case Type::text:
+        return "text";
+    case Type::choice:
+        return choices_text(k.choices);
+    case Type::integer:
+        return k.limits.text().empty() ? "integer" : "integer " + k.limits.text();
+    case Type::number:
+        return k.limits.text().empty() ? "number" : "number " + k.limits.text();
+    case Type::boolean:
+        return "true or false";
+    case Type::numbers:
+        return "increasing numbers " + k.limits.text();
+    case Type::class_map:
+        return "class: number " + k.limits.text();
+    case Type::path:
+        return "file";
+    case Type::paths:
+        return "file or list of files";
+    case Type::mapping:
+        return "section";
+    case Type::levels:
+        return "list of levels";
+    }
+    return {};
+}
+
+} // namespace
+
+const std::vector<Key>& keys()
+{
+    static const std::vector<Key> table = make_keys();
+    return table;
+}
+
+const Key* find(std::string_view name)
+{
+    const auto& t = keys();
+    const auto it = std::find_if(t.begin(), t.end(), [&](const Key& k) { return k.name == name; });
+    return it == t.end() ? nullptr : &*it;
+}
+
+const Key& key(std::string_view name)
+{
+    const Key* k = find(name);
+    if (k == nullptr) {
+        throw std::logic_error("config schema has no key '" + std::string(name) + "'");
+    }
+    return *k;
+}
+
+void add_option(ArgSet& args, std::string_view name, ArgSet::Target target)
+{
+    const Key& k = key(name);
+    std::string value_name;
+    switch (k.type) {
+    case Type::integer:
+        value_name = "N";
+        break;
+    case Type::number:
+        value_name = "X";
+        break;
+    case Type::numbers:
+    case Type::class_map:
+        value_name = "LIST";
+        break;
+    case Type::path:
+        value_name = "FILE";
+        break;
+    case Type::choice:
+        value_name = "NAME";
+        break;
+    default:
+        break;
+    }
+    std::string help;
+    for (const char c : k.doc) {
+        if (c != '`') {
+            help += c;
+        }
+    }
+    help += "\n      config: " + k.name;
+    if (k.type == Type::boolean) {
+        help += std::string(": ") + (k.flag_when ? "true" : "false");
+    } else if (k.type == Type::choice) {
+        help += ", one of " + choices_text(k.choices);
+    } else if (!k.limits.text().empty()) {
+        help += (k.type == Type::numbers ? ", each " : ", ") + k.limits.text();
+    }
+    args.add(k.flag, target, help, value_name, k.type == Type::integer || k.type == Type::number ? k.limits : Limits{},
+             k.type == Type::choice ? k.choices : std::vector<std::string>{});
+}
+
+std::string reference_markdown()
+{
+    std::ostringstream out;
+    out << "# Config keys\n\n"
+           "<!-- Generated from config/schema.cpp by scripts/config-doc; a test fails when they differ. -->\n\n"
+           "A config is one YAML file. Relative paths are resolved against the config\n"
+           "file's folder. Every key is checked when a config is read, by tigerlod-ingest\n"
+           "(`--validate` checks without reading data) and by every stage given\n"
+           "`--config FILE`: an unknown key, a value of the wrong type or out of range is\n"
+           "an error (exit 2) naming the file, line and key.\n\n"
+           "The stages take their section with `--config FILE` (tigerlod-color and\n"
+           "tigerlod-simplify `simplify`, tigerlod-pack `pack`, tigerlod-verify `verify`;\n"
+           "tigerlod-ingest reads the whole file, its CONFIG argument); an option given on\n"
+           "the command line wins over the config's (a `false` that became a flag, like\n"
+           "`projection_scale: false` as `--no-projection-scale`, stays). The pipeline\n"
+           "passes the config to every stage and nothing else. The column `option` names\n"
+           "the stage option a key becomes.\n";
+    const std::string header = "| key | meaning | values | default | option |\n|---|---|---|---|---|\n";
+    out << "\n## Top level\n\n" << header;
+    for (const Key& k : keys()) {
+        if (k.type == Type::mapping && k.name.find('.') == std::string::npos) {
+            out << "\n## `" << k.name << "`: " << k.doc << "\n\n" << header;
+            continue;
+        }
+        const std::string when = k.type == Type::boolean && !k.flag.empty()
+                                     ? std::string("`") + (k.flag_when ? "true" : "false") + "`: "
+                                     : std::string();
+        out << "| `" << k.name << "` | " << when << k.doc << " | " << type_text(k) << " | " << k.default_text << " | ";
+        if (!k.flag.empty()) {
+            out << "`--" << k.flag << "`";
+        }
+        out << " |\n";
+    }
+    out << "\nPartitions: level k is partitioned by the units of level k-1 (tracts by\n"
+           "county); the top level is one partition, `all`. A chain between two partitions\n"
+           "belongs to the one with the smaller code and is in the other's halo.\n\n"
+           "The Data Tree goes to `out/<name>/tree/` and is updated in place on the next\n"
+           "run: tiles whose content did not change are kept, the skeleton is swapped\n"
+           "atomically, and tiles the new skeleton no longer names are removed.\n";
+    return out.str();
+}
+
+} // namespace tigerlod::config
