@@ -1,43 +1,17 @@
 #pragma once
 /// @file simplifier.hpp
 /// One chain store at one tolerance: the paper's Steps 1-4 with lazy
-/// compliance and an exact safety net (see README.md beside this file).
+/// compliance and an exact safety net (see README.md beside this file), on
+/// OpenGL (raster.hpp). What needs no GL is in tolerances.hpp.
 
 #include "formats/chains/chain_store.hpp"
-#include "simplification/coloring.hpp"
-#include "core/metric.hpp"
 #include "simplification/raster.hpp"
+#include "simplification/tolerances.hpp"
 
-#include <functional>
-#include <map>
-#include <optional>
 #include <string>
 #include <vector>
 
 namespace tigerlod::simplify {
-
-/// A user point constraint in lon/lat degrees.
-struct LonLat {
-    double lon = 0, lat = 0;
-};
-
-struct SimplifyOptions {
-    Metric metric = Metric::l2;
-    std::map<std::string, double> class_scale; ///< eps multiplier by feature class
-    bool projection_scale = true;              ///< eps in ground metres through the local projection scale
-    uint32_t max_reach = 0;                    ///< cap on a shortcut's reach in vertices (0: none)
-    bool point_constraints = true;             ///< units' internal points and user points keep their side
-    std::vector<LonLat> user_points;
-    bool lazy = true;       ///< test only shortcuts on shortest paths
-    bool clip_tests = true; ///< draw only the parts of a shortcut that can fail (near_parts.hpp); off for tests
-    bool far_rule = true;   ///< accept shortcuts far from every other chain without the raster; off for tests
-    ColorOptions color;
-    unsigned threads = 1;
-    /// Runs GL work on the thread that owns the context, waiting for it:
-    /// given, simplify_store hands every use of the Raster to it (several
-    /// stores can then be simplified at once); empty, it calls the Raster itself.
-    std::function<void(const std::function<void()>&)> gl_thread;
-};
 
 /// What happened at one tolerance (summed over stores by the caller).
 struct ToleranceStats {
@@ -72,30 +46,6 @@ struct ToleranceStats {
     double seconds_far = 0; ///< the far rule's grid and blocked segments
     void add(const ToleranceStats& o);
 };
-
-/// The tolerance of each chain of `store` in grid units for `eps_m` ground metres.
-std::vector<double> chain_tolerances(const chains::ChainStore& store, double eps_m, const SimplifyOptions& opt);
-
-/// Per point of `store`, whether the segment starting there takes part:
-/// every owned segment, and the halo segments within `reach` grid units of
-/// an owned one. The halo holds whole chains with any part near the
-/// partition (a kilometre, say), most of whose length is out of reach at
-/// any tolerance of the ladder; colouring, gridding and drawing it cost as
-/// much as the owned chains did. Decided by cells, so some farther segments
-/// stay in and none within reach is left out. Empty when the store has no
-/// halo: every segment takes part.
-std::vector<uint8_t> segments_in_reach(const chains::ChainStore& store, double reach);
-
-/// Where `store` breaks the point part of the partition contract
-/// (formats/chains/SPEC.md, "The partition contract"): the first unit, in
-/// chain order, that an owned chain bounds and of which the store holds no
-/// internal point (its own, or a neighbour's). Empty when it holds. Without
-/// that point a shortcut could cut the unit's point off, and the store alone
-/// cannot tell.
-std::optional<std::string> partition_contract_fault(const chains::ChainStore& store);
-
-/// Colour `store` at `eps_m` (what tigerlod-color writes).
-ColorResult color_store(const chains::ChainStore& store, double eps_m, const SimplifyOptions& opt);
 
 /// Simplify the owned chains of `store` at `eps_m`. `colors`, if given, must
 /// come from color_store with the same options. The result holds the owned

@@ -5,7 +5,7 @@
 
 #include "core/manifest.hpp"
 #include "core/stage.hpp"
-#include "simplification/simplifier.hpp"
+#include "simplification/tolerances.hpp"
 
 #include <filesystem>
 #include <map>

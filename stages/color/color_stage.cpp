@@ -5,7 +5,7 @@
 #include "formats/chains/chain_store.hpp"
 #include "simplification/color_io.hpp"
 
-#include <GL/osmesa.h>
+#include <GeographicLib/Config.h>
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -23,9 +23,8 @@ std::vector<std::string> ColorStage::config_args(const fs::path& file) const
 
 std::vector<std::string> ColorStage::versions() const
 {
-    return {std::string("OSMesa API ") + std::to_string(OSMESA_MAJOR_VERSION) + "." +
-                std::to_string(OSMESA_MINOR_VERSION) + " (EGL with --gl egl)",
-            chains::format_version_text()};
+    // The colouring is on the CPU: no OpenGL. GeographicLib gives the projection scale of eps.
+    return {std::string("GeographicLib ") + GEOGRAPHICLIB_VERSION_STRING, chains::format_version_text()};
 }
 
 std::string ColorStage::help_notes() const

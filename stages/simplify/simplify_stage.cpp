@@ -9,6 +9,7 @@
 #include "core/serial_queue.hpp"
 #include "gl/context.hpp"
 #include "simplification/color_io.hpp"
+#include "simplification/simplifier.hpp"
 
 #include <GeographicLib/Config.h>
 #include <GL/osmesa.h>

@@ -5,7 +5,7 @@
 /// core/geometry.hpp. The report's schema is in REPORT.md beside this file.
 
 #include "reader/reader.hpp"
-#include "simplification/simplifier.hpp"
+#include "simplification/tolerances.hpp"
 
 #include <array>
 #include <filesystem>

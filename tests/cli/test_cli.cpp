@@ -207,7 +207,7 @@ TEST_F(Cli, HelpAndVersion)
     const std::map<std::string, std::vector<std::string>> versions = {
         {"ingest", {"GDAL ", "GeographicLib ", "chain store format "}},
         {"dump", {"chain store format ", "Data Tree format "}},
-        {"color", {"OSMesa API ", "chain store format "}},
+        {"color", {"GeographicLib ", "chain store format "}},
         {"simplify", {"OSMesa API ", "GeographicLib ", "chain store format "}},
         {"pack", {"Draco ", "chain store format ", "Data Tree format "}},
         {"export", {"GDAL ", "Data Tree format "}},
