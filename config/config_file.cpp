@@ -43,6 +43,24 @@ std::string wanted(const Key& k)
     return {};
 }
 
+// Strings are built by appending: GCC 12 at -O3 warns falsely (-Wrestrict,
+// its bug 105329) on `"literal" + std::string` here.
+std::string bracketed(const std::string& s)
+{
+    std::string out = "[";
+    out += s;
+    out += ']';
+    return out;
+}
+
+void append_item(std::string& list, const std::string& item)
+{
+    if (!list.empty()) {
+        list += ',';
+    }
+    list += item;
+}
+
 std::optional<double> number_of(const YAML::Node& n)
 {
     if (!n.IsScalar()) {
@@ -154,7 +172,7 @@ class Checker {
                 if (!n) {
                     wrong(v[i], k);
                 }
-                in_limits(v[i], k, *n, "[" + std::to_string(i) + "]");
+                in_limits(v[i], k, *n, bracketed(std::to_string(i)));
                 if (previous && *n <= *previous) {
                     m_cfg.fail(v[i], "'" + k.name + "' must increase: " + v[i].as<std::string>() + " follows " +
                                          v[i - 1].as<std::string>());
@@ -172,7 +190,7 @@ class Checker {
                 if (!kv.first.IsScalar() || !n) {
                     wrong(kv.second, k);
                 }
-                in_limits(kv.second, k, *n, "[" + kv.first.as<std::string>() + "]");
+                in_limits(kv.second, k, *n, bracketed(kv.first.as<std::string>()));
             }
             return;
         case Type::paths:
@@ -260,7 +278,8 @@ void ConfigFile::fail(const YAML::Node& at, const std::string& what) const
 {
     std::string where = m_file.string();
     if (at.IsDefined() && at.Mark().line >= 0) {
-        where += ":" + std::to_string(at.Mark().line + 1);
+        where += ':';
+        where += std::to_string(at.Mark().line + 1);
     }
     throw config_error(where + ": " + what);
 }
@@ -289,7 +308,7 @@ std::vector<std::string> stage_args(const fs::path& file, std::string_view stage
         case Type::numbers: {
             std::string list;
             for (const auto& item : v) {
-                list += (list.empty() ? "" : ",") + item.as<std::string>();
+                append_item(list, item.as<std::string>());
             }
             args.push_back(flag + "=" + list);
             break;
@@ -297,7 +316,7 @@ std::vector<std::string> stage_args(const fs::path& file, std::string_view stage
         case Type::class_map: {
             std::string list;
             for (const auto& kv : v) {
-                list += (list.empty() ? "" : ",") + kv.first.as<std::string>() + "=" + kv.second.as<std::string>();
+                append_item(list, kv.first.as<std::string>() + '=' + kv.second.as<std::string>());
             }
             args.push_back(flag + "=" + list);
             break;
