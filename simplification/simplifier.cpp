@@ -8,6 +8,7 @@
 #include "simplification/near_parts.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <future>
@@ -379,184 +380,258 @@ class BorderRule {
     double m_eps_max = 0;           ///< the largest halo chain's tolerance; 0 without a halo
 };                                  // class BorderRule
 
-} // namespace
+/// A (chain, candidate) pair to test: indices into StoreSimplifier's work and that chain's candidates.
+using TestPair = std::pair<uint32_t, uint32_t>;
 
-ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyOptions& opt, Raster& raster,
-                          const ColorResult* colors, ToleranceStats& st)
-{
-    st.eps_m = eps_m;
-    const auto eps = chain_tolerances(store, eps_m, opt);
-    auto t0 = Clock::now();
-    const auto keep = segments_in_reach(store, halo_reach(eps, opt));
-    // The colouring runs on a thread of its own beside the candidates, the
-    // point constraints and the far rule, which do not need it: it is one
-    // thread's work (contours at 16 m: 0.21 s), and a single store's other
-    // steps would leave the second core idle for it.
-    ColorResult own_colors;
-    std::future<std::pair<ColorResult, double>> colouring;
-    if (!colors) {
-        auto colour = [&] {
-            const auto c0 = Clock::now();
-            auto result = color_chains(store, eps, keep, opt);
-            return std::pair{std::move(result), since(c0)};
-        };
-        colouring = std::async(opt.threads > 1 ? std::launch::async : std::launch::deferred, colour);
+/// simplify_store, step by step (README.md beside this file): the
+/// tolerances, colouring, candidates, the point constraints culled up front
+/// (Step 3) and the far rule are prepared once; then rounds of Step 4
+/// (shortest paths) and Steps 1-2 (the eps-Voronoi diagram and the
+/// compliance test on OpenGL) run until every path is clean, and the exact
+/// check bans what the raster let through, until nothing meets.
+class StoreSimplifier {
+  public:
+    StoreSimplifier(const ChainStore& store, double eps_m, const SimplifyOptions& opt, Raster& raster,
+                    const ColorResult* colors, ToleranceStats& st)
+        : m_store(store), m_eps_m(eps_m), m_opt(opt), m_raster(raster), m_colors(colors), m_st(st),
+          m_eps(chain_tolerances(store, eps_m, opt))
+    {
+        m_st.eps_m = eps_m;
     }
-    st.seconds_color += since(t0);
-    const double pixel = colors ? colors->pixel : tile_pixel(eps, opt.color); // colors->pixel once known
 
-    // Owned chains to simplify.
-    std::vector<Work> work;
-    for (uint32_t i = 0; i < store.chains.size(); ++i) {
-        const auto& c = store.chains[i];
-        if (c.flags & chains::chain_halo) {
-            continue;
+    ChainStore run()
+    {
+        start_colouring();
+        collect_work();
+        find_candidates();
+        cull_by_point_constraints();
+        build_far_rule();
+        finish_colouring();
+        if (!m_opt.lazy) {
+            test_every_candidate();
         }
-        Work w;
-        w.chain = i;
-        w.tol = Tolerance(eps[i], opt.metric);
-        w.ring = (c.flags & chains::chain_closed) != 0;
-        w.fixed = (c.flags & chains::chain_problem) != 0;
-        work.push_back(std::move(w));
-        ++st.chains;
-        st.input_vertices += c.count;
+        BorderRule border(m_store, m_eps, m_opt);
+        do {
+            settle_paths();
+        } while (exact_check(border));
+        return result();
     }
-    auto points_of = [&](const Work& w) { return store.chain_points(store.chains[w.chain]); };
 
-    // Candidates (exact proximity).
-    t0 = Clock::now();
-    parallel_each(work.size(), opt.threads, [&](size_t i) {
-        Work& w = work[i];
-        if (!w.fixed) {
-            w.cand = proximate_shortcuts(points_of(w), w.tol, opt.max_reach);
-        }
-    });
-    st.seconds_candidates += since(t0);
+  private:
+    std::span<const GridPoint> points_of(const Work& w) const { return m_store.chain_points(m_store.chains[w.chain]); }
 
-    // Step 3's point constraints, culled up front: units' internal points,
-    // user points, and one vertex of every other chain (an island keeps its side).
-    t0 = Clock::now();
-    PointIndex index;
-    if (opt.point_constraints) {
-        for (const auto& cp : store.constraints) {
-            index.entries.push_back({cp.p, UINT32_MAX});
+    /// The segments in reach, then the colouring on a thread of its own
+    /// beside the candidates, the point constraints and the far rule, which
+    /// do not need it: it is one thread's work (contours at 16 m: 0.21 s),
+    /// and a single store's other steps would leave the second core idle for it.
+    void start_colouring()
+    {
+        const auto t0 = Clock::now();
+        m_keep = segments_in_reach(m_store, halo_reach(m_eps, m_opt));
+        if (!m_colors) {
+            auto colour = [this] {
+                const auto c0 = Clock::now();
+                auto result = color_chains(m_store, m_eps, m_keep, m_opt);
+                return std::pair{std::move(result), since(c0)};
+            };
+            m_colouring = std::async(m_opt.threads > 1 ? std::launch::async : std::launch::deferred, colour);
         }
-        if (!opt.user_points.empty()) {
-            const Projection proj(store.projection);
-            for (const auto& u : opt.user_points) {
-                if (const auto g = proj.to_grid(u.lon, u.lat)) {
-                    index.entries.push_back({*g, UINT32_MAX});
+        m_st.seconds_color += since(t0);
+        m_pixel = m_colors ? m_colors->pixel : tile_pixel(m_eps, m_opt.color); // m_colors->pixel once known
+    }
+
+    /// The owned chains to simplify.
+    void collect_work()
+    {
+        for (uint32_t i = 0; i < m_store.chains.size(); ++i) {
+            const auto& c = m_store.chains[i];
+            if (c.flags & chains::chain_halo) {
+                continue;
+            }
+            Work w;
+            w.chain = i;
+            w.tol = Tolerance(m_eps[i], m_opt.metric);
+            w.ring = (c.flags & chains::chain_closed) != 0;
+            w.fixed = (c.flags & chains::chain_problem) != 0;
+            m_work.push_back(std::move(w));
+            ++m_st.chains;
+            m_st.input_vertices += c.count;
+        }
+    }
+
+    /// Candidates: every proximate shortcut (exact proximity, candidates.hpp).
+    void find_candidates()
+    {
+        const auto t0 = Clock::now();
+        parallel_each(m_work.size(), m_opt.threads, [&](size_t i) {
+            Work& w = m_work[i];
+            if (!w.fixed) {
+                w.cand = proximate_shortcuts(points_of(w), w.tol, m_opt.max_reach);
+            }
+        });
+        m_st.seconds_candidates += since(t0);
+    }
+
+    /// Step 3's point constraints, culled up front: units' internal points,
+    /// user points, and one vertex of every other chain (an island keeps its side).
+    void cull_by_point_constraints()
+    {
+        const auto t0 = Clock::now();
+        PointIndex index;
+        if (m_opt.point_constraints) {
+            for (const auto& cp : m_store.constraints) {
+                index.entries.push_back({cp.p, UINT32_MAX});
+            }
+            if (!m_opt.user_points.empty()) {
+                const Projection proj(m_store.projection);
+                for (const auto& u : m_opt.user_points) {
+                    if (const auto g = proj.to_grid(u.lon, u.lat)) {
+                        index.entries.push_back({*g, UINT32_MAX});
+                    }
                 }
             }
         }
-    }
-    // A chain of two vertices has no middle one: both its ends stand for it
-    // (a group of straight chains between junctions, wholly inside the
-    // region of a shortcut, would otherwise pass to the other side of it).
-    // A junction at a shortcut's own end does not count (cull_by_points).
-    for (uint32_t i = 0; i < store.chains.size(); ++i) {
-        const auto pts = store.chain_points(store.chains[i]);
-        if (pts.size() >= 3) {
-            index.entries.push_back({pts[pts.size() / 2], i});
-        } else if (pts.size() == 2) {
-            index.entries.push_back({pts.front(), UINT32_MAX});
-            index.entries.push_back({pts.back(), UINT32_MAX});
-        }
-    }
-    index.finish();
-    std::vector<std::vector<uint32_t>> culled(work.size());
-    parallel_each(work.size(), opt.threads, [&](size_t i) {
-        Work& w = work[i];
-        if (w.cand.empty()) {
-            return;
-        }
-        const auto pts = points_of(w);
-        GridBox box;
-        for (const GridPoint p : pts) {
-            box.extend(p);
-        }
-        const auto r = static_cast<int64_t>(std::ceil(2 * w.tol.eps * l2_reach(opt.metric))) + 1;
-        box.min_x -= r;
-        box.min_y -= r;
-        box.max_x += r;
-        box.max_y += r;
-        culled[i] = cull_by_points(pts, w.cand, index.near(box, w.chain));
-    });
-    for (size_t i = 0; i < work.size(); ++i) {
-        Work& w = work[i];
-        st.banned_points += culled[i].size();
-        st.candidates += w.cand.size() - culled[i].size();
-        w.state.assign(w.cand.size(), unknown);
-        for (const uint32_t id : culled[i]) {
-            w.state[id] = bad_points;
-        }
-    }
-    st.seconds_constraints += since(t0);
-
-    // A shortcut farther from every other chain than that chain's reach
-    // (eps_j in the metric plus the colouring margin) lies in its own
-    // chain's eps-Voronoi region: proximate shortcuts stay within eps_i of
-    // their chain in the metric (near_parts.hpp: in any norm), so within
-    // eps_i x l2_reach as an L2 distance, and no other region comes near.
-    // Those skip the raster.
-    t0 = Clock::now();
-    const double ball_l2 = l2_reach(opt.metric); // the metric's unit ball lies in the L2 disc of this radius
-    const double margin = pixel * opt.color.margin_px;
-    double reach_max = 0;
-    for (const double e : eps) {
-        reach_max = std::max(reach_max, e * ball_l2 + margin);
-    }
-    // Cells at least three mean segments wide: at 1 m a 2 x reach cell is
-    // 3 m, and a county's 100 m segments each filled dozens of them (74 s of
-    // the tract ladder's 1 m step); one mean segment still made a query visit
-    // nine cells (far rule on the tract level at 16 m 0.65 -> 0.40 s with
-    // three, contours 0.52 -> 0.39 s; four was slower on the contours). The
-    // answer does not depend on the size.
-    const double cell = std::max({2 * reach_max, 3 * mean_segment_length(store), 1.0});
-    std::vector<std::pair<uint64_t, GridSeg>> grid; // (cell, segment), segments in (chain, index) order
-    // Each segment goes in the cells it passes through (not its bounding box:
-    // a 10 km diagonal at 1 m covers 25 M cells of its box, measured at 17 GB).
-    GridBox extent;
-    for (uint32_t c = 0; c < store.chains.size(); ++c) {
-        for (const GridPoint p : store.chain_points(store.chains[c])) {
-            extent.extend(p);
-        }
-    }
-    const CellGrid cells = extent.empty() ? CellGrid{}
-                                          : CellGrid(double(extent.min_x), double(extent.min_y), double(extent.max_x),
-                                                     double(extent.max_y), cell);
-    for (uint32_t c = 0; c < store.chains.size(); ++c) {
-        const auto pts = store.chain_points(store.chains[c]);
-        const auto use = keep_of(keep, store.chains[c]);
-        for (uint32_t i = 0; i + 1 < pts.size(); ++i) {
-            if (!takes_part(use, i)) {
-                continue;
+        // A chain of two vertices has no middle one: both its ends stand for it
+        // (a group of straight chains between junctions, wholly inside the
+        // region of a shortcut, would otherwise pass to the other side of it).
+        // A junction at a shortcut's own end does not count (cull_by_points).
+        for (uint32_t i = 0; i < m_store.chains.size(); ++i) {
+            const auto pts = m_store.chain_points(m_store.chains[i]);
+            if (pts.size() >= 3) {
+                index.entries.push_back({pts[pts.size() / 2], i});
+            } else if (pts.size() == 2) {
+                index.entries.push_back({pts.front(), UINT32_MAX});
+                index.entries.push_back({pts.back(), UINT32_MAX});
             }
-            cover_cells(pts[i].x, pts[i].y, pts[i + 1].x, pts[i + 1].y, 0.0, cell, 0.0, 0.0, [&](int64_t x, int64_t y) {
-                grid.emplace_back(cells.key(x, y), GridSeg{c, i});
-            });
         }
+        index.finish();
+        std::vector<std::vector<uint32_t>> culled(m_work.size());
+        parallel_each(m_work.size(), m_opt.threads, [&](size_t i) {
+            Work& w = m_work[i];
+            if (w.cand.empty()) {
+                return;
+            }
+            const auto pts = points_of(w);
+            GridBox box;
+            for (const GridPoint p : pts) {
+                box.extend(p);
+            }
+            const auto r = static_cast<int64_t>(std::ceil(2 * w.tol.eps * l2_reach(m_opt.metric))) + 1;
+            box.min_x -= r;
+            box.min_y -= r;
+            box.max_x += r;
+            box.max_y += r;
+            culled[i] = cull_by_points(pts, w.cand, index.near(box, w.chain));
+        });
+        for (size_t i = 0; i < m_work.size(); ++i) {
+            Work& w = m_work[i];
+            m_st.banned_points += culled[i].size();
+            m_st.candidates += w.cand.size() - culled[i].size();
+            w.state.assign(w.cand.size(), unknown);
+            for (const uint32_t id : culled[i]) {
+                w.state[id] = bad_points;
+            }
+        }
+        m_st.seconds_constraints += since(t0);
     }
-    const CellBuckets<GridSeg> grid_cells(grid); // each cell's segments in (chain, index) order
-    grid = {};
-    // The part of segment ab that another chain's segment comes within r of
-    // (the hull of those parts, as parameters along ab), or nothing.
-    auto near_other = [&](uint32_t chain, GridPoint a, GridPoint b, double r) {
+
+    /// The far rule's grid and blocked segments. A shortcut farther from
+    /// every other chain than that chain's reach (eps_j in the metric plus
+    /// the colouring margin) lies in its own chain's eps-Voronoi region:
+    /// proximate shortcuts stay within eps_i of their chain in the metric
+    /// (near_parts.hpp: in any norm), so within eps_i x l2_reach as an L2
+    /// distance, and no other region comes near. Those skip the raster.
+    void build_far_rule()
+    {
+        const auto t0 = Clock::now();
+        m_ball_l2 = l2_reach(m_opt.metric); // the metric's unit ball lies in the L2 disc of this radius
+        const double margin = m_pixel * m_opt.color.margin_px;
+        for (const double e : m_eps) {
+            m_reach_max = std::max(m_reach_max, e * m_ball_l2 + margin);
+        }
+        // Cells at least three mean segments wide: at 1 m a 2 x reach cell is
+        // 3 m, and a county's 100 m segments each filled dozens of them (74 s of
+        // the tract ladder's 1 m step); one mean segment still made a query visit
+        // nine cells (far rule on the tract level at 16 m 0.65 -> 0.40 s with
+        // three, contours 0.52 -> 0.39 s; four was slower on the contours). The
+        // answer does not depend on the size.
+        m_cell = std::max({2 * m_reach_max, 3 * mean_segment_length(m_store), 1.0});
+        std::vector<std::pair<uint64_t, GridSeg>> grid; // (cell, segment), segments in (chain, index) order
+        // Each segment goes in the cells it passes through (not its bounding box:
+        // a 10 km diagonal at 1 m covers 25 M cells of its box, measured at 17 GB).
+        GridBox extent;
+        for (uint32_t c = 0; c < m_store.chains.size(); ++c) {
+            for (const GridPoint p : m_store.chain_points(m_store.chains[c])) {
+                extent.extend(p);
+            }
+        }
+        if (!extent.empty()) {
+            m_cells = CellGrid(double(extent.min_x), double(extent.min_y), double(extent.max_x), double(extent.max_y),
+                               m_cell);
+        }
+        for (uint32_t c = 0; c < m_store.chains.size(); ++c) {
+            const auto pts = m_store.chain_points(m_store.chains[c]);
+            const auto use = keep_of(m_keep, m_store.chains[c]);
+            for (uint32_t i = 0; i + 1 < pts.size(); ++i) {
+                if (!takes_part(use, i)) {
+                    continue;
+                }
+                cover_cells(pts[i].x, pts[i].y, pts[i + 1].x, pts[i + 1].y, 0.0, m_cell, 0.0, 0.0,
+                            [&](int64_t x, int64_t y) { grid.emplace_back(m_cells.key(x, y), GridSeg{c, i}); });
+            }
+        }
+        m_grid_cells.emplace(grid); // each cell's segments in (chain, index) order
+        grid = {};
+        // Per owned chain, prefix counts of its segments that have another chain
+        // within eps_i x l2_reach + the largest reach (L2): a shortcut spanning
+        // only clear segments lies within eps_i x l2_reach of them, so farther
+        // than any other chain's reach from that chain. And the blocked segments
+        // with the part of each that is near another chain, for the parts of a
+        // shortcut that can fail (near_parts.hpp).
+        m_blocked.resize(m_work.size());
+        m_blocked_at.resize(m_work.size());
+        parallel_each(m_work.size(), m_opt.threads, [&](size_t wi) {
+            const Work& w = m_work[wi];
+            if (w.cand.empty() || !m_opt.far_rule) {
+                return;
+            }
+            const auto pts = points_of(w);
+            auto& b = m_blocked[wi];
+            b.assign(pts.size(), 0);
+            for (size_t k = 0; k + 1 < pts.size(); ++k) {
+                const auto near = near_other(w.chain, pts[k], pts[k + 1], w.tol.eps * m_ball_l2 + m_reach_max);
+                b[k + 1] = b[k] + (near ? 1 : 0);
+                if (near) {
+                    // Widened by 2 grid units for rounding.
+                    const double len = std::hypot(double(pts[k + 1].x) - pts[k].x, double(pts[k + 1].y) - pts[k].y);
+                    const double pad = len > 0 ? 2 / len : 1;
+                    m_blocked_at[wi].push_back({static_cast<uint32_t>(k), std::max(0.0, near->first - pad),
+                                                std::min(1.0, near->second + pad)});
+                }
+            }
+        });
+        m_st.seconds_far += since(t0);
+    }
+
+    /// The part of segment ab that another chain's segment comes within r of
+    /// (the hull of those parts, as parameters along ab), or nothing.
+    std::optional<std::pair<double, double>> near_other(uint32_t chain, GridPoint a, GridPoint b, double r) const
+    {
         std::optional<std::pair<double, double>> near;
         const double reach = r * (1 + 1e-9) + 1;
         // The cells within r of ab (a segment within r of ab passes through one).
-        cover_cells(a.x, a.y, b.x, b.y, r, cell, 0.0, 0.0, [&](int64_t x, int64_t y) {
+        cover_cells(a.x, a.y, b.x, b.y, r, m_cell, 0.0, 0.0, [&](int64_t x, int64_t y) {
             if (near && near->first == 0 && near->second == 1) {
                 return; // the whole segment already
             }
-            if (!cells.contains(x, y)) {
+            if (!m_cells.contains(x, y)) {
                 return; // beyond every segment of the store
             }
-            for (const GridSeg gs : grid_cells.find(cells.key(x, y))) {
+            for (const GridSeg gs : m_grid_cells->find(m_cells.key(x, y))) {
                 if (gs.chain == chain) {
                     continue;
                 }
-                const auto p = store.chain_points(store.chains[gs.chain]);
+                const auto p = m_store.chain_points(m_store.chains[gs.chain]);
                 const GridPoint c = p[gs.index], d = p[gs.index + 1];
                 // Boxes farther apart than the reach on an axis first (dense
                 // maps put dozens of segments in a query's cells).
@@ -573,103 +648,95 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             }
         });
         return near;
-    };
-    // Per owned chain, prefix counts of its segments that have another chain
-    // within eps_i x l2_reach + the largest reach (L2): a shortcut spanning
-    // only clear segments lies within eps_i x l2_reach of them, so farther
-    // than any other chain's reach from that chain. And the blocked segments
-    // with the part of each that is near another chain, for the parts of a
-    // shortcut that can fail (near_parts.hpp).
-    std::vector<std::vector<uint32_t>> blocked(work.size());
-    std::vector<std::vector<NearSegment>> blocked_at(work.size());
-    parallel_each(work.size(), opt.threads, [&](size_t wi) {
-        const Work& w = work[wi];
-        if (w.cand.empty() || !opt.far_rule) {
-            return;
+    }
+
+    /// The colouring's result (given, or from start_colouring), and the
+    /// tiles each owned chain is drawn in with its class there.
+    void finish_colouring()
+    {
+        if (m_colouring.valid()) {
+            auto [result, seconds] = m_colouring.get();
+            m_own_colors = std::move(result);
+            m_colors = &m_own_colors;
+            m_st.seconds_color += seconds;
         }
-        const auto pts = points_of(w);
-        auto& b = blocked[wi];
-        b.assign(pts.size(), 0);
-        for (size_t k = 0; k + 1 < pts.size(); ++k) {
-            const auto near = near_other(w.chain, pts[k], pts[k + 1], w.tol.eps * ball_l2 + reach_max);
-            b[k + 1] = b[k] + (near ? 1 : 0);
-            if (near) {
-                // Widened by 2 grid units for rounding.
-                const double len = std::hypot(double(pts[k + 1].x) - pts[k].x, double(pts[k + 1].y) - pts[k].y);
-                const double pad = len > 0 ? 2 / len : 1;
-                blocked_at[wi].push_back(
-                    {static_cast<uint32_t>(k), std::max(0.0, near->first - pad), std::min(1.0, near->second + pad)});
-            }
+        if (m_colors->pixel != m_pixel) {
+            throw std::logic_error("simplify: the tiles' pixel is not the one the far rule took");
         }
-    });
-
-    st.seconds_far += since(t0);
-
-    if (colouring.valid()) {
-        auto [result, seconds] = colouring.get();
-        own_colors = std::move(result);
-        colors = &own_colors;
-        st.seconds_color += seconds;
-    }
-    if (colors->pixel != pixel) {
-        throw std::logic_error("simplify: the tiles' pixel is not the one the far rule took");
-    }
-    st.tiles += colors->tiles.size();
-    st.splits += colors->splits;
-    st.max_classes = std::max(st.max_classes, colors->max_classes_used);
-
-    // Tiles each owned chain is drawn in, and its class there.
-    std::vector<uint32_t> work_of(store.chains.size(), UINT32_MAX);
-    for (uint32_t i = 0; i < work.size(); ++i) {
-        work_of[work[i].chain] = i;
-    }
-    std::vector<std::vector<std::pair<uint32_t, uint8_t>>> tiles_of(work.size());
-    for (uint32_t t = 0; t < colors->tiles.size(); ++t) {
-        const auto& tile = colors->tiles[t];
-        for (size_t m = 0; m < tile.chains.size(); ++m) {
-            const uint32_t wi = work_of[tile.chains[m]];
-            if (wi != UINT32_MAX) {
-                tiles_of[wi].emplace_back(t, tile.classes[m]);
+        m_st.tiles += m_colors->tiles.size();
+        m_st.splits += m_colors->splits;
+        m_st.max_classes = std::max(m_st.max_classes, m_colors->max_classes_used);
+        std::vector<uint32_t> work_of(m_store.chains.size(), UINT32_MAX);
+        for (uint32_t i = 0; i < m_work.size(); ++i) {
+            work_of[m_work[i].chain] = i;
+        }
+        m_tiles_of.resize(m_work.size());
+        for (uint32_t t = 0; t < m_colors->tiles.size(); ++t) {
+            const auto& tile = m_colors->tiles[t];
+            for (size_t m = 0; m < tile.chains.size(); ++m) {
+                const uint32_t wi = work_of[tile.chains[m]];
+                if (wi != UINT32_MAX) {
+                    m_tiles_of[wi].emplace_back(t, tile.classes[m]);
+                }
             }
         }
     }
 
-    // The far rule: no blocked segment between the shortcut's ends.
-    auto proved_far = [&](uint32_t wi, Shortcut sc) {
-        const auto& b = blocked[wi];
+    /// The far rule: no blocked segment between the shortcut's ends.
+    bool proved_far(uint32_t wi, Shortcut sc) const
+    {
+        const auto& b = m_blocked[wi];
         return !b.empty() && b[sc.to] == b[sc.from];
-    };
+    }
 
-    // Raster test of (work, candidate) pairs, tile by tile.
-    auto raster_test = [&](const std::vector<std::pair<uint32_t, uint32_t>>& all_tests) {
-        std::vector<std::pair<uint32_t, uint32_t>> tests;
-        for (size_t t = 0; t < all_tests.size(); ++t) {
-            if (proved_far(all_tests[t].first, work[all_tests[t].first].cand.at(all_tests[t].second))) {
-                work[all_tests[t].first].state[all_tests[t].second] = good;
-                ++st.proved_far;
+    /// Steps 1-2: settle `all_tests` by the far rule where it can, draw the
+    /// rest tile by tile (the parts of each shortcut that can fail, in every
+    /// tile of its chain), and mark each good or bad_raster.
+    void raster_test(const std::vector<TestPair>& all_tests)
+    {
+        std::vector<TestPair> tests;
+        for (const auto& [wi, ci] : all_tests) {
+            if (proved_far(wi, m_work[wi].cand.at(ci))) {
+                m_work[wi].state[ci] = good;
+                ++m_st.proved_far;
             } else {
-                tests.push_back(all_tests[t]);
+                tests.emplace_back(wi, ci);
             }
         }
-        std::vector<std::vector<TestSegment>> per_tile(colors->tiles.size());
+        const auto per_tile = tile_parts(tests);
+        std::vector<uint8_t> fails(tests.size(), 0);
+        draw_tiles(per_tile, fails);
+        for (uint32_t id = 0; id < tests.size(); ++id) {
+            const auto [wi, ci] = tests[id];
+            m_work[wi].state[ci] = fails[id] ? bad_raster : good;
+            m_st.banned_raster += fails[id];
+        }
+        m_st.drawn_segments += tests.size();
+    }
+
+    /// The parts of each test's shortcut to draw (near_parts.hpp), per tile
+    /// of its chain that they come near.
+    std::vector<std::vector<TestSegment>> tile_parts(const std::vector<TestPair>& tests) const
+    {
+        std::vector<std::vector<TestSegment>> per_tile(m_colors->tiles.size());
         std::vector<std::pair<double, double>> parts;
         for (uint32_t id = 0; id < tests.size(); ++id) {
             const auto [wi, ci] = tests[id];
-            const auto pts = points_of(work[wi]);
-            const Shortcut sc = work[wi].cand.at(ci);
+            const auto pts = points_of(m_work[wi]);
+            const Shortcut sc = m_work[wi].cand.at(ci);
             const GridPoint a = pts[sc.from], b = pts[sc.to];
-            if (blocked[wi].empty() || !opt.clip_tests) {
+            if (m_blocked[wi].empty() || !m_opt.clip_tests) {
                 parts.assign(1, {0.0, 1.0});
             } else {
                 // Slack of 2 grid units on the radius, and a pixel at each end of a part.
-                parts =
-                    near_parts(pts, sc.from, sc.to, blocked_at[wi], work[wi].tol.eps * ball_l2 + 2, colors->pixel + 2);
+                parts = near_parts(pts, sc.from, sc.to, m_blocked_at[wi], m_work[wi].tol.eps * m_ball_l2 + 2,
+                                   m_colors->pixel + 2);
             }
             for (const auto& [p0, p1] : parts) {
                 const double ax = a.x + p0 * double(b.x - a.x), ay = a.y + p0 * double(b.y - a.y);
                 const double bx = a.x + p1 * double(b.x - a.x), by = a.y + p1 * double(b.y - a.y);
-                for (const auto& [t, cls] : tiles_of[wi]) {
-                    const TileSpec& s = colors->tiles[t].spec;
+                for (const auto& [t, cls] : m_tiles_of[wi]) {
+                    const TileSpec& s = m_colors->tiles[t].spec;
                     const double x1 = s.x0 + s.width * s.pixel, y1 = s.y0 + s.height * s.pixel;
                     if (std::max(ax, bx) + s.pixel < s.x0 || std::min(ax, bx) - s.pixel > x1 ||
                         std::max(ay, by) + s.pixel < s.y0 || std::min(ay, by) - s.pixel > y1) {
@@ -679,7 +746,14 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
                 }
             }
         }
-        std::vector<uint8_t> fails(tests.size(), 0);
+        return per_tile;
+    }
+
+    /// Draw the tiles that have parts to test: the tents of their chains
+    /// (Step 1, the eps-Voronoi diagram in the stencil buffer) and the parts
+    /// (Step 2, compliance), setting fails[id] for each test that fails.
+    void draw_tiles(const std::vector<std::vector<TestSegment>>& per_tile, std::vector<uint8_t>& fails)
+    {
         size_t parts_in_all = 0;
         for (const auto& p : per_tile) {
             parts_in_all += p.size();
@@ -693,51 +767,46 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
             }
         }
         std::vector<PreparedTile> prepared(drawn_tiles.size());
-        parallel_each(drawn_tiles.size(), opt.threads, [&](size_t i) {
-            const auto& tile = colors->tiles[drawn_tiles[i]];
+        parallel_each(drawn_tiles.size(), m_opt.threads, [&](size_t i) {
+            const auto& tile = m_colors->tiles[drawn_tiles[i]];
             std::vector<TentChain> tents(tile.chains.size());
             for (size_t m = 0; m < tile.chains.size(); ++m) {
-                const auto& c = store.chains[tile.chains[m]];
-                tents[m] = {store.chain_points(c), eps[tile.chains[m]], tile.classes[m], keep_of(keep, c)};
+                const auto& c = m_store.chains[tile.chains[m]];
+                tents[m] = {m_store.chain_points(c), m_eps[tile.chains[m]], tile.classes[m], keep_of(m_keep, c)};
             }
-            prepared[i] = raster.prepare(tile.spec, tents, per_tile[drawn_tiles[i]]);
+            prepared[i] = m_raster.prepare(tile.spec, tents, per_tile[drawn_tiles[i]]);
         });
         RasterStats before, after;
         auto gl_work = [&] {
-            before = raster.stats();
-            raster.begin_batch(parts_in_all);
+            before = m_raster.stats();
+            m_raster.begin_batch(parts_in_all);
             for (const auto& p : prepared) {
-                raster.draw(p, fails);
+                m_raster.draw(p, fails);
             }
-            raster.end_batch(fails);
-            after = raster.stats();
+            m_raster.end_batch(fails);
+            after = m_raster.stats();
         };
-        if (opt.gl_thread) {
-            opt.gl_thread(gl_work);
+        if (m_opt.gl_thread) {
+            m_opt.gl_thread(gl_work);
         } else {
             gl_work();
         }
-        for (uint32_t id = 0; id < tests.size(); ++id) {
-            const auto [wi, ci] = tests[id];
-            work[wi].state[ci] = fails[id] ? bad_raster : good;
-            st.banned_raster += fails[id];
-        }
-        st.drawn_segments += tests.size();
-        st.drawn_parts += after.drawn_segments - before.drawn_segments;
-        st.drawn_pixels += after.drawn_pixels - before.drawn_pixels;
-        st.tent_segments += after.tent_segments - before.tent_segments;
-        st.tent_segments_skipped += after.tent_segments_skipped - before.tent_segments_skipped;
-        st.seconds_voronoi += after.voronoi_seconds - before.voronoi_seconds;
-        st.seconds_compliance += after.compliance_seconds - before.compliance_seconds;
-    };
+        m_st.drawn_parts += after.drawn_segments - before.drawn_segments;
+        m_st.drawn_pixels += after.drawn_pixels - before.drawn_pixels;
+        m_st.tent_segments += after.tent_segments - before.tent_segments;
+        m_st.tent_segments_skipped += after.tent_segments_skipped - before.tent_segments_skipped;
+        m_st.seconds_voronoi += after.voronoi_seconds - before.voronoi_seconds;
+        m_st.seconds_compliance += after.compliance_seconds - before.compliance_seconds;
+    }
 
-    if (!opt.lazy) {
-        // Every candidate, but only those the far rule cannot settle are
-        // listed: listing all of them cost 8 bytes each (1 GB for one South
-        // Dakota county map at 64 m, whose 65 M candidates are 98% far).
-        std::vector<std::pair<uint32_t, uint32_t>> near;
-        for (uint32_t wi = 0; wi < work.size(); ++wi) {
-            auto& w = work[wi];
+    /// Not lazy: every candidate at once. Only those the far rule cannot
+    /// settle are listed: listing all of them cost 8 bytes each (1 GB for one
+    /// South Dakota county map at 64 m, whose 65 M candidates are 98% far).
+    void test_every_candidate()
+    {
+        std::vector<TestPair> near;
+        for (uint32_t wi = 0; wi < m_work.size(); ++wi) {
+            auto& w = m_work[wi];
             const auto runs = w.cand.runs();
             for (size_t r = 0; r < runs.size(); ++r) {
                 for (uint32_t k = runs[r].lo; k <= runs[r].hi; ++k) {
@@ -747,7 +816,7 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
                     }
                     if (proved_far(wi, {runs[r].from, k})) {
                         w.state[ci] = good;
-                        ++st.proved_far;
+                        ++m_st.proved_far;
                     } else {
                         near.emplace_back(wi, ci);
                     }
@@ -757,125 +826,184 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
         raster_test(near);
     }
 
-    BorderRule border(store, eps, opt);
-
-    bool checked_once = false;
-    for (;;) {
-        // Step 4 for the chains whose candidates changed, then test what the
-        // paths use and has not been tested (lazy), until every path is clean.
+    /// Step 4 for the chains whose candidates changed, then test what the
+    /// paths use and has not been tested (lazy), until every path is clean.
+    void settle_paths()
+    {
         for (;;) {
-            ++st.rounds;
-            t0 = Clock::now();
-            parallel_each(work.size(), opt.threads, [&](size_t i) {
-                Work& w = work[i];
-                if (!w.dirty) {
-                    return;
+            ++m_st.rounds;
+            shortest_paths();
+            const auto tests = lazy_tests();
+            if (tests.empty()) {
+                for (Work& w : m_work) {
+                    w.dirty = false;
                 }
-                const auto pts = points_of(w);
-                shortest_path(w, pts.size());
-                if (w.ring) {
-                    // Keep the ring's orientation: ban the longest shortcut until it holds.
-                    const int128 orig = signed_area2(pts, pts.size(), [](size_t k) { return k; });
-                    for (;;) {
-                        const int128 now = signed_area2(pts, w.path.size(), [&](size_t k) { return w.path[k]; });
-                        if ((now > 0) == (orig > 0) && now != 0) {
-                            break;
-                        }
-                        uint32_t worst = UINT32_MAX, span = 0;
-                        for (size_t e = 0; e < w.path_cand.size(); ++e) {
-                            if (w.path_cand[e] != UINT32_MAX && w.path[e + 1] - w.path[e] > span) {
-                                span = w.path[e + 1] - w.path[e];
-                                worst = w.path_cand[e];
-                            }
-                        }
-                        if (worst == UINT32_MAX) {
-                            break;
-                        }
-                        w.state[worst] = bad_exact;
-                        ++st.orientation_repairs;
-                        shortest_path(w, pts.size());
+                return;
+            }
+            raster_test(tests);
+            // Chains whose tested shortcuts all passed keep their paths.
+            std::vector<uint8_t> failed(m_work.size(), 0);
+            for (const auto& [wi, ci] : tests) {
+                failed[wi] |= m_work[wi].state[ci] != good; // the far ones were marked good
+            }
+            for (uint32_t wi = 0; wi < m_work.size(); ++wi) {
+                m_work[wi].dirty = failed[wi] != 0;
+            }
+        }
+    }
+
+    /// Step 4: the shortest path of every chain whose candidates changed,
+    /// a ring keeping its orientation.
+    void shortest_paths()
+    {
+        const auto t0 = Clock::now();
+        parallel_each(m_work.size(), m_opt.threads, [&](size_t i) {
+            Work& w = m_work[i];
+            if (!w.dirty) {
+                return;
+            }
+            const auto pts = points_of(w);
+            shortest_path(w, pts.size());
+            if (w.ring) {
+                keep_orientation(w, pts);
+            }
+        });
+        m_st.seconds_shortest_path += since(t0);
+    }
+
+    /// A ring keeps its orientation: ban the longest shortcut of its path until it holds.
+    void keep_orientation(Work& w, std::span<const GridPoint> pts)
+    {
+        const int128 orig = signed_area2(pts, pts.size(), [](size_t k) { return k; });
+        for (;;) {
+            const int128 now = signed_area2(pts, w.path.size(), [&](size_t k) { return w.path[k]; });
+            if ((now > 0) == (orig > 0) && now != 0) {
+                return;
+            }
+            uint32_t worst = UINT32_MAX, span = 0;
+            for (size_t e = 0; e < w.path_cand.size(); ++e) {
+                if (w.path_cand[e] != UINT32_MAX && w.path[e + 1] - w.path[e] > span) {
+                    span = w.path[e + 1] - w.path[e];
+                    worst = w.path_cand[e];
+                }
+            }
+            if (worst == UINT32_MAX) {
+                return;
+            }
+            w.state[worst] = bad_exact;
+            std::atomic_ref(m_st.orientation_repairs).fetch_add(1, std::memory_order_relaxed);
+            shortest_path(w, pts.size());
+        }
+    }
+
+    /// Lazy: every untested shortcut that starts at a vertex of the current
+    /// path (the path's own among them). A path of P vertices over shortcuts
+    /// reaching w ahead costs about P * w = n segments, not the n * w of
+    /// testing every candidate, and the alternatives a failure needs are
+    /// mostly tested already, so the rounds (each a redraw of the tiles
+    /// involved) stay few. The result is the same as testing all: the path
+    /// is the smallest shortest path over the shortcuts that pass, whatever
+    /// was tested.
+    std::vector<TestPair> lazy_tests()
+    {
+        std::vector<TestPair> tests;
+        for (uint32_t wi = 0; wi < m_work.size(); ++wi) {
+            Work& w = m_work[wi];
+            if (!w.dirty) {
+                continue;
+            }
+            const size_t before = tests.size();
+            for (const uint32_t v : w.path) {
+                for (uint32_t c = w.cand.first_id(v); c < w.cand.first_id(v + 1); ++c) {
+                    if (w.state[c] == unknown) {
+                        tests.emplace_back(wi, c);
                     }
                 }
-            });
-            st.seconds_shortest_path += since(t0);
-            // Lazy: test every untested shortcut that starts at a vertex of
-            // the current path (the path's own among them). A path of P
-            // vertices over shortcuts reaching w ahead costs about P * w = n
-            // segments, not the n * w of testing every candidate, and the
-            // alternatives a failure needs are mostly tested already, so the
-            // rounds (each a redraw of the tiles involved) stay few. The
-            // result is the same as testing all: the path is the smallest
-            // shortest path over the shortcuts that pass, whatever was tested.
-            std::vector<std::pair<uint32_t, uint32_t>> tests;
-            for (uint32_t wi = 0; wi < work.size(); ++wi) {
-                Work& w = work[wi];
-                if (!w.dirty) {
-                    continue;
+            }
+            if (++w.rounds > lazy_rounds) {
+                // Still failing after a few rounds: test the rest at once
+                // rather than pay a redraw of its tiles per round, unless
+                // the rest is many rounds' worth (a coarse tolerance: a
+                // chain of n vertices has n x w shortcuts, most of which
+                // no path would take; tract set at 2000 m, 10.9 M tested).
+                const size_t round = tests.size() - before;
+                size_t rest = 0;
+                for (uint32_t c = 0; c < w.cand.size() && rest <= rest_rounds * round; ++c) {
+                    rest += w.state[c] == unknown ? 1 : 0;
                 }
-                const size_t before = tests.size();
-                for (const uint32_t v : w.path) {
-                    for (uint32_t c = w.cand.first_id(v); c < w.cand.first_id(v + 1); ++c) {
+                if (rest <= rest_rounds * round) {
+                    tests.resize(before);
+                    for (uint32_t c = 0; c < w.cand.size(); ++c) {
                         if (w.state[c] == unknown) {
                             tests.emplace_back(wi, c);
                         }
                     }
                 }
-                if (++w.rounds > lazy_rounds) {
-                    // Still failing after a few rounds: test the rest at once
-                    // rather than pay a redraw of its tiles per round, unless
-                    // the rest is many rounds' worth (a coarse tolerance: a
-                    // chain of n vertices has n x w shortcuts, most of which
-                    // no path would take; tract set at 2000 m, 10.9 M tested).
-                    const size_t round = tests.size() - before;
-                    size_t rest = 0;
-                    for (uint32_t c = 0; c < w.cand.size() && rest <= rest_rounds * round; ++c) {
-                        rest += w.state[c] == unknown ? 1 : 0;
-                    }
-                    if (rest <= rest_rounds * round) {
-                        tests.resize(before);
-                        for (uint32_t c = 0; c < w.cand.size(); ++c) {
-                            if (w.state[c] == unknown) {
-                                tests.emplace_back(wi, c);
-                            }
-                        }
-                    }
-                }
-            }
-            if (tests.empty()) {
-                for (Work& w : work) {
-                    w.dirty = false;
-                }
-                break;
-            }
-            raster_test(tests);
-            // Chains whose tested shortcuts all passed keep their paths.
-            std::vector<uint8_t> failed(work.size(), 0);
-            for (const auto& [wi, ci] : tests) {
-                failed[wi] |= work[wi].state[ci] != good; // the far ones were marked good
-            }
-            for (uint32_t wi = 0; wi < work.size(); ++wi) {
-                work[wi].dirty = failed[wi] != 0;
             }
         }
+        return tests;
+    }
 
-        // Exact safety net: simplified owned chains against each other and the halo.
-        t0 = Clock::now();
+    /// The exact safety net: the simplified owned chains against each other
+    /// and the halo, with the integer predicates, then the border rule.
+    /// Bans each shortcut in a meeting and returns whether it banned any.
+    bool exact_check(BorderRule& border)
+    {
+        const auto t0 = Clock::now();
         std::vector<Segment> segs;
-        struct Tag {
-            uint32_t work; ///< UINT32_MAX for a halo chain
-            uint32_t cand; ///< candidate index, UINT32_MAX for an original edge
-            uint32_t chain;
-        };
         std::vector<Tag> tags;
-        // After the first check only the edges that are new in a path can
-        // meet anything new: a pair of edges both present at the last check
-        // was found then. So each meeting pair is found once, in the first
-        // check that has both, and a repair costs what it changed.
-        const bool first_check = !checked_once;
         std::vector<uint8_t> is_new;
-        for (uint32_t wi = 0; wi < work.size(); ++wi) {
-            const auto pts = points_of(work[wi]);
-            auto& w = work[wi];
+        const bool first_check = !m_checked_once;
+        collect_check_segments(segs, tags, is_new);
+        bool banned_any = false;
+        const auto meets =
+            first_check ? find_intersections(segs, m_opt.threads) : find_intersections(segs, is_new, m_opt.threads);
+        for (const auto& x : meets) {
+            const Tag& a = tags[segs[x.first].tag];
+            const Tag& b = tags[segs[x.second].tag];
+            bool banned = false;
+            for (const Tag* t : {&a, &b}) {
+                if (t->work != UINT32_MAX && t->cand != UINT32_MAX) {
+                    Work& w = m_work[t->work];
+                    if (w.state[t->cand] != bad_exact) {
+                        w.state[t->cand] = bad_exact;
+                        w.dirty = true;
+                        ++m_st.banned_exact;
+                    }
+                    banned = true;
+                }
+            }
+            if (!banned) {
+                ++m_st.input_conflicts;
+            } else if (a.chain == b.chain) {
+                ++m_st.self_intersection_repairs;
+            }
+            banned_any |= banned;
+        }
+        banned_any |= border.ban(m_work, m_cells, *m_grid_cells, m_cell, m_ball_l2, m_st);
+        m_st.seconds_exact += since(t0);
+        return banned_any;
+    }
+
+    /// What a segment of the exact check is.
+    struct Tag {
+        uint32_t work; ///< UINT32_MAX for a halo chain
+        uint32_t cand; ///< candidate index, UINT32_MAX for an original edge
+        uint32_t chain;
+    };
+
+    /// The segments of the exact check: every path's edges and the halo's
+    /// segments in reach. After the first check only the edges that are new
+    /// in a path can meet anything new (is_new): a pair of edges both
+    /// present at the last check was found then. So each meeting pair is
+    /// found once, in the first check that has both, and a repair costs
+    /// what it changed.
+    void collect_check_segments(std::vector<Segment>& segs, std::vector<Tag>& tags, std::vector<uint8_t>& is_new)
+    {
+        const bool first_check = !m_checked_once;
+        for (uint32_t wi = 0; wi < m_work.size(); ++wi) {
+            const auto pts = points_of(m_work[wi]);
+            auto& w = m_work[wi];
             const bool same = w.path == w.checked;
             for (size_t e = 0; e + 1 < w.path.size(); ++e) {
                 segs.push_back({pts[w.path[e]], pts[w.path[e + 1]], static_cast<uint32_t>(tags.size())});
@@ -896,13 +1024,13 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
                 w.checked = w.path;
             }
         }
-        checked_once = true;
-        for (uint32_t i = 0; i < store.chains.size(); ++i) {
-            if (!(store.chains[i].flags & chains::chain_halo)) {
+        m_checked_once = true;
+        for (uint32_t i = 0; i < m_store.chains.size(); ++i) {
+            if (!(m_store.chains[i].flags & chains::chain_halo)) {
                 continue;
             }
-            const auto pts = store.chain_points(store.chains[i]);
-            const auto use = keep_of(keep, store.chains[i]);
+            const auto pts = m_store.chain_points(m_store.chains[i]);
+            const auto use = keep_of(m_keep, m_store.chains[i]);
             for (size_t e = 0; e + 1 < pts.size(); ++e) {
                 if (!takes_part(use, e)) {
                     continue;
@@ -914,63 +1042,67 @@ ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyO
                 }
             }
         }
-        bool banned_any = false;
-        const auto meets =
-            first_check ? find_intersections(segs, opt.threads) : find_intersections(segs, is_new, opt.threads);
-        for (const auto& x : meets) {
-            const Tag& a = tags[segs[x.first].tag];
-            const Tag& b = tags[segs[x.second].tag];
-            bool banned = false;
-            for (const Tag* t : {&a, &b}) {
-                if (t->work != UINT32_MAX && t->cand != UINT32_MAX) {
-                    Work& w = work[t->work];
-                    if (w.state[t->cand] != bad_exact) {
-                        w.state[t->cand] = bad_exact;
-                        w.dirty = true;
-                        ++st.banned_exact;
-                    }
-                    banned = true;
-                }
-            }
-            if (!banned) {
-                ++st.input_conflicts;
-            } else if (a.chain == b.chain) {
-                ++st.self_intersection_repairs;
-            }
-            banned_any |= banned;
-        }
-        banned_any |= border.ban(work, cells, grid_cells, cell, ball_l2, st);
-        st.seconds_exact += since(t0);
-        if (!banned_any) {
-            break;
-        }
     }
 
-    ChainStore out;
-    out.level_index = store.level_index;
-    out.level_count = store.level_count;
-    out.level_name = store.level_name;
-    out.partition = store.partition;
-    out.projection = store.projection;
-    out.halo_m = store.halo_m;
-    out.eps_m = eps_m;
-    out.metric = static_cast<uint8_t>(opt.metric);
-    out.strings = store.strings;
-    out.junctions = store.junctions;
-    out.constraints = store.constraints;
-    std::vector<GridPoint> buf;
-    for (const Work& w : work) {
-        const auto pts = points_of(w);
-        buf.clear();
-        for (const uint32_t v : w.path) {
-            buf.push_back(pts[v]);
+    /// The owned chains along their paths, with the store's junctions and constraints.
+    ChainStore result() const
+    {
+        ChainStore out;
+        out.level_index = m_store.level_index;
+        out.level_count = m_store.level_count;
+        out.level_name = m_store.level_name;
+        out.partition = m_store.partition;
+        out.projection = m_store.projection;
+        out.halo_m = m_store.halo_m;
+        out.eps_m = m_eps_m;
+        out.metric = static_cast<uint8_t>(m_opt.metric);
+        out.strings = m_store.strings;
+        out.junctions = m_store.junctions;
+        out.constraints = m_store.constraints;
+        std::vector<GridPoint> buf;
+        for (const Work& w : m_work) {
+            const auto pts = points_of(w);
+            buf.clear();
+            for (const uint32_t v : w.path) {
+                buf.push_back(pts[v]);
+            }
+            chains::ChainInfo info = m_store.chains[w.chain];
+            out.add_chain(info, buf);
+            m_st.output_vertices += buf.size();
         }
-        chains::ChainInfo info = store.chains[w.chain];
-        out.add_chain(info, buf);
-        st.output_vertices += buf.size();
+        out.canonicalize();
+        return out;
     }
-    out.canonicalize();
-    return out;
+
+    const ChainStore& m_store;
+    const double m_eps_m;
+    const SimplifyOptions& m_opt;
+    Raster& m_raster;
+    const ColorResult* m_colors; ///< given, or m_own_colors once finish_colouring has it
+    ToleranceStats& m_st;
+    const std::vector<double> m_eps; ///< per chain, grid units (chain_tolerances)
+    std::vector<uint8_t> m_keep;     ///< the segments in reach (segments_in_reach)
+    ColorResult m_own_colors;
+    /// After m_eps and m_keep, which it reads: destroyed (waited for) before them.
+    std::future<std::pair<ColorResult, double>> m_colouring;
+    double m_pixel = 0; ///< the tiles' pixel, grid units
+    std::vector<Work> m_work;
+    // The far rule (build_far_rule).
+    double m_ball_l2 = 0, m_reach_max = 0, m_cell = 0;
+    CellGrid m_cells;
+    std::optional<CellBuckets<GridSeg>> m_grid_cells;
+    std::vector<std::vector<uint32_t>> m_blocked;
+    std::vector<std::vector<NearSegment>> m_blocked_at;
+    std::vector<std::vector<std::pair<uint32_t, uint8_t>>> m_tiles_of; ///< (tile, class) of each owned chain
+    bool m_checked_once = false;
+}; // class StoreSimplifier
+
+} // namespace
+
+ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyOptions& opt, Raster& raster,
+                          const ColorResult* colors, ToleranceStats& st)
+{
+    return StoreSimplifier(store, eps_m, opt, raster, colors, st).run();
 }
 
 } // namespace tigerlod::simplify
