@@ -1,5 +1,7 @@
 // Hand-made maps with exact expectations for tigerlod-color and
-// tigerlod-simplify, on OSMesa (a dependency installed by scripts/setup).
+// tigerlod-simplify, on OSMesa (a dependency installed by scripts/setup):
+// the mechanisms (candidates, raster, colouring, statistics). Maps whose
+// outcome alone is the point are data: tests/maps/ (test_maps.cpp).
 #include "core/errors.hpp"
 #include "core/segment_grid.hpp"
 #include "gl/context.hpp"
@@ -9,6 +11,7 @@
 #include "simplification/near_parts.hpp"
 #include "simplification/raster.hpp"
 #include "simplification/simplifier.hpp"
+#include "../../support/simplify_fixture.hpp"
 
 #include <gtest/gtest.h>
 
@@ -18,11 +21,9 @@
 
 using namespace tigerlod;
 using namespace tigerlod::simplify;
-using chains::ChainStore;
+using namespace tigerlod::simplify::testing;
 
 namespace {
-
-using Pts = std::vector<GridPoint>;
 
 /// A chain of n points from the origin, each step drawn from [lo, hi] in x
 /// and the same divided by y_div in y (mostly forward, turning back at times).
@@ -39,79 +40,6 @@ Pts random_walk(std::mt19937& rng, int n, int lo, int hi, int y_div)
     return pts;
 }
 
-/// A store in grid units (1 cm); every chain owned unless `halo`.
-struct MapBuilder {
-    ChainStore s;
-    MapBuilder()
-    {
-        s.level_name = "test";
-        s.partition = "all";
-    }
-    MapBuilder& chain(uint64_t id, const Pts& pts, const std::string& left = "L", const std::string& right = "R",
-                      const std::string& cls = "", uint32_t flags = 0)
-    {
-        chains::ChainInfo c;
-        c.id = id;
-        c.left = s.intern(left);
-        c.right = s.intern(right);
-        c.feature_class = s.intern(cls);
-        c.flags = flags | (pts.front() == pts.back() ? chains::chain_closed : 0U);
-        s.add_chain(c, pts);
-        return *this;
-    }
-    MapBuilder& point(const std::string& unit, GridPoint p)
-    {
-        s.constraints.push_back({s.intern(unit), chains::constraint_internal, p});
-        return *this;
-    }
-};
-
-/// The OSMesa context of the tests: one, current on the tests' thread.
-gl::Context& context()
-{
-    static std::unique_ptr<gl::Context> ctx = gl::Context::create(gl::Backend::osmesa);
-    return *ctx;
-}
-
-/// One raster engine per mode, shared by the tests.
-Raster& raster(Compliance mode = Compliance::ssbo, Metric metric = Metric::l2)
-{
-    // The context first: statics are destroyed in reverse order, so the
-    // engines go before the context they use.
-    gl::Context& ctx = context();
-    static std::map<std::pair<int, int>, std::unique_ptr<Raster>> engines;
-    auto& r = engines[{int(mode), int(metric)}];
-    if (!r) {
-        RasterOptions o;
-        o.compliance = mode;
-        o.metric = metric;
-        o.max_tile_pixels = 1024;
-        r = std::make_unique<Raster>(ctx, o);
-    }
-    return *r;
-}
-
-SimplifyOptions plain(Metric m = Metric::l2)
-{
-    SimplifyOptions o;
-    o.metric = m;
-    o.projection_scale = false; // eps_m / 0.01 grid units exactly
-    o.color.tile_pixels = 1024;
-    o.color.metric = m;
-    return o;
-}
-
-ChainStore run(const ChainStore& in, double eps_m, SimplifyOptions o = plain(), ToleranceStats* stats = nullptr,
-               Compliance mode = Compliance::ssbo)
-{
-    ToleranceStats st;
-    auto out = simplify_store(in, eps_m, o, raster(mode, o.metric), nullptr, st);
-    if (stats) {
-        *stats = st;
-    }
-    return out;
-}
-
 /// A square render tile: origin and pixel in grid units, side in pixels.
 TileSpec square_tile(double x0, double y0, double pixel, uint32_t side)
 {
@@ -121,33 +49,6 @@ TileSpec square_tile(double x0, double y0, double pixel, uint32_t side)
     t.pixel = pixel;
     t.width = t.height = side;
     return t;
-}
-
-Pts points_of(const ChainStore& s, uint64_t id)
-{
-    for (const auto& c : s.chains) {
-        if (c.id == id) {
-            const auto p = s.chain_points(c);
-            return {p.begin(), p.end()};
-        }
-    }
-    ADD_FAILURE() << "no chain " << id;
-    return {};
-}
-
-/// Intersections other than shared end points among all chains of the stores.
-size_t count_intersections(const std::vector<const ChainStore*>& stores)
-{
-    std::vector<Segment> segs;
-    for (const auto* s : stores) {
-        for (const auto& c : s->chains) {
-            const auto p = s->chain_points(c);
-            for (size_t i = 0; i + 1 < p.size(); ++i) {
-                segs.push_back({p[i], p[i + 1], uint32_t(segs.size())});
-            }
-        }
-    }
-    return find_intersections(segs, 1).size();
 }
 
 bool dp_within(const Pts& pts, size_t a, size_t b, double eps)
@@ -614,69 +515,6 @@ TEST(NearParts, OnlyBlockedSegmentsGiveParts)
     EXPECT_NEAR(q[0].second, (335 + 4) / 400.0, 1e-8);
 }
 
-TEST(Simplify, IslandInABayIsNotJumped)
-{
-    // A bay 200 wide and 150 deep; an island ring inside it.
-    const Pts coast{{0, 0}, {400, 0}, {400, -150}, {600, -150}, {600, 0}, {1000, 0}};
-    const Pts island{{480, -100}, {520, -100}, {520, -60}, {480, -60}, {480, -100}};
-    MapBuilder m;
-    m.chain(1, coast, "land", "sea").chain(2, island, "isle", "sea");
-    const auto out = run(m.s, 2.0); // 200 units: the bay mouth is proximate
-    const auto c = points_of(out, 1);
-    // The island's points stay on the sea side: inside the polygon the coast
-    // makes with its own mouth.
-    Pts ring = c;
-    ring.push_back(c.front());
-    for (const GridPoint p : island) {
-        PointInPolygon pip(p);
-        for (size_t i = 0; i + 1 < ring.size(); ++i) {
-            pip.add_segment(ring[i], ring[i + 1]);
-        }
-        PointInPolygon orig(p);
-        Pts o = coast;
-        o.push_back(coast.front());
-        for (size_t i = 0; i + 1 < o.size(); ++i) {
-            orig.add_segment(o[i], o[i + 1]);
-        }
-        EXPECT_EQ(pip.location(), orig.location()) << "island vertex " << p.x << "," << p.y;
-    }
-    EXPECT_EQ(count_intersections({&out}), 0U);
-}
-
-TEST(Simplify, AGroupOfStraightChainsInABayIsNotJumped)
-{
-    // The same bay, and in it four junctions joined by six straight chains
-    // (a triangle and its centre, every chain of two vertices): no chain has
-    // a middle vertex and no unit has a point, so only the chains' ends can
-    // tell that the group lies between the coast and its mouth. Near the
-    // bay's bottom, it is farther from the mouth than the bay's walls are,
-    // so the raster passes the mouth.
-    const Pts coast{{0, 0}, {400, 0}, {400, -150}, {600, -150}, {600, 0}, {1000, 0}};
-    const GridPoint a{480, -140}, b{520, -140}, c{500, -110}, d{500, -128};
-    MapBuilder m;
-    m.chain(1, coast, "land", "sea");
-    uint64_t id = 2;
-    for (const auto& [p, q] : {std::pair{a, b}, {b, c}, {c, a}, {a, d}, {b, d}, {c, d}}) {
-        m.chain(id++, Pts{p, q}, "", "");
-    }
-    const auto out = run(m.s, 2.0);
-    Pts ring = points_of(out, 1);
-    ring.push_back(ring.front());
-    Pts orig = coast;
-    orig.push_back(coast.front());
-    for (const GridPoint p : {a, b, c, d}) {
-        PointInPolygon now(p), before(p);
-        for (size_t i = 0; i + 1 < ring.size(); ++i) {
-            now.add_segment(ring[i], ring[i + 1]);
-        }
-        for (size_t i = 0; i + 1 < orig.size(); ++i) {
-            before.add_segment(orig[i], orig[i + 1]);
-        }
-        EXPECT_EQ(now.location(), before.location()) << "junction " << p.x << "," << p.y;
-    }
-    EXPECT_EQ(count_intersections({&out}), 0U);
-}
-
 TEST(Simplify, HaloChainConstrainsWhereItComesNearAndOnlyThere)
 {
     // An owned chain dipping 800 below the line between its ends, and a
@@ -754,64 +592,6 @@ TEST(Simplify, ShortestPathThatSelfIntersectsIsRepaired)
     EXPECT_EQ(points_of(out, 1), c);
     EXPECT_EQ(st.self_intersection_repairs, 1U);
     EXPECT_EQ(st.banned_exact, 1U);
-}
-
-TEST(Simplify, LensOfTwoChainsBetweenTheSameJunctionsDoesNotCollapse)
-{
-    const Pts a{{0, 0}, {500, 50}, {1000, 0}};
-    const Pts b{{0, 0}, {500, -50}, {1000, 0}};
-    MapBuilder m;
-    m.chain(1, a, "in", "out").chain(2, b, "out", "in");
-    const auto out = run(m.s, 1.0);
-    EXPECT_LE(points_of(out, 1).size() + points_of(out, 2).size(), 6U);
-    EXPECT_GE(points_of(out, 1).size() + points_of(out, 2).size(), 5U) << "both collapsed onto one line";
-    EXPECT_EQ(count_intersections({&out}), 0U);
-}
-
-TEST(Simplify, RingKeepsThreeVerticesAndItsOrientation)
-{
-    const Pts ring{{0, 0}, {100, 0}, {200, 5}, {300, 0}, {300, 100}, {0, 100}, {0, 0}};
-    MapBuilder m;
-    m.chain(1, ring);
-    const auto out = run(m.s, 64.0); // eps far larger than the ring
-    const auto p = points_of(out, 1);
-    ASSERT_GE(p.size(), 4U);
-    EXPECT_EQ(p.front(), p.back());
-    int128 area = 0;
-    for (size_t i = 0; i + 1 < p.size(); ++i) {
-        area += int128{p[i].x} * p[i + 1].y - int128{p[i + 1].x} * p[i].y;
-    }
-    EXPECT_GT(area, 0) << "counter-clockwise ring must stay counter-clockwise";
-}
-
-TEST(Simplify, PerChainEpsByFeatureClass)
-{
-    const Pts a{{0, 0}, {500, 60}, {1000, 0}};
-    const Pts b{{0, 5000}, {500, 5060}, {1000, 5000}};
-    MapBuilder m;
-    m.chain(1, a, "x", "y", "road").chain(2, b, "x", "y", "river");
-    SimplifyOptions o = plain();
-    o.class_scale["river"] = 0.5; // 50 units: the 60 bump stays
-    const auto out = run(m.s, 1.0, o);
-    EXPECT_EQ(points_of(out, 1).size(), 2U);
-    EXPECT_EQ(points_of(out, 2), b);
-}
-
-TEST(Simplify, MetricsDifferWhereTheyShould)
-{
-    // Vertex (500 + d, 500 - d) off the diagonal: L2 distance d*sqrt2, L1 2d, Linf d.
-    const Pts d60{{0, 0}, {560, 440}, {1000, 1000}};
-    const Pts d80{{0, 0}, {580, 420}, {1000, 1000}};
-    auto size_at = [](const Pts& p, Metric m) {
-        MapBuilder b;
-        b.chain(1, p);
-        return points_of(run(b.s, 1.0, plain(m)), 1).size();
-    };
-    EXPECT_EQ(size_at(d60, Metric::l2), 2U);
-    EXPECT_EQ(size_at(d60, Metric::l1), 3U);
-    EXPECT_EQ(size_at(d60, Metric::linf), 2U);
-    EXPECT_EQ(size_at(d80, Metric::l2), 3U);
-    EXPECT_EQ(size_at(d80, Metric::linf), 2U);
 }
 
 namespace {
