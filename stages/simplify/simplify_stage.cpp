@@ -129,53 +129,68 @@ int SimplifyStage::run(const StageContext& ctx)
                  (llvmpipe_inline ? " (LP_NUM_THREADS=0: every core has a worker)" : ""));
 
     const auto t_start = std::chrono::steady_clock::now();
-    std::vector<ToleranceStats> totals(m_common.tolerances.size());
+    const auto totals = simplify_stores(stores, out.path(), raster, llvmpipe_inline, ctx);
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+    write_file_atomic(out.path() / "simplify-report.json",
+                      report_json(stores.size(), context->describe(), totals, seconds).dump(2) + "\n");
+    write_file_atomic(out.path() / "manifest.json", manifest_text(manifest_json(ingest, colored, points_sha256)));
+    out.commit();
+    print_summary(stores.size(), context->describe(), totals, seconds);
+    return exit_ok;
+}
+
+std::vector<ToleranceStats> SimplifyStage::simplify_one(const StoreFile& sf, const SimplifyOptions& so, Raster& raster,
+                                                        const fs::path& out_dir) const
+{
     double max_scale = 1.0;
-    for (const auto& [cls, f] : o.class_scale) {
+    for (const auto& [cls, f] : so.class_scale) {
         max_scale = std::max(max_scale, f);
     }
-    // One store at every tolerance; returns its statistics per tolerance.
-    auto simplify_one = [&](const auto& sf, const SimplifyOptions& so) {
-        std::vector<ToleranceStats> stats(m_common.tolerances.size());
-        const auto store = chains::read(sf.path);
-        check_store(store, sf);
-        // Partitions are simplified independently only if each sees every
-        // chain within eps_i + eps_j of its own: its halo must be that wide.
-        const double need = 2 * m_common.tolerances.back() * max_scale * l2_reach(so.metric);
-        if (store.partition != "all" && store.halo_m < need) {
-            throw usage_error(sf.path.string() + ": cut with a halo of " + std::to_string(store.halo_m) +
-                              " m, but tolerance " + std::to_string(m_common.tolerances.back()) + " m needs at least " +
-                              std::to_string(need) + " m so that partitions cannot cross; re-run tigerlod-ingest " +
-                              "with a larger ingest.halo_m (or --halo-m), or lower the tolerances");
+    std::vector<ToleranceStats> stats(m_common.tolerances.size());
+    const auto store = chains::read(sf.path);
+    check_store(store, sf);
+    // Partitions are simplified independently only if each sees every
+    // chain within eps_i + eps_j of its own: its halo must be that wide.
+    const double need = 2 * m_common.tolerances.back() * max_scale * l2_reach(so.metric);
+    if (store.partition != "all" && store.halo_m < need) {
+        throw usage_error(sf.path.string() + ": cut with a halo of " + std::to_string(store.halo_m) +
+                          " m, but tolerance " + std::to_string(m_common.tolerances.back()) + " m needs at least " +
+                          std::to_string(need) + " m so that partitions cannot cross; re-run tigerlod-ingest " +
+                          "with a larger ingest.halo_m (or --halo-m), or lower the tolerances");
+    }
+    if (so.point_constraints) {
+        if (const auto fault = partition_contract_fault(store)) {
+            throw input_error(sf.path.string() + ": " + *fault);
         }
-        if (so.point_constraints) {
-            if (const auto fault = partition_contract_fault(store)) {
-                throw input_error(sf.path.string() + ": " + *fault);
-            }
+    }
+    for (size_t ti = 0; ti < m_common.tolerances.size(); ++ti) {
+        const double eps_m = m_common.tolerances[ti];
+        ColorResult given;
+        const ColorResult* colors = nullptr;
+        if (!m_colors.empty()) {
+            given =
+                colors_from_json(fs::path(m_colors) / tolerance_dir(eps_m) / sf.level / (sf.partition + ".colors.json"),
+                                 store, eps_m, so.metric, tile_pixel(chain_tolerances(store, eps_m, so), so.color));
+            colors = &given;
         }
-        for (size_t ti = 0; ti < m_common.tolerances.size(); ++ti) {
-            const double eps_m = m_common.tolerances[ti];
-            ColorResult given;
-            const ColorResult* colors = nullptr;
-            if (!m_colors.empty()) {
-                given = colors_from_json(
-                    fs::path(m_colors) / tolerance_dir(eps_m) / sf.level / (sf.partition + ".colors.json"), store,
-                    eps_m, so.metric, tile_pixel(chain_tolerances(store, eps_m, so), so.color));
-                colors = &given;
-            }
-            chains::ChainStore result;
-            try {
-                result = simplify_store(store, eps_m, so, raster, colors, stats[ti]);
-            } catch (const input_error& e) {
-                throw input_error(sf.path.string() + " at eps " + std::to_string(eps_m) + " m: " + e.what());
-            }
-            const fs::path dir = out.path() / tolerance_dir(eps_m) / sf.level;
-            fs::create_directories(dir);
-            write_file(dir / (sf.partition + ".tlc"), chains::encode(result)); // inside the output folder
+        chains::ChainStore result;
+        try {
+            result = simplify_store(store, eps_m, so, raster, colors, stats[ti]);
+        } catch (const input_error& e) {
+            throw input_error(sf.path.string() + " at eps " + std::to_string(eps_m) + " m: " + e.what());
         }
-        return stats;
-    };
+        const fs::path dir = out_dir / tolerance_dir(eps_m) / sf.level;
+        fs::create_directories(dir);
+        write_file(dir / (sf.partition + ".tlc"), chains::encode(result)); // inside the output folder
+    }
+    return stats;
+}
 
+std::vector<ToleranceStats> SimplifyStage::simplify_stores(const std::vector<StoreFile>& stores,
+                                                           const fs::path& out_dir, Raster& raster,
+                                                           bool llvmpipe_inline, const StageContext& ctx) const
+{
+    const auto& o = m_common.options;
     // Several stores at once, each on one worker with its share of the
     // threads; the GL context stays on this thread, which runs the workers'
     // raster batches one at a time (SerialQueue). Each store's result depends on
@@ -203,7 +218,7 @@ int SimplifyStage::run(const StageContext& ctx)
                     return;
                 }
                 try {
-                    per_store_stats[si] = simplify_one(stores[si], per_store);
+                    per_store_stats[si] = simplify_one(stores[si], per_store, raster, out_dir);
                 } catch (...) {
                     for (size_t f = first_failed.load(); si < f && !first_failed.compare_exchange_weak(f, si);) {
                     }
@@ -222,19 +237,25 @@ int SimplifyStage::run(const StageContext& ctx)
     if (failure) {
         std::rethrow_exception(failure);
     }
+    std::vector<ToleranceStats> totals(m_common.tolerances.size());
     for (const auto& list : per_store_stats) {
         for (size_t ti = 0; ti < list.size(); ++ti) {
             totals[ti].add(list[ti]);
             totals[ti].eps_m = m_common.tolerances[ti];
         }
     }
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+    return totals;
+}
 
+json SimplifyStage::report_json(size_t stores, const std::string& gl, const std::vector<ToleranceStats>& totals,
+                                double seconds) const
+{
+    const auto& o = m_common.options;
     json report;
     report["schema"] = "tigerlod.simplify-report/1";
     report["input"] = m_common.input;
-    report["stores"] = stores.size();
-    report["gl"] = context->describe();
+    report["stores"] = stores;
+    report["gl"] = gl;
     report["options"] = {{"metric", metric_name(o.metric)},
                          {"projection_scale", o.projection_scale},
                          {"class_scale", o.class_scale},
@@ -285,7 +306,13 @@ int SimplifyStage::run(const StageContext& ctx)
     }
     report["tolerances"] = std::move(tols);
     report["seconds"] = seconds;
-    write_file_atomic(out.path() / "simplify-report.json", report.dump(2) + "\n");
+    return report;
+}
+
+json SimplifyStage::manifest_json(const Manifest& ingest, const std::optional<Manifest>& colored,
+                                  const std::string& points_sha256) const
+{
+    const auto& o = m_common.options;
     json manifest = new_manifest("simplify", versions());
     add_input(manifest, "ingest", ingest);
     if (colored) {
@@ -306,11 +333,14 @@ int SimplifyStage::run(const StageContext& ctx)
     options["compliance"] = m_compliance;
     options["window_pixels"] = m_window_pixels;
     manifest["options"] = std::move(options);
-    write_file_atomic(out.path() / "manifest.json", manifest_text(manifest));
-    out.commit();
+    return manifest;
+}
 
+void SimplifyStage::print_summary(size_t stores, const std::string& gl, const std::vector<ToleranceStats>& totals,
+                                  double seconds) const
+{
     {
-        std::printf("simplify: %zu stores in %.2f s on %s\n", stores.size(), seconds, context->describe().c_str());
+        std::printf("simplify: %zu stores in %.2f s on %s\n", stores, seconds, gl.c_str());
         for (const auto& t : totals) {
             std::printf("  eps %g m: %zu -> %zu vertices (%.1f%%), %zu candidates, %zu drawn, banned raster %zu "
                         "exact %zu border %zu points %zu\n",
@@ -321,7 +351,6 @@ int SimplifyStage::run(const StageContext& ctx)
         }
         std::printf("outputs in %s\n", m_common.output.c_str());
     }
-    return exit_ok;
 }
 
 } // namespace tigerlod::simplify

@@ -4,7 +4,10 @@
 /// tolerance of the ladder, on OpenGL.
 
 #include "core/stage.hpp"
+#include "simplification/simplifier.hpp"
 #include "simplification/stage_options.hpp"
+
+#include <optional>
 
 namespace tigerlod::simplify {
 
@@ -23,6 +26,26 @@ class SimplifyStage final : public Stage {
     std::vector<std::string> config_args(const std::filesystem::path& file) const override;
 
   private:
+    /// One store at every tolerance of the ladder, written under
+    /// `out_dir`; its statistics per tolerance.
+    std::vector<ToleranceStats> simplify_one(const StoreFile& sf, const SimplifyOptions& so, Raster& raster,
+                                             const std::filesystem::path& out_dir) const;
+    /// Every store, several at once, each on a worker with its share of the
+    /// threads, the GL work on this thread; the statistics summed per
+    /// tolerance in store order (the same whatever the threads).
+    std::vector<ToleranceStats> simplify_stores(const std::vector<StoreFile>& stores,
+                                                const std::filesystem::path& out_dir, Raster& raster,
+                                                bool llvmpipe_inline, const StageContext& ctx) const;
+    /// simplify-report.json.
+    nlohmann::ordered_json report_json(size_t stores, const std::string& gl, const std::vector<ToleranceStats>& totals,
+                                       double seconds) const;
+    /// manifest.json: the inputs' digests and the options, the user points themselves included.
+    nlohmann::ordered_json manifest_json(const Manifest& ingest, const std::optional<Manifest>& colored,
+                                         const std::string& points_sha256) const;
+    /// The lines on stdout.
+    void print_summary(size_t stores, const std::string& gl, const std::vector<ToleranceStats>& totals,
+                       double seconds) const;
+
     CommonOptions m_common;
     std::string m_points;
     std::string m_compliance = "ssbo";
