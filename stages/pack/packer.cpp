@@ -94,16 +94,65 @@ std::vector<chains::ChainStore> read_all(const std::vector<fs::path>& paths, uns
 
 } // namespace
 
-PackedTree build_tree(const fs::path& original, const fs::path& simplified, const PackOptions& options)
-{
-    // The stores: LOD 0 from ORIGINAL, LOD k from the k-th smallest eps folder.
-    const auto rel = store_files(original);
-    if (rel.empty()) {
-        throw input_error(original.string() + ": no chain stores (<level>/<partition>.tlc)");
-    }
-    std::vector<fs::path> lod_dirs{original};
-    std::vector<double> lod_eps{0.0};
+namespace {
+
+/// build_tree step by step: the LODs (ORIGINAL and each eps folder), the
+/// levels, the partitions and their units (pass 1), the hierarchy of nodes
+/// from them, then every node's table and payload at each level and LOD
+/// (pass 2), laid out in tiles.
+class TreeBuilder {
+  public:
+    TreeBuilder(const fs::path& original, const fs::path& simplified, const PackOptions& options)
+        : m_original(original), m_simplified(simplified), m_options(options), m_rel(store_files(original))
     {
+        if (m_rel.empty()) {
+            throw input_error(original.string() + ": no chain stores (<level>/<partition>.tlc)");
+        }
+    }
+
+    PackedTree build()
+    {
+        find_lods();
+        find_levels();
+        build_hierarchy(read_partitions());
+        name_nodes();
+        m_tree.lods.resize(m_lod_eps.size());
+        for (size_t k = 0; k < m_lod_eps.size(); ++k) {
+            m_tree.lods[k].eps_m = m_lod_eps[k];
+        }
+        for (uint32_t l = 0; l < m_level_names.size(); ++l) {
+            pack_level(l);
+        }
+        std::vector<std::vector<std::string>> payloads(m_nodes.size());
+        for (size_t i = 0; i < m_nodes.size(); ++i) {
+            payloads[i].push_back(std::move(m_nodes[i].table));
+            for (auto& p : m_nodes[i].lod_payloads) {
+                payloads[i].push_back(std::move(p));
+            }
+        }
+        layout_tiles(m_tree, payloads, m_options.tile_bytes);
+        return std::move(m_tree);
+    }
+
+  private:
+    /// The stores of level l, relative to ORIGINAL (none if it has no folder).
+    const std::vector<fs::path>& files_of(uint32_t l) const
+    {
+        static const std::vector<fs::path> none;
+        const auto it = m_level_files.find(l);
+        return it == m_level_files.end() ? none : it->second;
+    }
+
+    /// LOD 0 from ORIGINAL, LOD k from the k-th smallest eps folder.
+    void find_lods()
+    {
+        const fs::path& original = m_original;
+        const fs::path& simplified = m_simplified;
+        const auto& rel = m_rel;
+        auto& lod_dirs = m_lod_dirs;
+        auto& lod_eps = m_lod_eps;
+        lod_dirs = {original};
+        lod_eps = {0.0};
         std::vector<std::pair<double, fs::path>> eps_dirs;
         if (fs::is_directory(simplified)) {
             for (const auto& d : fs::directory_iterator(simplified)) {
@@ -134,15 +183,15 @@ PackedTree build_tree(const fs::path& original, const fs::path& simplified, cons
             lod_dirs.push_back(dir);
         }
     }
-    const size_t nlods = lod_eps.size();
 
-    // Levels, from each level folder's stores.
-    std::map<uint32_t, std::vector<fs::path>> level_files;
-    std::vector<std::string> level_names;
-    PackedTree tree;
-    auto& sk = tree.skeleton;
+    /// The levels, from each level folder's first store; the projection too.
+    void find_levels()
     {
-        std::vector<chains::ChainStore> firsts;
+        const fs::path& original = m_original;
+        auto& sk = m_tree.skeleton;
+        const auto& rel = m_rel;
+        auto& level_names = m_level_names;
+        auto& level_files = m_level_files;
         std::map<std::string, uint32_t> index_of_dir;
         for (const auto& r : rel) {
             const std::string dir = r.parent_path().string();
@@ -167,110 +216,127 @@ PackedTree build_tree(const fs::path& original, const fs::path& simplified, cons
             }
             level_files[index_of_dir[dir]].push_back(r);
         }
+        sk.level_names = level_names;
+        sk.lod_eps_m = m_lod_eps;
     }
-    const auto nlevels = static_cast<uint32_t>(level_names.size());
-    sk.level_names = level_names;
-    sk.lod_eps_m = lod_eps;
 
-    // Pass 1: partitions and their units, level by level; the hierarchy from them.
-    std::vector<std::map<std::string, std::vector<std::string>>> units(nlevels); // partition -> units
-    std::vector<std::map<std::string, fs::path>> file_of(nlevels);
-    for (uint32_t l = 0; l < nlevels; ++l) {
-        std::vector<fs::path> paths;
-        for (const auto& r : level_files[l]) {
-            paths.push_back(original / r);
-        }
-        const auto stores = read_all(paths, options.threads);
-        for (size_t i = 0; i < stores.size(); ++i) {
-            const auto& s = stores[i];
-            if (s.level_index != l || s.projection != stores.front().projection) {
-                throw input_error(paths[i].string() + ": level or projection differs from the other stores");
-            }
-            std::set<std::string> u;
-            for (const auto& c : s.constraints) {
-                if (c.kind == chains::constraint_internal) {
-                    u.insert(s.strings[c.unit]);
-                }
-            }
-            units[l][s.partition] = {u.begin(), u.end()};
-            file_of[l][s.partition] = level_files[l][i];
-        }
-    }
-    if (units[0].size() != 1) {
-        throw input_error(original.string() + ": the top level must have one partition, it has " +
-                          std::to_string(units[0].size()));
-    }
-    std::vector<NodeBuild> nodes;
-    nodes.push_back({0, units[0].begin()->first, units[0].begin()->second, {}, {}, {}, {}, 0.0});
-    sk.nodes.push_back({});
-    for (size_t i = 0; i < nodes.size(); ++i) {
-        const uint32_t l = nodes[i].level;
-        auto& n = sk.nodes[i];
-        n.level = l;
-        n.first_child = static_cast<uint32_t>(nodes.size());
-        if (l + 1 < nlevels) {
-            for (const auto& u : nodes[i].units) {
-                if (auto it = units[l + 1].find(u); it != units[l + 1].end()) {
-                    nodes.push_back({l + 1, u, it->second, {}, {}, {}, {}, 0.0});
-                    datatree::Node child;
-                    child.parent = static_cast<uint32_t>(i);
-                    sk.nodes.push_back(child);
-                    ++sk.nodes[i].child_count;
-                }
-            }
-        }
-        if (sk.nodes[i].child_count == 0) {
-            sk.nodes[i].first_child = 0;
-        }
-    }
+    /// Pass 1: each level's partitions and their units (partition -> units).
+    std::vector<std::map<std::string, std::vector<std::string>>> read_partitions() const
     {
-        std::vector<size_t> per_level(nlevels);
-        for (const auto& n : nodes) {
-            ++per_level[n.level];
-        }
+        const auto nlevels = static_cast<uint32_t>(m_level_names.size());
+        std::vector<std::map<std::string, std::vector<std::string>>> units(nlevels);
         for (uint32_t l = 0; l < nlevels; ++l) {
-            if (per_level[l] != units[l].size()) {
-                throw input_error(original.string() + "/" + level_names[l] + ": " +
-                                  std::to_string(units[l].size() - per_level[l]) +
-                                  " partitions are not units of the level above");
+            std::vector<fs::path> paths;
+            for (const auto& r : files_of(l)) {
+                paths.push_back(m_original / r);
+            }
+            const auto stores = read_all(paths, m_options.threads);
+            for (size_t i = 0; i < stores.size(); ++i) {
+                const auto& s = stores[i];
+                if (s.level_index != l || s.projection != stores.front().projection) {
+                    throw input_error(paths[i].string() + ": level or projection differs from the other stores");
+                }
+                std::set<std::string> u;
+                for (const auto& c : s.constraints) {
+                    if (c.kind == chains::constraint_internal) {
+                        u.insert(s.strings[c.unit]);
+                    }
+                }
+                units[l][s.partition] = {u.begin(), u.end()};
             }
         }
-    }
-    std::unordered_map<std::string, uint32_t> string_index;
-    for (size_t i = 0; i < nodes.size(); ++i) {
-        const std::string code = i == 0 ? std::string() : nodes[i].partition;
-        auto [it, fresh] = string_index.try_emplace(code, 0);
-        if (fresh) {
-            if (!code.empty()) {
-                it->second = static_cast<uint32_t>(sk.strings.size());
-                sk.strings.push_back(code);
-            }
-        }
-        sk.nodes[i].code = it->second;
+        return units;
     }
 
-    // Pass 2: each level at each LOD: node geometry, errors, payloads.
-    tree.lods.resize(nlods);
-    for (size_t k = 0; k < nlods; ++k) {
-        tree.lods[k].eps_m = lod_eps[k];
-    }
-    for (uint32_t l = 0; l < nlevels; ++l) {
-        std::vector<size_t> at_level;
+    /// The nodes, breadth first from the top level's one partition: a
+    /// partition of level l + 1 is a child of the node whose unit it is.
+    void build_hierarchy(const std::vector<std::map<std::string, std::vector<std::string>>>& units)
+    {
+        const auto nlevels = static_cast<uint32_t>(m_level_names.size());
+        const fs::path& original = m_original;
+        const auto& level_names = m_level_names;
+        auto& sk = m_tree.skeleton;
+        auto& nodes = m_nodes;
+        if (units[0].size() != 1) {
+            throw input_error(original.string() + ": the top level must have one partition, it has " +
+                              std::to_string(units[0].size()));
+        }
+        nodes.push_back({0, units[0].begin()->first, units[0].begin()->second, {}, {}, {}, {}, 0.0});
+        sk.nodes.push_back({});
         for (size_t i = 0; i < nodes.size(); ++i) {
-            if (nodes[i].level == l) {
+            const uint32_t l = nodes[i].level;
+            auto& n = sk.nodes[i];
+            n.level = l;
+            n.first_child = static_cast<uint32_t>(nodes.size());
+            if (l + 1 < nlevels) {
+                for (const auto& u : nodes[i].units) {
+                    if (auto it = units[l + 1].find(u); it != units[l + 1].end()) {
+                        nodes.push_back({l + 1, u, it->second, {}, {}, {}, {}, 0.0});
+                        datatree::Node child;
+                        child.parent = static_cast<uint32_t>(i);
+                        sk.nodes.push_back(child);
+                        ++sk.nodes[i].child_count;
+                    }
+                }
+            }
+            if (sk.nodes[i].child_count == 0) {
+                sk.nodes[i].first_child = 0;
+            }
+        }
+        {
+            std::vector<size_t> per_level(nlevels);
+            for (const auto& n : nodes) {
+                ++per_level[n.level];
+            }
+            for (uint32_t l = 0; l < nlevels; ++l) {
+                if (per_level[l] != units[l].size()) {
+                    throw input_error(original.string() + "/" + level_names[l] + ": " +
+                                      std::to_string(units[l].size() - per_level[l]) +
+                                      " partitions are not units of the level above");
+                }
+            }
+        }
+    }
+
+    /// Each node's code in the skeleton's strings (the root's is empty).
+    void name_nodes()
+    {
+        auto& sk = m_tree.skeleton;
+        const auto& nodes = m_nodes;
+        std::unordered_map<std::string, uint32_t> string_index;
+        for (size_t i = 0; i < nodes.size(); ++i) {
+            const std::string code = i == 0 ? std::string() : nodes[i].partition;
+            auto [it, fresh] = string_index.try_emplace(code, 0);
+            if (fresh) {
+                if (!code.empty()) {
+                    it->second = static_cast<uint32_t>(sk.strings.size());
+                    sk.strings.push_back(code);
+                }
+            }
+            sk.nodes[i].code = it->second;
+        }
+    }
+
+    /// Pass 2 for level l: at each LOD, every node's geometry, error and payload.
+    void pack_level(uint32_t l)
+    {
+        std::vector<size_t> at_level;
+        for (size_t i = 0; i < m_nodes.size(); ++i) {
+            if (m_nodes[i].level == l) {
                 at_level.push_back(i);
             }
         }
-        for (size_t k = 0; k < nlods; ++k) {
+        auto& sk = m_tree.skeleton;
+        for (size_t k = 0; k < m_lod_eps.size(); ++k) {
             std::vector<fs::path> paths;
-            for (const auto& r : level_files[l]) {
-                paths.push_back(lod_dirs[k] / r);
+            for (const auto& r : files_of(l)) {
+                paths.push_back(m_lod_dirs[k] / r);
             }
-            const auto stores = read_all(paths, options.threads);
+            const auto stores = read_all(paths, m_options.threads);
             std::map<std::string, size_t> store_of;
             for (size_t s = 0; s < stores.size(); ++s) {
                 store_of[stores[s].partition] = s;
-                if (k > 0 && (stores[s].eps_m != lod_eps[k] || stores[s].metric != stores.front().metric)) {
+                if (k > 0 && (stores[s].eps_m != m_lod_eps[k] || stores[s].metric != stores.front().metric)) {
                     throw input_error(paths[s].string() + ": tolerance or metric differs from its folder's");
                 }
             }
@@ -278,106 +344,122 @@ PackedTree build_tree(const fs::path& original, const fs::path& simplified, cons
                 sk.metric = stores.front().metric;
             }
             const ChainIndex owned = index_owned(stores, paths);
-            parallel_each(at_level.size(), options.threads, [&](size_t a) {
-                NodeBuild& nb = nodes[at_level[a]];
-                datatree::Node& node = sk.nodes[at_level[a]];
-                const auto sit = store_of.find(nb.partition);
+            parallel_each(at_level.size(), m_options.threads, [&](size_t a) {
+                const auto sit = store_of.find(m_nodes[at_level[a]].partition);
                 if (sit == store_of.end()) {
                     throw input_error(paths.front().parent_path().string() + ": no store for partition " +
-                                      nb.partition);
+                                      m_nodes[at_level[a]].partition);
                 }
-                const auto& store = stores[sit->second];
-                if (k == 0) {
-                    // The node's map: the chains it owns, and the borders of its units owned by neighbours.
-                    const std::set<std::string> mine(nb.units.begin(), nb.units.end());
-                    for (const auto& c : store.chains) {
-                        if ((c.flags & chains::chain_halo) == 0 || mine.contains(store.strings[c.left]) ||
-                            mine.contains(store.strings[c.right])) {
-                            nb.ids.push_back(c.id);
-                        }
-                    }
-                    std::sort(nb.ids.begin(), nb.ids.end());
-                    node.chains = static_cast<uint32_t>(nb.ids.size());
-                }
-                datatree::Geometry g;
-                g.offsets.reserve(nb.ids.size() + 1);
-                datatree::ChainTable table;
-                std::map<std::string, uint32_t> table_strings{{"", 0}};
-                auto table_string = [&](const std::string& s) {
-                    auto [it, fresh] = table_strings.try_emplace(s, static_cast<uint32_t>(table.strings.size()));
-                    if (fresh) {
-                        table.strings.push_back(s);
-                    }
-                    return it->second;
-                };
-                double error = 0.0;
-                for (size_t ci = 0; ci < nb.ids.size(); ++ci) {
-                    const auto it = owned.find(nb.ids[ci]);
-                    if (it == owned.end()) {
-                        throw input_error(paths[sit->second].string() + ": chain " + std::to_string(nb.ids[ci]) +
-                                          " is in no store of its level at this tolerance");
-                    }
-                    const auto& [os, oc] = it->second;
-                    const auto pts = os->chain_points(*oc);
-                    if (k == 0) {
-                        table.chains.push_back(
-                            {oc->id, table_string(os->strings[oc->left]), table_string(os->strings[oc->right]),
-                             table_string(os->strings[oc->feature_class]), oc->flags & ~uint32_t{chains::chain_halo}});
-                    } else {
-                        const double d = deviation(nb.original.chain(ci), pts);
-                        if (d < 0) {
-                            throw input_error(paths[size_t(os - stores.data())].string() + ": chain " +
-                                              std::to_string(oc->id) +
-                                              " is not a subsequence of its original with the same endpoints");
-                        }
-                        error = std::max(error, d);
-                    }
-                    g.add_chain(pts);
-                }
-                if (k == 0) {
-                    datatree::Box box{INT32_MAX, INT32_MAX, INT32_MIN, INT32_MIN};
-                    for (const auto& p : g.points) {
-                        box = {std::min(box.min_x, p.x), std::min(box.min_y, p.y), std::max(box.max_x, p.x),
-                               std::max(box.max_y, p.y)};
-                    }
-                    if (g.points.empty()) {
-                        box = {};
-                    }
-                    node.box = box;
-                    nb.table = datatree::encode_table(table);
-                    node.lods.resize(nlods);
-                }
-                const double error_m = std::max(nb.last_error, error * sk.grid_m());
-                nb.last_error = error_m;
-                node.lods[k].error_m = error_m;
-                node.lods[k].vertices = g.points.size();
-                nb.lod_payloads.push_back(
-                    datatree::encode_geometry(g, {node.box.min_x, node.box.min_y}, {options.draco_speed}));
-                if (k == 0) {
-                    nb.original = std::move(g);
-                }
+                pack_node(m_nodes[at_level[a]], sk.nodes[at_level[a]], stores, sit->second, paths, owned, k);
             });
             for (size_t i : at_level) {
-                tree.lods[k].vertices += sk.nodes[i].lods[k].vertices;
-                tree.lods[k].payload_bytes += nodes[i].lod_payloads[k].size();
-                tree.lods[k].raw_bytes += sk.nodes[i].lods[k].vertices * sizeof(GridPoint);
+                m_tree.lods[k].vertices += sk.nodes[i].lods[k].vertices;
+                m_tree.lods[k].payload_bytes += m_nodes[i].lod_payloads[k].size();
+                m_tree.lods[k].raw_bytes += sk.nodes[i].lods[k].vertices * sizeof(GridPoint);
             }
         }
         for (size_t i : at_level) {
-            nodes[i].original = {};
-            tree.table_bytes += nodes[i].table.size();
+            m_nodes[i].original = {};
+            m_tree.table_bytes += m_nodes[i].table.size();
         }
     }
 
-    std::vector<std::vector<std::string>> payloads(nodes.size());
-    for (size_t i = 0; i < nodes.size(); ++i) {
-        payloads[i].push_back(std::move(nodes[i].table));
-        for (auto& p : nodes[i].lod_payloads) {
-            payloads[i].push_back(std::move(p));
+    /// One node at LOD k from its partition's store (stores[store_index]):
+    /// at LOD 0 its chains (the ones it owns and the borders of its units
+    /// that neighbours own), its table and box; at every LOD its geometry,
+    /// its error (never below the LOD before) and its payload.
+    void pack_node(NodeBuild& nb, datatree::Node& node, const std::vector<chains::ChainStore>& stores,
+                   size_t store_index, const std::vector<fs::path>& paths, const ChainIndex& owned, size_t k) const
+    {
+        const auto& sk = m_tree.skeleton;
+        const size_t nlods = m_lod_eps.size();
+        const auto& store = stores[store_index];
+        if (k == 0) {
+            // The node's map: the chains it owns, and the borders of its units owned by neighbours.
+            const std::set<std::string> mine(nb.units.begin(), nb.units.end());
+            for (const auto& c : store.chains) {
+                if ((c.flags & chains::chain_halo) == 0 || mine.contains(store.strings[c.left]) ||
+                    mine.contains(store.strings[c.right])) {
+                    nb.ids.push_back(c.id);
+                }
+            }
+            std::sort(nb.ids.begin(), nb.ids.end());
+            node.chains = static_cast<uint32_t>(nb.ids.size());
+        }
+        datatree::Geometry g;
+        g.offsets.reserve(nb.ids.size() + 1);
+        datatree::ChainTable table;
+        std::map<std::string, uint32_t> table_strings{{"", 0}};
+        auto table_string = [&](const std::string& s) {
+            auto [it, fresh] = table_strings.try_emplace(s, static_cast<uint32_t>(table.strings.size()));
+            if (fresh) {
+                table.strings.push_back(s);
+            }
+            return it->second;
+        };
+        double error = 0.0;
+        for (size_t ci = 0; ci < nb.ids.size(); ++ci) {
+            const auto it = owned.find(nb.ids[ci]);
+            if (it == owned.end()) {
+                throw input_error(paths[store_index].string() + ": chain " + std::to_string(nb.ids[ci]) +
+                                  " is in no store of its level at this tolerance");
+            }
+            const auto& [os, oc] = it->second;
+            const auto pts = os->chain_points(*oc);
+            if (k == 0) {
+                table.chains.push_back(
+                    {oc->id, table_string(os->strings[oc->left]), table_string(os->strings[oc->right]),
+                     table_string(os->strings[oc->feature_class]), oc->flags & ~uint32_t{chains::chain_halo}});
+            } else {
+                const double d = deviation(nb.original.chain(ci), pts);
+                if (d < 0) {
+                    throw input_error(paths[size_t(os - stores.data())].string() + ": chain " + std::to_string(oc->id) +
+                                      " is not a subsequence of its original with the same endpoints");
+                }
+                error = std::max(error, d);
+            }
+            g.add_chain(pts);
+        }
+        if (k == 0) {
+            datatree::Box box{INT32_MAX, INT32_MAX, INT32_MIN, INT32_MIN};
+            for (const auto& p : g.points) {
+                box = {std::min(box.min_x, p.x), std::min(box.min_y, p.y), std::max(box.max_x, p.x),
+                       std::max(box.max_y, p.y)};
+            }
+            if (g.points.empty()) {
+                box = {};
+            }
+            node.box = box;
+            nb.table = datatree::encode_table(table);
+            node.lods.resize(nlods);
+        }
+        const double error_m = std::max(nb.last_error, error * sk.grid_m());
+        nb.last_error = error_m;
+        node.lods[k].error_m = error_m;
+        node.lods[k].vertices = g.points.size();
+        nb.lod_payloads.push_back(
+            datatree::encode_geometry(g, {node.box.min_x, node.box.min_y}, {m_options.draco_speed}));
+        if (k == 0) {
+            nb.original = std::move(g);
         }
     }
-    layout_tiles(tree, payloads, options.tile_bytes);
-    return tree;
+
+    const fs::path m_original, m_simplified;
+    const PackOptions m_options;
+    const std::vector<fs::path> m_rel; ///< the stores, relative to ORIGINAL and each eps folder
+    std::vector<fs::path> m_lod_dirs;
+    std::vector<double> m_lod_eps;
+    std::map<uint32_t, std::vector<fs::path>> m_level_files;
+    std::vector<std::string> m_level_names;
+    std::vector<NodeBuild> m_nodes;
+    PackedTree m_tree;
+}; // class TreeBuilder
+
+} // namespace
+
+PackedTree build_tree(const fs::path& original, const fs::path& simplified, const PackOptions& options)
+{
+    return TreeBuilder(original, simplified, options).build();
 }
 
 void layout_tiles(PackedTree& tree, const std::vector<std::vector<std::string>>& payloads, uint64_t tile_bytes)
