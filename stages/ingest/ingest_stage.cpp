@@ -111,30 +111,13 @@ std::string IngestStage::help_notes() const
            "spikes...) are counted and located in the report; chains involved carry the problem flag.\n";
 }
 
-int IngestStage::run(const StageContext& ctx)
-{
-    IngestConfig cfg = load_config(m_config);
-    if (m_halo_m >= 0) {
-        cfg.halo_m = m_halo_m;
-    }
-    if (m_threads >= 0) {
-        cfg.threads = static_cast<unsigned>(m_threads);
-    }
-    const unsigned threads = cfg.threads == 0 ? std::max(1U, std::thread::hardware_concurrency()) : cfg.threads;
-    const Projection projection(cfg.projection);
-    ctx.log.info("config " + cfg.file.string() + ": " + projection.describe());
-    if (m_validate) {
-        validate_dataset(cfg);
-        std::printf("%s: valid; dataset %s, %zu input files, levels", cfg.file.c_str(), cfg.name.c_str(),
-                    cfg.dataset.edges.size() + cfg.dataset.faces.size() + cfg.dataset.inputs.size());
-        for (const auto& l : cfg.levels) {
-            std::printf(" %s", l.name.c_str());
-        }
-        std::printf("; projection %s; halo %g m; %u threads\n", projection.describe().c_str(), cfg.halo_m, threads);
-        return exit_ok;
-    }
+namespace {
 
-    // The manifest's input digests are computed beside the work, not after it.
+using InputFiles = std::vector<std::pair<fs::path, const char*>>;
+
+/// The files ingest reads, with their role in the manifest: the config, then FACES, EDGES, other inputs.
+InputFiles input_files_of(const IngestConfig& cfg)
+{
     std::vector<std::pair<fs::path, const char*>> input_files{{cfg.file, "config"}};
     for (const auto& p : cfg.dataset.faces) {
         input_files.emplace_back(p, "faces");
@@ -145,48 +128,35 @@ int IngestStage::run(const StageContext& ctx)
     for (const auto& p : cfg.dataset.inputs) {
         input_files.emplace_back(p, "input");
     }
-    auto digests = std::async(std::launch::async, [&input_files] {
-        std::vector<std::string> out;
-        for (const auto& f : input_files) {
-            out.push_back(sha256_file(f.first));
-        }
-        return out;
-    });
+    return input_files;
+}
 
-    std::vector<fs::path> reads{m_config};
-    for (const auto& f : input_files) {
-        reads.emplace_back(f.first);
-    }
-    OutputDir out(m_output, m_overwrite, reads);
-    log_removed_leftovers(ctx.log, out.removed_leftovers());
-    for (const auto& l : cfg.levels) {
-        fs::create_directories(out.path() / l.name);
-    }
-    std::atomic<uint64_t> stores{0};
-    BuildOptions options;
-    options.halo_m = cfg.halo_m;
-    options.threads = threads;
-    options.max_problem_samples = static_cast<size_t>(m_max_problem_samples);
-    options.log = &ctx.log;
-    const StoreSink sink = [&](const chains::ChainStore& s) {
-        // Inside the output folder, renamed into place whole at the end.
-        write_file(out.path() / s.level_name / (file_name(s.partition) + ".tlc"), chains::encode(s));
-        ++stores;
-    };
-
-    const double t0 = ctx.log.elapsed_s();
-    double t_read = 0;
-    uint64_t points_read = 0;
+/// What the build gave, with the points read and when reading ended (the log's clock).
+struct Built {
     BuildResult result;
+    uint64_t points_read = 0;
+    double t_read = 0;
+};
+
+/// Read the dataset and build the map: region by region when it comes in
+/// several files (each read once and put aside on disk in `scratch`), else
+/// whole. Every store goes to `sink`.
+Built read_and_build(const IngestConfig& cfg, const Projection& projection, const BuildOptions& options,
+                     const StoreSink& sink, const fs::path& scratch, bool whole_map, const Log& log)
+{
+    Built built;
+    auto& result = built.result;
+    auto& points_read = built.points_read;
+    auto& t_read = built.t_read;
+    const unsigned threads = options.threads;
     const bool tiger = cfg.dataset.kind == DatasetSpec::Kind::tiger;
     const bool by_parts =
-        !m_whole_map &&
-        ((cfg.dataset.kind == DatasetSpec::Kind::polygons && cfg.dataset.inputs.size() > 1) ||
-         (tiger && cfg.dataset.faces.size() > 1 && cfg.dataset.faces.size() == cfg.dataset.edges.size()));
+        !whole_map && ((cfg.dataset.kind == DatasetSpec::Kind::polygons && cfg.dataset.inputs.size() > 1) ||
+                       (tiger && cfg.dataset.faces.size() > 1 && cfg.dataset.faces.size() == cfg.dataset.edges.size()));
     if (by_parts) {
         // Region by region: each file read once and put aside on disk, inside
         // the output folder (removed before it is renamed into place).
-        const fs::path aside = out.path() / ".parts";
+        const fs::path aside = scratch;
         fs::create_directories(aside);
         auto part_path = [&](size_t i) { return aside / (std::to_string(i) + ".raw"); };
         std::vector<PartSummary> parts(tiger ? cfg.dataset.faces.size() : cfg.dataset.inputs.size());
@@ -195,19 +165,19 @@ int IngestStage::run(const StageContext& ctx)
             write_raw(part, part_path(i));
         };
         if (tiger) {
-            read_tiger_parts(cfg, threads, ctx.log, put_aside);
+            read_tiger_parts(cfg, threads, log, put_aside);
         } else {
-            read_polygon_parts(cfg, threads, ctx.log, put_aside);
+            read_polygon_parts(cfg, threads, log, put_aside);
         }
 #ifdef __GLIBC__
         malloc_trim(0);
 #endif
-        t_read = ctx.log.elapsed_s();
+        t_read = log.elapsed_s();
         for (const auto& p : parts) {
             points_read += p.points_read;
         }
-        ctx.log.info("read " + std::to_string(points_read) + " points from " + std::to_string(parts.size()) +
-                     (tiger ? " counties" : " files"));
+        log.info("read " + std::to_string(points_read) + " points from " + std::to_string(parts.size()) +
+                 (tiger ? " counties" : " files"));
         std::vector<std::string> level_names;
         for (const auto& l : cfg.levels) {
             level_names.push_back(l.name);
@@ -219,20 +189,25 @@ int IngestStage::run(const StageContext& ctx)
         points_read = result.input_vertices;
         fs::remove_all(aside);
     } else {
-        RawMap raw = read_dataset(cfg, threads, ctx.log);
+        RawMap raw = read_dataset(cfg, threads, log);
 #ifdef __GLIBC__
         // What the readers freed goes back to the system before the build's peak
         // (tract set: 125 -> 83 MB resident after reading, the peak 8-10 MB lower).
         malloc_trim(0);
 #endif
-        t_read = ctx.log.elapsed_s();
+        t_read = log.elapsed_s();
         points_read = raw.points_read;
-        ctx.log.info("read " + std::to_string(points_read) + " points, " + std::to_string(raw.polyline_count()) +
-                     " polylines, " + std::to_string(raw.units.size()) + " units");
+        log.info("read " + std::to_string(points_read) + " points, " + std::to_string(raw.polyline_count()) +
+                 " polylines, " + std::to_string(raw.units.size()) + " units");
         result = build_map(std::move(raw), projection, options, sink);
     }
-    const double t_build = ctx.log.elapsed_s();
+    return built;
+}
 
+/// ingest-report.json.
+json report_json(const IngestConfig& cfg, const Projection& projection, const BuildResult& result,
+                 uint64_t stores_written)
+{
     json report;
     report["schema"] = "tigerlod.ingest-report/1";
     report["config"] = cfg.name;
@@ -240,7 +215,7 @@ int IngestStage::run(const StageContext& ctx)
     report["input_vertices"] = result.input_vertices;
     report["unique_vertices"] = result.unique_vertices;
     report["edges"] = result.edges;
-    report["stores"] = stores.load();
+    report["stores"] = stores_written;
     json levels = json::array();
     for (const auto& l : result.levels) {
         levels.push_back({{"name", l.name},
@@ -266,11 +241,16 @@ int IngestStage::run(const StageContext& ctx)
         samples.push_back({{"kind", s.kind}, {"lon", s.lon_deg}, {"lat", s.lat_deg}, {"where", s.where}});
     }
     report["problem_samples"] = samples;
-    write_file_atomic(out.path() / "ingest-report.json", report.dump(2) + "\n");
+    return report;
+}
 
-    json manifest = new_manifest("ingest", versions());
+/// manifest.json: the inputs with their SHA-256 (`sha`, in input_files order) and the resolved options.
+json manifest_json(const IngestConfig& cfg, const Projection& projection, const InputFiles& input_files,
+                   const std::vector<std::string>& sha, const std::vector<std::string>& libraries,
+                   int max_problem_samples)
+{
+    json manifest = new_manifest("ingest", libraries);
     json inputs = json::array();
-    const std::vector<std::string> sha = digests.get();
     for (size_t i = 0; i < input_files.size(); ++i) {
         const auto& [p, role] = input_files[i];
         inputs.push_back({{"role", role},
@@ -286,9 +266,16 @@ int IngestStage::run(const StageContext& ctx)
     manifest["options"] = {{"levels", levels_spec},
                            {"projection", projection.describe()},
                            {"halo_m", cfg.halo_m},
-                           {"max_problem_samples", m_max_problem_samples}};
-    write_file_atomic(out.path() / "manifest.json", manifest_text(manifest));
+                           {"max_problem_samples", max_problem_samples}};
+    return manifest;
+}
 
+/// ingest-timings.json, the only output that varies between runs.
+json timings_json(const Built& built, double t0, double t_build, unsigned threads)
+{
+    const auto& result = built.result;
+    const double t_read = built.t_read;
+    const uint64_t points_read = built.points_read;
     const double seconds = t_build - t0;
     json phases = json::object();
     for (const auto& [phase, s] : result.seconds) {
@@ -302,13 +289,19 @@ int IngestStage::run(const StageContext& ctx)
                     {"threads", threads},
                     {"vertices_per_s", seconds > 0 ? static_cast<double>(points_read) / seconds : 0.0},
                     {"peak_rss_mb", peak_rss_mb()}};
-    write_file_atomic(out.path() / "ingest-timings.json", timings.dump(2) + "\n");
-    out.commit();
+    return timings;
+}
 
+/// The lines on stdout.
+void print_summary(const IngestConfig& cfg, const Built& built, double seconds, uint64_t stores_written,
+                   const std::string& output)
+{
+    const auto& result = built.result;
+    const uint64_t points_read = built.points_read;
     std::printf("ingest %s: %llu input vertices in %.2f s (%.2f M/s), %llu stores in %s\n", cfg.name.c_str(),
                 static_cast<unsigned long long>(points_read), seconds,
                 seconds > 0 ? static_cast<double>(points_read) / seconds / 1e6 : 0.0,
-                static_cast<unsigned long long>(stores.load()), m_output.c_str());
+                static_cast<unsigned long long>(stores_written), output.c_str());
     std::printf("  %-12s %8s %8s %7s %10s %9s %6s\n", "level", "units", "chains", "rings", "vertices", "junctions",
                 "parts");
     for (const auto& l : result.levels) {
@@ -324,6 +317,74 @@ int IngestStage::run(const StageContext& ctx)
         }
     }
     std::printf("  problems:%s\n", found.empty() ? " none" : found.c_str());
+}
+
+} // namespace
+
+int IngestStage::run(const StageContext& ctx)
+{
+    IngestConfig cfg = load_config(m_config);
+    if (m_halo_m >= 0) {
+        cfg.halo_m = m_halo_m;
+    }
+    if (m_threads >= 0) {
+        cfg.threads = static_cast<unsigned>(m_threads);
+    }
+    const unsigned threads = cfg.threads == 0 ? std::max(1U, std::thread::hardware_concurrency()) : cfg.threads;
+    const Projection projection(cfg.projection);
+    ctx.log.info("config " + cfg.file.string() + ": " + projection.describe());
+    if (m_validate) {
+        validate_dataset(cfg);
+        std::printf("%s: valid; dataset %s, %zu input files, levels", cfg.file.c_str(), cfg.name.c_str(),
+                    cfg.dataset.edges.size() + cfg.dataset.faces.size() + cfg.dataset.inputs.size());
+        for (const auto& l : cfg.levels) {
+            std::printf(" %s", l.name.c_str());
+        }
+        std::printf("; projection %s; halo %g m; %u threads\n", projection.describe().c_str(), cfg.halo_m, threads);
+        return exit_ok;
+    }
+    // The manifest's input digests are computed beside the work, not after it.
+    const InputFiles input_files = input_files_of(cfg);
+    auto digests = std::async(std::launch::async, [&input_files] {
+        std::vector<std::string> out;
+        for (const auto& f : input_files) {
+            out.push_back(sha256_file(f.first));
+        }
+        return out;
+    });
+    std::vector<fs::path> reads{m_config};
+    for (const auto& f : input_files) {
+        reads.emplace_back(f.first);
+    }
+    OutputDir out(m_output, m_overwrite, reads);
+    log_removed_leftovers(ctx.log, out.removed_leftovers());
+    for (const auto& l : cfg.levels) {
+        fs::create_directories(out.path() / l.name);
+    }
+    std::atomic<uint64_t> stores{0};
+    BuildOptions options;
+    options.halo_m = cfg.halo_m;
+    options.threads = threads;
+    options.max_problem_samples = static_cast<size_t>(m_max_problem_samples);
+    options.log = &ctx.log;
+    const StoreSink sink = [&](const chains::ChainStore& s) {
+        // Inside the output folder, renamed into place whole at the end.
+        write_file(out.path() / s.level_name / (file_name(s.partition) + ".tlc"), chains::encode(s));
+        ++stores;
+    };
+
+    const double t0 = ctx.log.elapsed_s();
+    // Parts put aside go inside the output folder (removed before it is renamed into place).
+    const Built built = read_and_build(cfg, projection, options, sink, out.path() / ".parts", m_whole_map, ctx.log);
+    const double t_build = ctx.log.elapsed_s();
+    write_file_atomic(out.path() / "ingest-report.json",
+                      report_json(cfg, projection, built.result, stores.load()).dump(2) + "\n");
+    write_file_atomic(
+        out.path() / "manifest.json",
+        manifest_text(manifest_json(cfg, projection, input_files, digests.get(), versions(), m_max_problem_samples)));
+    write_file_atomic(out.path() / "ingest-timings.json", timings_json(built, t0, t_build, threads).dump(2) + "\n");
+    out.commit();
+    print_summary(cfg, built, t_build - t0, stores.load(), m_output);
     return exit_ok;
 }
 
