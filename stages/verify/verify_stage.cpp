@@ -140,57 +140,38 @@ void write_gpkg(const fs::path& path, const Report& r)
 
 } // namespace
 
-int VerifyStage::run(const StageContext& ctx)
-{
-    // The earlier report first: a bad one is found before the work, not after.
-    json old;
-    if (!m_compare.empty()) {
-        try {
-            std::ifstream in(m_compare);
-            old = json::parse(in);
-            if (old.value("schema", "") != "tigerlod.verify-report/1" || !old.contains("items") ||
-                !old.contains("by_level_lod")) {
-                throw input_error("not a tigerlod.verify-report/1");
-            }
-        } catch (const std::exception& e) {
-            throw input_error("verify: --compare " + m_compare + ": " + e.what());
-        }
-    }
-    // The tree's manifest says what it was made from and under which
-    // contract (simplify's options, its user points included): the tree is
-    // checked against that, and against the ingest output it was packed from.
-    const Manifest packed = read_manifest(m_tree, "pack");
-    const Manifest ingest = read_manifest(m_original, "ingest");
-    require_made_from(packed, "ingest", ingest);
-    if (!packed.doc.contains("simplify")) {
-        throw input_error((fs::path(m_tree) / "manifest.json").string() + ": no 'simplify' section");
-    }
-    std::string error;
-    const auto tree = reader::Tree::open(m_tree, error);
-    // --compare is read whole above: an output over it replaces it only on success.
-    OutputDir out(m_output, m_overwrite, {m_tree, m_original});
-    log_removed_leftovers(ctx.log, out.removed_leftovers());
-    Options options;
-    options.threads =
-        m_threads > 0 ? static_cast<unsigned>(m_threads) : std::max(1U, std::thread::hardware_concurrency());
-    options.max_items = static_cast<size_t>(m_max_items);
-    options.tolerance =
-        simplify::tolerance_contract(packed.doc.at("simplify"), (fs::path(m_tree) / "manifest.json").string());
-    options.user_points = options.tolerance.user_points;
-    Report r;
-    if (!tree) {
-        // An unreadable skeleton is the tree's failure: one violation, nothing else can be checked.
-        r.violations["skeleton"] = 1;
-        r.items.push_back({"skeleton", "", 0, "", {}, 0, 0, 0, 0, error});
-    } else {
-        r = verify_tree(*tree, m_original, options);
-    }
-    ctx.log.info("verify: checked");
+namespace {
 
+/// The count of violations of kind `k` (0 when none was counted).
+uint64_t count_of(const Report& r, const char* k)
+{
+    const auto it = r.violations.find(k);
+    return it == r.violations.end() ? 0 : it->second;
+}
+
+/// The earlier report of --compare, checked to be one.
+json read_earlier_report(const std::string& path)
+{
+    try {
+        std::ifstream in(path);
+        json old = json::parse(in);
+        if (old.value("schema", "") != "tigerlod.verify-report/1" || !old.contains("items") ||
+            !old.contains("by_level_lod")) {
+            throw input_error("not a tigerlod.verify-report/1");
+        }
+        return old;
+    } catch (const std::exception& e) {
+        throw input_error("verify: --compare " + path + ": " + e.what());
+    }
+}
+
+/// verify-report.json without its comparison.
+json report_json(const Report& r, const Options& options, const std::string& tree, const std::string& original)
+{
     json report;
     report["schema"] = "tigerlod.verify-report/1";
-    report["tree"] = m_tree;
-    report["original"] = m_original;
+    report["tree"] = tree;
+    report["original"] = original;
     report["clean"] = r.total() == 0;
     report["contract"] = {{"class_scale", options.tolerance.class_scale},
                           {"projection_scale", options.tolerance.projection_scale},
@@ -200,7 +181,7 @@ int VerifyStage::run(const StageContext& ctx)
         {"nodes", r.nodes}, {"lods", r.lods}, {"chains", r.chains}, {"segments", r.segments}, {"points", r.points}};
     json counts = json::object();
     for (const char* k : kinds) {
-        counts[k] = r.violations[k];
+        counts[k] = count_of(r, k);
     }
     report["violations"] = counts;
     report["input_problems"] = r.input_problems;
@@ -244,65 +225,67 @@ int VerifyStage::run(const StageContext& ctx)
     report["seconds"] = r.seconds;
     report["segments_per_second"] = r.seconds > 0 ? double(r.segments) / r.seconds : 0.0;
 
-    std::string compare_text;
-    if (!m_compare.empty()) {
-        try {
-            // Input problems are the input's, not the run's: not compared.
-            auto counted = [](const json& it) { return it.at("kind") != "input_problem"; };
-            std::set<std::string> was, now;
-            for (const auto& it : old.at("items")) {
-                if (counted(it)) {
-                    was.insert(key_of(it));
-                }
-            }
-            json fresh = json::array(), fixed = json::array();
-            for (const auto& it : report["items"]) {
-                if (counted(it)) {
-                    now.insert(key_of(it));
-                    if (!was.contains(key_of(it))) {
-                        fresh.push_back(it);
-                    }
-                }
-            }
-            for (const auto& it : old.at("items")) {
-                if (counted(it) && !now.contains(key_of(it))) {
-                    fixed.push_back(it);
-                }
-            }
-            json vertices = json::array();
-            for (const auto& ll : report["by_level_lod"]) {
-                int64_t before = -1;
-                for (const auto& o : old.at("by_level_lod")) {
-                    if (o.at("level") == ll.at("level") && o.at("lod") == ll.at("lod")) {
-                        before = o.at("vertices").get<int64_t>();
-                    }
-                }
-                const auto after = ll.at("vertices").get<int64_t>();
-                vertices.push_back({{"level", ll.at("level")},
-                                    {"lod", ll.at("lod")},
-                                    {"before", before < 0 ? json(nullptr) : json(before)},
-                                    {"after", after},
-                                    {"change", before < 0 ? json(nullptr) : json(after - before)}});
-            }
-            report["compare"] = {{"against", m_compare}, {"new", fresh.size()},  {"fixed", fixed.size()},
-                                 {"new_items", fresh},   {"fixed_items", fixed}, {"vertices", vertices}};
-            compare_text = "since " + m_compare + ": " + std::to_string(fresh.size()) + " new, " +
-                           std::to_string(fixed.size()) + " fixed violations\n";
-        } catch (const std::exception& e) {
-            throw input_error("verify: --compare " + m_compare + ": " + e.what());
-        }
-    }
-    write_file_atomic(out.path() / "verify-report.json", report.dump(2) + "\n");
-    write_gpkg(out.path() / "violations.gpkg", r);
-    json manifest = new_manifest("verify", versions());
-    add_input(manifest, "pack", packed);
-    add_input(manifest, "ingest", ingest);
-    manifest["options"] = {{"max_items", m_max_items}, {"compare", m_compare}};
-    write_file_atomic(out.path() / "manifest.json", manifest_text(manifest));
-    out.commit();
+    return report;
+}
 
+/// The comparison with an earlier report: new and fixed violations (input
+/// problems are the input's, not the run's: not compared), vertex counts
+/// per level and LOD. Adds report["compare"]; returns the line for people.
+std::string compare_reports(json& report, const json& old, const std::string& against)
+{
+    try {
+        // Input problems are the input's, not the run's: not compared.
+        auto counted = [](const json& it) { return it.at("kind") != "input_problem"; };
+        std::set<std::string> was, now;
+        for (const auto& it : old.at("items")) {
+            if (counted(it)) {
+                was.insert(key_of(it));
+            }
+        }
+        json fresh = json::array(), fixed = json::array();
+        for (const auto& it : report["items"]) {
+            if (counted(it)) {
+                now.insert(key_of(it));
+                if (!was.contains(key_of(it))) {
+                    fresh.push_back(it);
+                }
+            }
+        }
+        for (const auto& it : old.at("items")) {
+            if (counted(it) && !now.contains(key_of(it))) {
+                fixed.push_back(it);
+            }
+        }
+        json vertices = json::array();
+        for (const auto& ll : report["by_level_lod"]) {
+            int64_t before = -1;
+            for (const auto& o : old.at("by_level_lod")) {
+                if (o.at("level") == ll.at("level") && o.at("lod") == ll.at("lod")) {
+                    before = o.at("vertices").get<int64_t>();
+                }
+            }
+            const auto after = ll.at("vertices").get<int64_t>();
+            vertices.push_back({{"level", ll.at("level")},
+                                {"lod", ll.at("lod")},
+                                {"before", before < 0 ? json(nullptr) : json(before)},
+                                {"after", after},
+                                {"change", before < 0 ? json(nullptr) : json(after - before)}});
+        }
+        report["compare"] = {{"against", against}, {"new", fresh.size()},  {"fixed", fixed.size()},
+                             {"new_items", fresh}, {"fixed_items", fixed}, {"vertices", vertices}};
+        return "since " + against + ": " + std::to_string(fresh.size()) + " new, " + std::to_string(fixed.size()) +
+               " fixed violations\n";
+    } catch (const std::exception& e) {
+        throw input_error("verify: --compare " + against + ": " + e.what());
+    }
+}
+
+/// One screen for people.
+void print_summary(const Report& r, const std::string& tree, const std::string& original, const std::string& output,
+                   const std::string& compare_text)
+{
     // One screen for people.
-    std::printf("verify: %s against %s\n", m_tree.c_str(), m_original.c_str());
+    std::printf("verify: %s against %s\n", tree.c_str(), original.c_str());
     std::printf("  checked %llu nodes x %llu LODs: %llu chains, %llu segments, %llu points in %.2f s\n",
                 static_cast<unsigned long long>(r.nodes), static_cast<unsigned long long>(r.lods),
                 static_cast<unsigned long long>(r.chains), static_cast<unsigned long long>(r.segments),
@@ -312,8 +295,8 @@ int VerifyStage::run(const StageContext& ctx)
     } else {
         std::printf("  %llu VIOLATIONS:\n", static_cast<unsigned long long>(r.total()));
         for (const char* k : kinds) {
-            if (r.violations[k] > 0) {
-                std::printf("    %-20s %llu\n", k, static_cast<unsigned long long>(r.violations[k]));
+            if (count_of(r, k) > 0) {
+                std::printf("    %-20s %llu\n", k, static_cast<unsigned long long>(count_of(r, k)));
             }
         }
         for (const auto& ll : r.by_level_lod) {
@@ -345,7 +328,57 @@ int VerifyStage::run(const StageContext& ctx)
                     static_cast<unsigned long long>(r.input_problems));
     }
     std::printf("%s", compare_text.c_str());
-    std::printf("report: %s/verify-report.json, violations: %s/violations.gpkg\n", m_output.c_str(), m_output.c_str());
+    std::printf("report: %s/verify-report.json, violations: %s/violations.gpkg\n", output.c_str(), output.c_str());
+}
+
+} // namespace
+
+int VerifyStage::run(const StageContext& ctx)
+{
+    // The earlier report first: a bad one is found before the work, not after.
+    const json old = m_compare.empty() ? json() : read_earlier_report(m_compare);
+    // The tree's manifest says what it was made from and under which
+    // contract (simplify's options, its user points included): the tree is
+    // checked against that, and against the ingest output it was packed from.
+    const Manifest packed = read_manifest(m_tree, "pack");
+    const Manifest ingest = read_manifest(m_original, "ingest");
+    require_made_from(packed, "ingest", ingest);
+    if (!packed.doc.contains("simplify")) {
+        throw input_error((fs::path(m_tree) / "manifest.json").string() + ": no 'simplify' section");
+    }
+    std::string error;
+    const auto tree = reader::Tree::open(m_tree, error);
+    // --compare is read whole above: an output over it replaces it only on success.
+    OutputDir out(m_output, m_overwrite, {m_tree, m_original});
+    log_removed_leftovers(ctx.log, out.removed_leftovers());
+    Options options;
+    options.threads =
+        m_threads > 0 ? static_cast<unsigned>(m_threads) : std::max(1U, std::thread::hardware_concurrency());
+    options.max_items = static_cast<size_t>(m_max_items);
+    options.tolerance =
+        simplify::tolerance_contract(packed.doc.at("simplify"), (fs::path(m_tree) / "manifest.json").string());
+    options.user_points = options.tolerance.user_points;
+    Report r;
+    if (!tree) {
+        // An unreadable skeleton is the tree's failure: one violation, nothing else can be checked.
+        r.violations["skeleton"] = 1;
+        r.items.push_back({"skeleton", "", 0, "", {}, 0, 0, 0, 0, error});
+    } else {
+        r = verify_tree(*tree, m_original, options);
+    }
+    ctx.log.info("verify: checked");
+
+    json report = report_json(r, options, m_tree, m_original);
+    const std::string compare_text = m_compare.empty() ? std::string() : compare_reports(report, old, m_compare);
+    write_file_atomic(out.path() / "verify-report.json", report.dump(2) + "\n");
+    write_gpkg(out.path() / "violations.gpkg", r);
+    json manifest = new_manifest("verify", versions());
+    add_input(manifest, "pack", packed);
+    add_input(manifest, "ingest", ingest);
+    manifest["options"] = {{"max_items", m_max_items}, {"compare", m_compare}};
+    write_file_atomic(out.path() / "manifest.json", manifest_text(manifest));
+    out.commit();
+    print_summary(r, m_tree, m_original, m_output, compare_text);
     return r.total() == 0 ? exit_ok : exit_data;
 }
 
