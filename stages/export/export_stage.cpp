@@ -94,6 +94,202 @@ OGRFieldDefnH field(OGRLayerH layer, const char* name, OGRFieldType type)
     return nullptr;
 }
 
+/// The nodes whose map is exported: every node of `level`, or the one `node` names.
+std::vector<uint32_t> nodes_to_export(const datatree::Skeleton& s, const std::string& level_name,
+                                      const std::string& node)
+{
+    std::vector<uint32_t> nodes;
+    if (level_name.empty()) {
+        nodes.push_back(view::find_node(s, node));
+        return nodes;
+    }
+    uint32_t level = UINT32_MAX;
+    for (uint32_t l = 0; l < s.level_names.size(); ++l) {
+        level = s.level_names[l] == level_name ? l : level;
+    }
+    if (level == UINT32_MAX) {
+        throw usage_error("export: no level '" + level_name + "' in the tree");
+    }
+    for (uint32_t n = 0; n < s.nodes.size(); ++n) {
+        if (s.nodes[n].level == level) {
+            nodes.push_back(n);
+        }
+    }
+    return nodes;
+}
+
+/// The node each unit is written from. A unit shows in the map of the node
+/// that holds it and, in part, in its neighbours' (across their outlines);
+/// whole there too when it is an island in a neighbour, but without its own
+/// holes. Its own node holds every chain of its boundary, any other node a
+/// subset: each unit is written once, from the node with the most of its
+/// boundary chains (the first of those). Empty for one node.
+std::map<std::string, std::pair<size_t, uint32_t>> home_nodes(const reader::Tree& tree,
+                                                              const std::vector<uint32_t>& nodes)
+{
+    std::map<std::string, std::pair<size_t, uint32_t>> home; // unit -> (boundary chains, node)
+    if (nodes.size() < 2) {
+        return home;
+    }
+    for (uint32_t n : nodes) {
+        datatree::ChainTable t;
+        if (auto st = tree.read_table(n, t); !st.ok()) {
+            throw input_error(st.error);
+        }
+        std::vector<size_t> count(t.strings.size(), 0);
+        for (const auto& c : t.chains) {
+            if (c.left != c.right) {
+                ++count[c.left];
+                ++count[c.right];
+            }
+        }
+        for (uint32_t u = 1; u < t.strings.size(); ++u) {
+            auto [it, added] = home.try_emplace(t.strings[u], count[u], n);
+            if (!added && count[u] > it->second.first) {
+                it->second = {count[u], n};
+            }
+        }
+    }
+    return home;
+}
+
+/// The layers of the file being written, and what went into them.
+class Writer {
+  public:
+    Writer(GDALDatasetH ds, bool with_chains, bool with_units, const Projection& proj, int lod, double eps_m,
+           fs::path tmp)
+        : m_proj(proj), m_lod(lod), m_eps_m(eps_m), m_tmp(std::move(tmp))
+    {
+        OGRSpatialReferenceH srs = OSRNewSpatialReference(nullptr);
+        OSRImportFromEPSG(srs, 4269);
+        OSRSetAxisMappingStrategy(srs, OAMS_TRADITIONAL_GIS_ORDER);
+        if (with_chains) {
+            m_chains = GDALDatasetCreateLayer(ds, "chains", srs, wkbLineString, nullptr);
+            field(m_chains, "chain_id", OFTInteger64);
+            field(m_chains, "node", OFTString);
+            field(m_chains, "left", OFTString);
+            field(m_chains, "right", OFTString);
+            field(m_chains, "class", OFTString);
+            field(m_chains, "lod", OFTInteger);
+            field(m_chains, "eps_m", OFTReal);
+        }
+        if (with_units) {
+            m_units = GDALDatasetCreateLayer(ds, "units", srs, wkbMultiPolygon, nullptr);
+            field(m_units, "unit", OFTString);
+            field(m_units, "node", OFTString);
+            field(m_units, "lod", OFTInteger);
+            field(m_units, "eps_m", OFTReal);
+        }
+        OSRDestroySpatialReference(srs);
+    }
+    bool writes_units() const { return m_units != nullptr; }
+
+    /// The node's chains not written before (a border shown by two nodes: once).
+    void write_chains(const view::NodeMap& m, const std::string& code)
+    {
+        if (m_chains == nullptr) {
+            return;
+        }
+        for (size_t i = 0; i < m.table.chains.size(); ++i) {
+            const auto& c = m.table.chains[i];
+            if (!m_written.insert(c.id).second) {
+                continue;
+            }
+            OGRFeatureH f = OGR_F_Create(OGR_L_GetLayerDefn(m_chains));
+            OGR_F_SetFieldInteger64(f, 0, static_cast<GIntBig>(c.id));
+            OGR_F_SetFieldString(f, 1, code.c_str());
+            OGR_F_SetFieldString(f, 2, m.table.strings[c.left].c_str());
+            OGR_F_SetFieldString(f, 3, m.table.strings[c.right].c_str());
+            OGR_F_SetFieldString(f, 4, m.table.strings[c.feature_class].c_str());
+            OGR_F_SetFieldInteger(f, 5, m_lod);
+            OGR_F_SetFieldDouble(f, 6, m_eps_m);
+            OGR_F_SetGeometryDirectly(f, to_line(m.geometry.chain(i)));
+            create(m_chains, f);
+            ++chains;
+        }
+    }
+
+    /// The node's units whose home it is, as valid multipolygons; a unit
+    /// whose boundary does not close here is counted in `incomplete`.
+    void write_units(const view::NodeMap& m, const std::string& code, uint32_t n,
+                     const std::map<std::string, std::pair<size_t, uint32_t>>& home)
+    {
+        if (m_units == nullptr) {
+            return;
+        }
+        for (uint32_t u = 1; u < m.table.strings.size(); ++u) {
+            if (const auto h = home.find(m.table.strings[u]); h != home.end() && h->second.second != n) {
+                continue; // written from its own node
+            }
+            const auto unit = view::unit_polygons(m.table, m.geometry, u);
+            if (!unit.complete) {
+                ++incomplete;
+                continue;
+            }
+            if (unit.polygons.empty()) {
+                continue; // a feature class, or a unit with no chain here
+            }
+            auto* polygons = new OGRMultiPolygon;
+            for (const auto& up : unit.polygons) {
+                auto* poly = new OGRPolygon;
+                poly->addRingDirectly(to_ring(up.outer));
+                for (const auto& hole : up.holes) {
+                    poly->addRingDirectly(to_ring(hole));
+                }
+                polygons->addGeometryDirectly(poly);
+            }
+            OGRFeatureH f = OGR_F_Create(OGR_L_GetLayerDefn(m_units));
+            OGR_F_SetFieldString(f, 0, m.table.strings[u].c_str());
+            OGR_F_SetFieldString(f, 1, code.c_str());
+            OGR_F_SetFieldInteger(f, 2, m_lod);
+            OGR_F_SetFieldDouble(f, 3, m_eps_m);
+            OGR_F_SetGeometryDirectly(f, OGRGeometry::ToHandle(polygons));
+            create(m_units, f);
+            ++units;
+        }
+    }
+
+    size_t chains = 0, units = 0, incomplete = 0;
+
+  private:
+    OGRGeometryH to_line(std::span<const GridPoint> pts) const
+    {
+        OGRGeometryH line = OGR_G_CreateGeometry(wkbLineString);
+        for (const auto& p : pts) {
+            double lon = 0, lat = 0;
+            m_proj.to_lonlat(p.x, p.y, lon, lat);
+            OGR_G_AddPoint_2D(line, lon, lat);
+        }
+        return line;
+    }
+    OGRLinearRing* to_ring(const std::vector<GridPoint>& pts) const
+    {
+        auto* ring = new OGRLinearRing;
+        for (const auto& p : pts) {
+            double lon = 0, lat = 0;
+            m_proj.to_lonlat(p.x, p.y, lon, lat);
+            ring->addPoint(lon, lat);
+        }
+        return ring;
+    }
+    /// Write feature `f` to `layer` and destroy it.
+    void create(OGRLayerH layer, OGRFeatureH f) const
+    {
+        const bool ok = OGR_L_CreateFeature(layer, f) == OGRERR_NONE;
+        OGR_F_Destroy(f);
+        if (!ok) {
+            throw environment_error("export: cannot write to " + m_tmp.string());
+        }
+    }
+
+    const Projection& m_proj;
+    const int m_lod;
+    const double m_eps_m;
+    const fs::path m_tmp;
+    OGRLayerH m_chains = nullptr, m_units = nullptr;
+    std::set<uint64_t> m_written;
+};
+
 } // namespace
 
 int ExportStage::run(const StageContext& ctx)
@@ -104,23 +300,7 @@ int ExportStage::run(const StageContext& ctx)
         throw format_error(error);
     }
     const auto& s = tree->skeleton();
-    std::vector<uint32_t> nodes;
-    if (!m_level.empty()) {
-        uint32_t level = UINT32_MAX;
-        for (uint32_t l = 0; l < s.level_names.size(); ++l) {
-            level = s.level_names[l] == m_level ? l : level;
-        }
-        if (level == UINT32_MAX) {
-            throw usage_error("export: no level '" + m_level + "' in the tree");
-        }
-        for (uint32_t n = 0; n < s.nodes.size(); ++n) {
-            if (s.nodes[n].level == level) {
-                nodes.push_back(n);
-            }
-        }
-    } else {
-        nodes.push_back(view::find_node(s, m_node));
-    }
+    const std::vector<uint32_t> nodes = nodes_to_export(s, m_level, m_node);
     const auto lod = static_cast<uint32_t>(m_lod);
     if (lod >= s.lod_eps_m.size()) {
         throw usage_error("export: no LOD " + std::to_string(lod) + " (the tree has " +
@@ -139,139 +319,14 @@ int ExportStage::run(const StageContext& ctx)
     if (g.ds == nullptr) {
         throw environment_error("export: cannot create " + tmp.string() + ": " + CPLGetLastErrorMsg());
     }
-    OGRSpatialReferenceH srs = OSRNewSpatialReference(nullptr);
-    OSRImportFromEPSG(srs, 4269);
-    OSRSetAxisMappingStrategy(srs, OAMS_TRADITIONAL_GIS_ORDER);
-    OGRLayerH chains_layer = nullptr, units_layer = nullptr;
-    if (gpkg || m_layer == "chains") {
-        chains_layer = GDALDatasetCreateLayer(g.ds, "chains", srs, wkbLineString, nullptr);
-        field(chains_layer, "chain_id", OFTInteger64);
-        field(chains_layer, "node", OFTString);
-        field(chains_layer, "left", OFTString);
-        field(chains_layer, "right", OFTString);
-        field(chains_layer, "class", OFTString);
-        field(chains_layer, "lod", OFTInteger);
-        field(chains_layer, "eps_m", OFTReal);
-    }
-    if (gpkg || m_layer == "units") {
-        units_layer = GDALDatasetCreateLayer(g.ds, "units", srs, wkbMultiPolygon, nullptr);
-        field(units_layer, "unit", OFTString);
-        field(units_layer, "node", OFTString);
-        field(units_layer, "lod", OFTInteger);
-        field(units_layer, "eps_m", OFTReal);
-    }
-    OSRDestroySpatialReference(srs);
-    auto to_line = [&](std::span<const GridPoint> pts) {
-        OGRGeometryH line = OGR_G_CreateGeometry(wkbLineString);
-        for (const auto& p : pts) {
-            double lon = 0, lat = 0;
-            proj.to_lonlat(p.x, p.y, lon, lat);
-            OGR_G_AddPoint_2D(line, lon, lat);
-        }
-        return line;
-    };
-    std::set<uint64_t> written;
-    // A unit shows in the map of the node that holds it and, in part, in its
-    // neighbours' (across their outlines); whole there too when it is an
-    // island in a neighbour, but without its own holes. Its own node holds
-    // every chain of its boundary, any other node a subset: each unit is
-    // written once, from the node with the most of its boundary chains (the
-    // first of those).
-    std::map<std::string, std::pair<size_t, uint32_t>> home; // unit -> (boundary chains, node)
-    if (units_layer != nullptr && nodes.size() > 1) {
-        for (uint32_t n : nodes) {
-            datatree::ChainTable t;
-            if (auto st = tree->read_table(n, t); !st.ok()) {
-                throw input_error(st.error);
-            }
-            std::vector<size_t> count(t.strings.size(), 0);
-            for (const auto& c : t.chains) {
-                if (c.left != c.right) {
-                    ++count[c.left];
-                    ++count[c.right];
-                }
-            }
-            for (uint32_t u = 1; u < t.strings.size(); ++u) {
-                auto [it, added] = home.try_emplace(t.strings[u], count[u], n);
-                if (!added && count[u] > it->second.first) {
-                    it->second = {count[u], n};
-                }
-            }
-        }
-    }
-    size_t nchains = 0, nunits = 0, incomplete = 0;
+    Writer writer(g.ds, gpkg || m_layer == "chains", gpkg || m_layer == "units", proj, m_lod, s.lod_eps_m[lod], tmp);
+    const auto home =
+        writer.writes_units() ? home_nodes(*tree, nodes) : std::map<std::string, std::pair<size_t, uint32_t>>{};
     for (uint32_t n : nodes) {
         const auto m = view::read_node(*tree, n, lod);
         const std::string code = n == 0 ? "root" : s.strings[s.nodes[n].code];
-        if (chains_layer != nullptr) {
-            for (size_t i = 0; i < m.table.chains.size(); ++i) {
-                const auto& c = m.table.chains[i];
-                if (!written.insert(c.id).second) {
-                    continue; // a border shown by two nodes: once
-                }
-                OGRFeatureH f = OGR_F_Create(OGR_L_GetLayerDefn(chains_layer));
-                OGR_F_SetFieldInteger64(f, 0, static_cast<GIntBig>(c.id));
-                OGR_F_SetFieldString(f, 1, code.c_str());
-                OGR_F_SetFieldString(f, 2, m.table.strings[c.left].c_str());
-                OGR_F_SetFieldString(f, 3, m.table.strings[c.right].c_str());
-                OGR_F_SetFieldString(f, 4, m.table.strings[c.feature_class].c_str());
-                OGR_F_SetFieldInteger(f, 5, m_lod);
-                OGR_F_SetFieldDouble(f, 6, s.lod_eps_m[lod]);
-                OGR_F_SetGeometryDirectly(f, to_line(m.geometry.chain(i)));
-                if (OGR_L_CreateFeature(chains_layer, f) != OGRERR_NONE) {
-                    OGR_F_Destroy(f);
-                    throw environment_error("export: cannot write to " + tmp.string());
-                }
-                OGR_F_Destroy(f);
-                ++nchains;
-            }
-        }
-        if (units_layer != nullptr) {
-            for (uint32_t u = 1; u < m.table.strings.size(); ++u) {
-                if (const auto h = home.find(m.table.strings[u]); h != home.end() && h->second.second != n) {
-                    continue; // written from its own node
-                }
-                const auto unit = view::unit_polygons(m.table, m.geometry, u);
-                if (!unit.complete) {
-                    ++incomplete;
-                    continue;
-                }
-                if (unit.polygons.empty()) {
-                    continue; // a feature class, or a unit with no chain here
-                }
-                auto to_ring = [&](const std::vector<GridPoint>& pts) {
-                    auto* ring = new OGRLinearRing;
-                    for (const auto& p : pts) {
-                        double lon = 0, lat = 0;
-                        proj.to_lonlat(p.x, p.y, lon, lat);
-                        ring->addPoint(lon, lat);
-                    }
-                    return ring;
-                };
-                auto* polygons = new OGRMultiPolygon;
-                for (const auto& up : unit.polygons) {
-                    auto* poly = new OGRPolygon;
-                    poly->addRingDirectly(to_ring(up.outer));
-                    for (const auto& h : up.holes) {
-                        poly->addRingDirectly(to_ring(h));
-                    }
-                    polygons->addGeometryDirectly(poly);
-                }
-                OGRGeometryH multi = OGRGeometry::ToHandle(polygons);
-                OGRFeatureH f = OGR_F_Create(OGR_L_GetLayerDefn(units_layer));
-                OGR_F_SetFieldString(f, 0, m.table.strings[u].c_str());
-                OGR_F_SetFieldString(f, 1, code.c_str());
-                OGR_F_SetFieldInteger(f, 2, m_lod);
-                OGR_F_SetFieldDouble(f, 3, s.lod_eps_m[lod]);
-                OGR_F_SetGeometryDirectly(f, multi);
-                if (OGR_L_CreateFeature(units_layer, f) != OGRERR_NONE) {
-                    OGR_F_Destroy(f);
-                    throw environment_error("export: cannot write to " + tmp.string());
-                }
-                OGR_F_Destroy(f);
-                ++nunits;
-            }
-        }
+        writer.write_chains(m, code);
+        writer.write_units(m, code, n, home);
     }
     GDALClose(g.ds);
     g.ds = nullptr;
@@ -286,7 +341,7 @@ int ExportStage::run(const StageContext& ctx)
     ctx.log.info("export: done");
     std::printf("export: %zu nodes, %zu chains, %zu unit polygons (%zu units not whole in their node, skipped)\n"
                 "outputs in %s\n",
-                nodes.size(), nchains, nunits, incomplete, m_output.c_str());
+                nodes.size(), writer.chains, writer.units, writer.incomplete, m_output.c_str());
     return exit_ok;
 }
 
