@@ -295,13 +295,11 @@ PartSummary summarize_part(const RawMap& part, size_t max_codes)
     return s;
 }
 
-BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::function<RawMap(size_t)>& load,
-                             const std::vector<std::string>& level_names, const Projection& projection,
-                             const BuildOptions& options, const StoreSink& sink)
+namespace {
+
+/// The region level: the first level with more than one code.
+size_t region_level(const std::vector<PartSummary>& parts, size_t nlev)
 {
-    const size_t nlev = level_names.size();
-    const size_t nparts = parts.size();
-    // The region level: the first with more than one code.
     size_t R = nlev;
     for (size_t L = 0; L < nlev && R == nlev; ++L) {
         const std::string* first = nullptr;
@@ -323,57 +321,133 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
             }
         }
     }
-    // Files that share a region-level code make one region.
-    std::vector<size_t> parent(nparts);
-    std::iota(parent.begin(), parent.end(), size_t{0});
-    // TIGER parts whose EDGES are not their FACES' county's are not separable.
-    bool separable = R < nlev && nparts > 1 && std::all_of(parts.begin(), parts.end(), [](const PartSummary& p) {
-                         return p.unpaired_edges == 0;
-                     });
-    if (separable) {
-        std::map<std::string, size_t> first_part;
-        for (size_t i = 0; i < nparts && separable; ++i) {
-            separable = parts[i].many[R] == 0;
-            for (const auto& c : parts[i].codes[R]) {
-                auto [it, added] = first_part.try_emplace(c, i);
-                if (!added) {
-                    parent[find_root(parent, i)] = find_root(parent, it->second);
+    return R;
+}
+
+/// A region: parts that share a code of the region level, and those codes.
+struct Region {
+    std::vector<size_t> parts;
+    std::vector<std::string> own;
+};
+
+/// What build_by_regions does, step by step: the region level and the
+/// regions (parts sharing a code of it), then for each region its map (its
+/// own units, the whole finer units of the parts near that come within
+/// reach, and every unit sharing a point with those) built and written, and
+/// last the region level and the coarser ones from the regions' borders.
+class RegionBuild {
+  public:
+    RegionBuild(const std::vector<PartSummary>& parts, const std::function<RawMap(size_t)>& load,
+                const std::vector<std::string>& level_names, const Projection& projection, const BuildOptions& options,
+                const StoreSink& sink)
+        : m_parts(parts), m_load(load), m_level_names(level_names), m_projection(projection), m_options(options),
+          m_sink(sink), m_R(region_level(parts, level_names.size()))
+    {
+    }
+
+    BuildResult run()
+    {
+        const auto groups = group_parts();
+        share_files_and_classes();
+        if (!m_separable || groups.size() < 2) {
+            return build_whole();
+        }
+        const auto regions = make_regions(groups);
+        const size_t nlev = m_level_names.size();
+        m_total.levels.resize(nlev);
+        for (size_t L = 0; L < nlev; ++L) {
+            m_total.levels[L].name = m_level_names[L];
+        }
+        const StoreSink checked = [this](const chains::ChainStore& s) { check_and_write(s); };
+        const auto t_start = std::chrono::steady_clock::now();
+        double build_s = 0;
+        for (const Region& region : regions) {
+            RawMap raw = assemble(region);
+            m_total.region_map_units += raw.units.size();
+            RegionScope scope;
+            scope.level = m_R;
+            scope.own = region.own;
+            const auto t0 = std::chrono::steady_clock::now();
+            add_result(m_total, build_region(std::move(raw), scope, m_projection, m_options, checked, m_coarse_in),
+                       m_R + 1, m_options.max_problem_samples);
+            build_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        }
+        const double regions_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+        return finish_coarse(checked, regions_s, build_s);
+    }
+
+  private:
+    void log(const std::string& what) const
+    {
+        if (m_options.log != nullptr) {
+            m_options.log->info(what);
+        }
+    }
+
+    /// Files that share a region-level code make one region (union-find),
+    /// when the parts are separable: TIGER parts whose EDGES are not their
+    /// FACES' county's are not.
+    std::map<size_t, std::vector<size_t>> group_parts()
+    {
+        const auto& parts = m_parts;
+        const size_t R = m_R, nlev = m_level_names.size(), nparts = parts.size();
+        std::vector<size_t> parent(nparts);
+        std::iota(parent.begin(), parent.end(), size_t{0});
+        // TIGER parts whose EDGES are not their FACES' county's are not separable.
+        m_separable = R < nlev && nparts > 1 && std::all_of(parts.begin(), parts.end(), [](const PartSummary& p) {
+                          return p.unpaired_edges == 0;
+                      });
+        if (m_separable) {
+            std::map<std::string, size_t> first_part;
+            for (size_t i = 0; i < nparts && m_separable; ++i) {
+                m_separable = parts[i].many[R] == 0;
+                for (const auto& c : parts[i].codes[R]) {
+                    auto [it, added] = first_part.try_emplace(c, i);
+                    if (!added) {
+                        parent[find_root(parent, i)] = find_root(parent, it->second);
+                    }
                 }
             }
         }
-    }
-    std::map<size_t, std::vector<size_t>> groups;
-    for (size_t i = 0; i < nparts; ++i) {
-        groups[find_root(parent, i)].push_back(i);
-    }
-    auto log = [&](const std::string& what) {
-        if (options.log != nullptr) {
-            options.log->info(what);
-        }
-    };
-    // What every region's map shares: files and classes, numbered as a whole
-    // read numbers them (TIGER: every FACES file, then every EDGES file).
-    RawMap meta;
-    meta.kind = nparts > 0 ? parts[0].kind : RawMap::Kind::polygon_rings;
-    meta.level_names = level_names;
-    std::vector<std::vector<uint32_t>> class_of(nparts);
-    const size_t files_per_part = nparts > 0 ? parts[0].files.size() : 0;
-    for (size_t f = 0; f < files_per_part; ++f) {
+        std::map<size_t, std::vector<size_t>> groups;
         for (size_t i = 0; i < nparts; ++i) {
-            meta.files.push_back(f < parts[i].files.size() ? parts[i].files[f] : std::string());
+            groups[find_root(parent, i)].push_back(i);
+        }
+        return groups;
+    }
+
+    /// What every region's map shares: files and classes, numbered as a
+    /// whole read numbers them (TIGER: every FACES file, then every EDGES file).
+    void share_files_and_classes()
+    {
+        const auto& parts = m_parts;
+        const size_t nparts = parts.size();
+        auto& meta = m_meta;
+        auto& class_of = m_class_of;
+        meta.kind = nparts > 0 ? parts[0].kind : RawMap::Kind::polygon_rings;
+        meta.level_names = m_level_names;
+        class_of.resize(nparts);
+        const size_t files_per_part = nparts > 0 ? parts[0].files.size() : 0;
+        for (size_t f = 0; f < files_per_part; ++f) {
+            for (size_t i = 0; i < nparts; ++i) {
+                meta.files.push_back(f < parts[i].files.size() ? parts[i].files[f] : std::string());
+            }
+        }
+        for (size_t i = 0; i < nparts; ++i) {
+            for (const auto& c : parts[i].classes) {
+                class_of[i].push_back(meta.intern_class(c));
+            }
         }
     }
-    for (size_t i = 0; i < nparts; ++i) {
-        for (const auto& c : parts[i].classes) {
-            class_of[i].push_back(meta.intern_class(c));
-        }
-    }
-    if (!separable || groups.size() < 2) {
-        // One region: the whole map at once.
-        Assembly whole(meta, class_of);
+
+    /// One region: the whole map at once.
+    BuildResult build_whole()
+    {
+        const size_t nparts = m_parts.size();
+        Assembly whole(m_meta, m_class_of);
         uint64_t empty = 0;
         for (size_t i = 0; i < nparts; ++i) {
-            RawMap part = load(i);
+            RawMap part = m_load(i);
             empty += part.empty_geometries;
             const std::vector<uint8_t> all(part.units.size(), 1);
             whole.add(i, std::move(part), all, true);
@@ -382,65 +456,53 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
         raw.points_read = whole.own_points();
         raw.empty_geometries = empty;
         log("building the map whole (one region)");
-        return build_map(std::move(raw), projection, options, sink);
+        return build_map(std::move(raw), m_projection, m_options, m_sink);
     }
 
-    struct Region {
-        std::vector<size_t> parts;
-        std::vector<std::string> own;
-    };
-    std::vector<Region> regions;
-    for (auto& [root, members] : groups) {
-        Region r;
-        r.parts = members;
-        for (size_t i : members) {
-            r.own.insert(r.own.end(), parts[i].codes[R].begin(), parts[i].codes[R].end());
+    /// The regions, in the order of their codes; a group without a code of the region level is none.
+    std::vector<Region> make_regions(const std::map<size_t, std::vector<size_t>>& groups) const
+    {
+        const size_t R = m_R;
+        std::vector<Region> regions;
+        for (auto& [root, members] : groups) {
+            Region r;
+            r.parts = members;
+            for (size_t i : members) {
+                r.own.insert(r.own.end(), m_parts[i].codes[R].begin(), m_parts[i].codes[R].end());
+            }
+            std::sort(r.own.begin(), r.own.end());
+            r.own.erase(std::unique(r.own.begin(), r.own.end()), r.own.end());
+            if (!r.own.empty()) {
+                regions.push_back(std::move(r));
+            }
         }
-        std::sort(r.own.begin(), r.own.end());
-        r.own.erase(std::unique(r.own.begin(), r.own.end()), r.own.end());
-        if (!r.own.empty()) {
-            regions.push_back(std::move(r));
-        }
-    }
-    std::sort(regions.begin(), regions.end(), [](const Region& a, const Region& b) { return a.own < b.own; });
+        std::sort(regions.begin(), regions.end(), [](const Region& a, const Region& b) { return a.own < b.own; });
 
-    BuildResult total;
-    total.levels.resize(nlev);
-    for (size_t L = 0; L < nlev; ++L) {
-        total.levels[L].name = level_names[L];
+        return regions;
     }
-    std::mutex written_mutex;
-    std::set<std::string> written;
-    const StoreSink checked = [&](const chains::ChainStore& s) {
+
+    /// Every store once: a partition written twice has units under two codes
+    /// of the region level in different files.
+    void check_and_write(const chains::ChainStore& s)
+    {
         {
-            const std::lock_guard lock(written_mutex);
-            if (!written.insert(s.level_name + "/" + s.partition).second) {
+            const std::lock_guard lock(m_written_mutex);
+            if (!m_written.insert(s.level_name + "/" + s.partition).second) {
                 throw input_error("level '" + s.level_name + "': partition '" + s.partition +
-                                  "' has units under two codes of level '" + level_names[R] +
+                                  "' has units under two codes of level '" + m_level_names[m_R] +
                                   "' in different files: the codes do not nest");
             }
         }
-        sink(s);
-    };
-    // How far a region's results can depend on other units: three halo cells
-    // (find_near reaches up to about two) and a margin, in degrees, for the
-    // smallest scale of the projection over the region.
-    const double reach_m = 3.0 * std::max(options.halo_m, 100.0) + 100.0;
-    const bool halos = R + 1 < nlev;
-    uint64_t own_points = 0;
-    RegionOutput coarse_in;
-    const auto t_start = std::chrono::steady_clock::now();
-    double build_s = 0;
-    for (const Region& region : regions) {
-        std::vector<uint8_t> is_own(nparts, 0);
-        GridBox own_box;
-        for (size_t i : region.parts) {
-            is_own[i] = 1;
-            if (parts[i].lo.lon <= parts[i].hi.lon) {
-                own_box.extend(as_point(parts[i].lo));
-                own_box.extend(as_point(parts[i].hi));
-            }
-        }
+        m_sink(s);
+    }
+
+    /// How far a region's results can depend on other units, in the input's
+    /// 1e-6 degrees (x, y): three halo cells (find_near reaches up to about
+    /// two) and a margin, for the smallest scale of the projection over `own_box`.
+    std::pair<int64_t, int64_t> reach_of(const GridBox& own_box) const
+    {
+        const double reach_m = 3.0 * std::max(m_options.halo_m, 100.0) + 100.0;
+        const Projection& projection = m_projection;
         double kmin = 1.0;
         double max_lat = 0.0;
         if (!own_box.empty()) {
@@ -459,8 +521,30 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
             e_lat / std::max(0.01, std::cos(std::min(89.0, max_lat + e_lat) * std::numbers::pi / 180.0));
         const auto ex = static_cast<int64_t>(std::ceil(e_lon * 1e6)) + 1;
         const auto ey = static_cast<int64_t>(std::ceil(e_lat * 1e6)) + 1;
-        const GridBox near_box = grown(own_box, ex, ey);
 
+        return {ex, ey};
+    }
+
+    /// The region's map, parts in file order: its own units, the whole
+    /// finer-level units of the parts near that come within reach, and every
+    /// unit that shares a point with one of those.
+    RawMap assemble(const Region& region)
+    {
+        const auto& parts = m_parts;
+        const size_t nparts = parts.size(), R = m_R;
+        const bool halos = R + 1 < m_level_names.size();
+        const auto& load = m_load;
+        std::vector<uint8_t> is_own(nparts, 0);
+        GridBox own_box;
+        for (size_t i : region.parts) {
+            is_own[i] = 1;
+            if (parts[i].lo.lon <= parts[i].hi.lon) {
+                own_box.extend(as_point(parts[i].lo));
+                own_box.extend(as_point(parts[i].hi));
+            }
+        }
+        const auto [ex, ey] = reach_of(own_box);
+        const GridBox near_box = grown(own_box, ex, ey);
         // Other parts near.
         std::vector<size_t> near;
         std::vector<GridBox> near_boxes;
@@ -540,7 +624,7 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
 
         // The region's map, parts in file order: its own units, the near
         // whole units, and every unit that shares a point with one of those.
-        Assembly assembly(meta, class_of);
+        Assembly assembly(m_meta, m_class_of);
         std::vector<size_t> order = region.parts;
         order.insert(order.end(), near.begin(), near.end());
         std::sort(order.begin(), order.end());
@@ -594,41 +678,67 @@ BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::f
             }
             assembly.add(i, std::move(part), take, is_own[i] != 0);
         }
-        own_points += assembly.own_points();
+        m_own_points += assembly.own_points();
         RawMap raw = assembly.finish();
-        total.region_map_units += raw.units.size();
         release(keys);
         log("region " + region.own.front() + (region.own.size() > 1 ? "..." : "") + ": " + std::to_string(own_units) +
             " own units, " + std::to_string(raw.units.size() - own_units) + " neighbouring, " +
             std::to_string(raw.coords.size()) + " points");
-        RegionScope scope;
-        scope.level = R;
-        scope.own = region.own;
-        const auto t0 = std::chrono::steady_clock::now();
-        add_result(total, build_region(std::move(raw), scope, projection, options, checked, coarse_in), R + 1,
-                   options.max_problem_samples);
-        build_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        return raw;
     }
-    const double regions_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
-    // The region level and the coarser ones, from the regions' edges between codes.
-    std::sort(coarse_in.units.begin(), coarse_in.units.end(), [](const RawUnit& a, const RawUnit& b) {
-        return std::pair{a.source.file, a.source.feature} < std::pair{b.source.file, b.source.feature};
-    });
-    const auto t_coarse = std::chrono::steady_clock::now();
-    BuildResult coarse =
-        build_coarse(meta, std::move(coarse_in.units), coarse_in.edges, R, projection, options, checked);
-    for (size_t L = 0; L <= R; ++L) {
-        total.levels[L] = coarse.levels[L];
+
+    /// The region level and the coarser ones, from the regions' edges
+    /// between codes; the totals.
+    BuildResult finish_coarse(const StoreSink& checked, double regions_s, double build_s)
+    {
+        const size_t R = m_R, nlev = m_level_names.size();
+        auto& total = m_total;
+        auto& coarse_in = m_coarse_in;
+        const auto& parts = m_parts;
+        std::sort(coarse_in.units.begin(), coarse_in.units.end(), [](const RawUnit& a, const RawUnit& b) {
+            return std::pair{a.source.file, a.source.feature} < std::pair{b.source.file, b.source.feature};
+        });
+        const auto t_coarse = std::chrono::steady_clock::now();
+        BuildResult coarse =
+            build_coarse(m_meta, std::move(coarse_in.units), coarse_in.edges, R, m_projection, m_options, checked);
+        for (size_t L = 0; L <= R; ++L) {
+            total.levels[L] = coarse.levels[L];
+        }
+        add_result(total, std::move(coarse), nlev, m_options.max_problem_samples);
+        total.seconds.emplace_back("coarse_levels",
+                                   std::chrono::duration<double>(std::chrono::steady_clock::now() - t_coarse).count());
+        total.seconds.emplace_back("regions_load", regions_s - build_s);
+        total.input_vertices = m_own_points;
+        for (const auto& p : parts) {
+            total.problems["empty_geometries"] += p.empty_geometries;
+        }
+        return std::move(total);
     }
-    add_result(total, std::move(coarse), nlev, options.max_problem_samples);
-    total.seconds.emplace_back("coarse_levels",
-                               std::chrono::duration<double>(std::chrono::steady_clock::now() - t_coarse).count());
-    total.seconds.emplace_back("regions_load", regions_s - build_s);
-    total.input_vertices = own_points;
-    for (const auto& p : parts) {
-        total.problems["empty_geometries"] += p.empty_geometries;
-    }
-    return total;
+
+    const std::vector<PartSummary>& m_parts;
+    const std::function<RawMap(size_t)>& m_load;
+    const std::vector<std::string>& m_level_names;
+    const Projection& m_projection;
+    const BuildOptions& m_options;
+    const StoreSink& m_sink;
+    const size_t m_R; ///< the region level
+    bool m_separable = false;
+    RawMap m_meta;                                 ///< files and classes every region's map shares
+    std::vector<std::vector<uint32_t>> m_class_of; ///< per part, its classes' numbers in m_meta
+    BuildResult m_total;
+    std::mutex m_written_mutex;
+    std::set<std::string> m_written; ///< level/partition of every store written
+    RegionOutput m_coarse_in;        ///< the regions' units and edges for the coarse levels
+    uint64_t m_own_points = 0;
+}; // class RegionBuild
+
+} // namespace
+
+BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::function<RawMap(size_t)>& load,
+                             const std::vector<std::string>& level_names, const Projection& projection,
+                             const BuildOptions& options, const StoreSink& sink)
+{
+    return RegionBuild(parts, load, level_names, projection, options, sink).run();
 }
 
 } // namespace tigerlod::ingest
