@@ -525,70 +525,123 @@ class RegionBuild {
         return {ex, ey};
     }
 
+    /// What a region's map is assembled from: which parts are its own, the
+    /// parts near, the own parts already loaded, the points a unit of a
+    /// part near could share with one taken (keys) and where those units
+    /// lie (key_cells), and per part near its whole finer-level units within
+    /// reach (core).
+    struct Neighbourhood {
+        std::vector<uint8_t> is_own;
+        std::vector<size_t> near;
+        std::vector<GridBox> near_boxes;
+        std::map<size_t, RawMap> loaded;
+        CellSet key_cells{50'000, 50'000};
+        std::vector<uint64_t> keys;
+        std::map<size_t, std::vector<uint8_t>> core;
+    };
+
     /// The region's map, parts in file order: its own units, the whole
     /// finer-level units of the parts near that come within reach, and every
     /// unit that shares a point with one of those.
     RawMap assemble(const Region& region)
     {
         const auto& parts = m_parts;
-        const size_t nparts = parts.size(), R = m_R;
-        const bool halos = R + 1 < m_level_names.size();
-        const auto& load = m_load;
-        std::vector<uint8_t> is_own(nparts, 0);
+        Neighbourhood nb;
+        nb.is_own.assign(parts.size(), 0);
         GridBox own_box;
         for (size_t i : region.parts) {
-            is_own[i] = 1;
+            nb.is_own[i] = 1;
             if (parts[i].lo.lon <= parts[i].hi.lon) {
                 own_box.extend(as_point(parts[i].lo));
                 own_box.extend(as_point(parts[i].hi));
             }
         }
         const auto [ex, ey] = reach_of(own_box);
-        const GridBox near_box = grown(own_box, ex, ey);
-        // Other parts near.
-        std::vector<size_t> near;
-        std::vector<GridBox> near_boxes;
-        for (size_t j = 0; j < nparts; ++j) {
-            const GridBox b{parts[j].lo.lon, parts[j].lo.lat, parts[j].hi.lon, parts[j].hi.lat};
-            if (!is_own[j] && b.intersects(near_box)) {
-                near.push_back(j);
-                near_boxes.push_back(b);
+        find_parts_near(nb, grown(own_box, ex, ey));
+        CellSet cells(std::max<int64_t>(ex, 50'000), std::max<int64_t>(ey, 50'000));
+        load_own_parts(region, nb, cells, ex, ey);
+        if (m_R + 1 < m_level_names.size()) { // finer levels: halos
+            take_whole_units_near(nb, cells);
+        }
+        nb.key_cells.seal();
+        std::sort(nb.keys.begin(), nb.keys.end());
+        nb.keys.erase(std::unique(nb.keys.begin(), nb.keys.end()), nb.keys.end());
+
+        Assembly assembly(m_meta, m_class_of);
+        std::vector<size_t> order = region.parts;
+        order.insert(order.end(), nb.near.begin(), nb.near.end());
+        std::sort(order.begin(), order.end());
+        size_t own_units = 0;
+        for (size_t i : order) {
+            RawMap part;
+            if (auto it = nb.loaded.find(i); it != nb.loaded.end()) {
+                part = std::move(it->second);
+                nb.loaded.erase(it);
+            } else {
+                part = m_load(i);
+            }
+            const std::vector<uint8_t> take = units_to_take(i, part, nb);
+            if (nb.is_own[i]) {
+                own_units += part.units.size();
+            }
+            assembly.add(i, std::move(part), take, nb.is_own[i] != 0);
+        }
+        m_own_points += assembly.own_points();
+        RawMap raw = assembly.finish();
+        release(nb.keys);
+        log("region " + region.own.front() + (region.own.size() > 1 ? "..." : "") + ": " + std::to_string(own_units) +
+            " own units, " + std::to_string(raw.units.size() - own_units) + " neighbouring, " +
+            std::to_string(raw.coords.size()) + " points");
+        return raw;
+    }
+
+    /// The other parts whose box meets `near_box`.
+    void find_parts_near(Neighbourhood& nb, const GridBox& near_box) const
+    {
+        for (size_t j = 0; j < m_parts.size(); ++j) {
+            const auto& p = m_parts[j];
+            const GridBox b{p.lo.lon, p.lo.lat, p.hi.lon, p.hi.lat};
+            if (!nb.is_own[j] && b.intersects(near_box)) {
+                nb.near.push_back(j);
+                nb.near_boxes.push_back(b);
             }
         }
-        // The own parts, their units' neighbourhood as cells, and their points
-        // that a unit of a part near could share.
-        std::map<size_t, RawMap> loaded;
-        CellSet cells(std::max<int64_t>(ex, 50'000), std::max<int64_t>(ey, 50'000));
-        // Where the keys' units are: a unit of a part near whose box misses
-        // these cells shares no point with them, and is not searched.
-        CellSet key_cells(50'000, 50'000);
-        std::vector<uint64_t> keys;
+    }
+
+    /// The own parts, their units' neighbourhood as cells (grown by the
+    /// reach), and their points that a unit of a part near could share.
+    void load_own_parts(const Region& region, Neighbourhood& nb, CellSet& cells, int64_t ex, int64_t ey) const
+    {
         for (size_t i : region.parts) {
-            RawMap part = load(i);
+            RawMap part = m_load(i);
             for (const GridBox& b : unit_boxes(part)) {
                 if (!b.empty()) {
                     cells.add(grown(b, ex, ey));
-                    key_cells.add(b);
+                    // Where the keys' units are: a unit of a part near whose
+                    // box misses these cells shares no point with them, and
+                    // is not searched.
+                    nb.key_cells.add(b);
                 }
             }
             for (const auto& p : part.coords) {
                 const GridBox at{p.lon, p.lat, p.lon, p.lat};
-                if (std::any_of(near_boxes.begin(), near_boxes.end(),
+                if (std::any_of(nb.near_boxes.begin(), nb.near_boxes.end(),
                                 [&](const GridBox& b) { return b.intersects(at); })) {
-                    keys.push_back(pack_key(p));
+                    nb.keys.push_back(pack_key(p));
                 }
             }
-            loaded.emplace(i, std::move(part));
+            nb.loaded.emplace(i, std::move(part));
         }
         cells.seal();
-        // The whole finer-level units (counties) of the parts near that come
-        // within reach, their points added to the keys.
-        std::map<size_t, std::vector<uint8_t>> core;
-        for (size_t j : near) {
-            if (!halos) {
-                continue;
-            }
-            const RawMap part = load(j);
+    }
+
+    /// The whole finer-level units (counties) of the parts near that come
+    /// within reach (`cells`): taken, their points added to the keys.
+    void take_whole_units_near(Neighbourhood& nb, const CellSet& cells) const
+    {
+        const size_t R = m_R;
+        for (size_t j : nb.near) {
+            const RawMap part = m_load(j);
             const auto boxes = unit_boxes(part);
             std::set<std::string> band;
             for (size_t u = 0; u < part.units.size(); ++u) {
@@ -599,7 +652,7 @@ class RegionBuild {
             if (band.empty()) {
                 continue;
             }
-            auto& flags = core[j];
+            auto& flags = nb.core[j];
             flags.assign(part.units.size(), 0);
             for (size_t u = 0; u < part.units.size(); ++u) {
                 flags[u] = band.count(part.units[u].codes[R + 1]) != 0 ? 1 : 0;
@@ -608,83 +661,62 @@ class RegionBuild {
                 const auto [l, r] = sides(part, p);
                 if ((l != no_unit && flags[l]) || (r != no_unit && flags[r])) {
                     for (uint64_t k = part.offsets[p]; k < part.offsets[p + 1]; ++k) {
-                        keys.push_back(pack_key(part.coords[k]));
+                        nb.keys.push_back(pack_key(part.coords[k]));
                     }
                 }
             }
             for (size_t u = 0; u < part.units.size(); ++u) {
                 if (flags[u] && !boxes[u].empty()) {
-                    key_cells.add(boxes[u]);
+                    nb.key_cells.add(boxes[u]);
                 }
             }
         }
-        key_cells.seal();
-        std::sort(keys.begin(), keys.end());
-        keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+    }
 
-        // The region's map, parts in file order: its own units, the near
-        // whole units, and every unit that shares a point with one of those.
-        Assembly assembly(m_meta, m_class_of);
-        std::vector<size_t> order = region.parts;
-        order.insert(order.end(), near.begin(), near.end());
-        std::sort(order.begin(), order.end());
-        size_t own_units = 0;
-        for (size_t i : order) {
-            RawMap part;
-            if (auto it = loaded.find(i); it != loaded.end()) {
-                part = std::move(it->second);
-                loaded.erase(it);
-            } else {
-                part = load(i);
+    /// The units of part i the region's map takes: all of an own part's;
+    /// of a part near, its whole units near and every unit sharing a point
+    /// (a key) with one taken.
+    std::vector<uint8_t> units_to_take(size_t i, const RawMap& part, const Neighbourhood& nb) const
+    {
+        std::vector<uint8_t> take(part.units.size(), nb.is_own[i]);
+        if (auto it = nb.core.find(i); it != nb.core.end()) {
+            for (size_t u = 0; u < take.size(); ++u) {
+                take[u] = take[u] | it->second[u];
             }
-            std::vector<uint8_t> take(part.units.size(), is_own[i]);
-            if (auto it = core.find(i); it != core.end()) {
-                for (size_t u = 0; u < take.size(); ++u) {
-                    take[u] = take[u] | it->second[u];
-                }
+        }
+        if (nb.is_own[i]) {
+            return take;
+        }
+        // Only units whose box meets an own or whole neighbouring unit's
+        // cells can share a point with one: the others are not searched
+        // (every point of a neighbouring state was: 0.10 s of the tract set's
+        // 0.27 s of region work).
+        const auto boxes = unit_boxes(part);
+        std::vector<uint8_t> maybe(part.units.size(), 0);
+        for (size_t u = 0; u < maybe.size(); ++u) {
+            maybe[u] = !boxes[u].empty() && nb.key_cells.meets(boxes[u]) ? 1 : 0;
+        }
+        for (size_t p = 0; p < part.polyline_count(); ++p) {
+            // The sides not yet taken that may share a point.
+            auto open = sides(part, p);
+            for (uint32_t& u : open) {
+                u = u == no_unit || take[u] || !maybe[u] ? no_unit : u;
             }
-            if (!is_own[i]) {
-                // Only units whose box meets an own or whole neighbouring
-                // unit's cells can share a point with one: the others are not
-                // searched (every point of a neighbouring state was: 0.10 s of
-                // the tract set's 0.27 s of region work).
-                const auto boxes = unit_boxes(part);
-                std::vector<uint8_t> maybe(part.units.size(), 0);
-                for (size_t u = 0; u < maybe.size(); ++u) {
-                    maybe[u] = !boxes[u].empty() && key_cells.meets(boxes[u]) ? 1 : 0;
-                }
-                for (size_t p = 0; p < part.polyline_count(); ++p) {
-                    // The sides not yet taken that may share a point.
-                    auto open = sides(part, p);
-                    for (uint32_t& u : open) {
-                        u = u == no_unit || take[u] || !maybe[u] ? no_unit : u;
-                    }
-                    if (open[0] == no_unit && open[1] == no_unit) {
-                        continue;
-                    }
-                    for (uint64_t k = part.offsets[p]; k < part.offsets[p + 1]; ++k) {
-                        if (std::binary_search(keys.begin(), keys.end(), pack_key(part.coords[k]))) {
-                            for (const uint32_t u : open) {
-                                if (u != no_unit) {
-                                    take[u] = 1;
-                                }
-                            }
-                            break;
+            if (open[0] == no_unit && open[1] == no_unit) {
+                continue;
+            }
+            for (uint64_t k = part.offsets[p]; k < part.offsets[p + 1]; ++k) {
+                if (std::binary_search(nb.keys.begin(), nb.keys.end(), pack_key(part.coords[k]))) {
+                    for (const uint32_t u : open) {
+                        if (u != no_unit) {
+                            take[u] = 1;
                         }
                     }
+                    break;
                 }
-            } else {
-                own_units += part.units.size();
             }
-            assembly.add(i, std::move(part), take, is_own[i] != 0);
         }
-        m_own_points += assembly.own_points();
-        RawMap raw = assembly.finish();
-        release(keys);
-        log("region " + region.own.front() + (region.own.size() > 1 ? "..." : "") + ": " + std::to_string(own_units) +
-            " own units, " + std::to_string(raw.units.size() - own_units) + " neighbouring, " +
-            std::to_string(raw.coords.size()) + " points");
-        return raw;
+        return take;
     }
 
     /// The region level and the coarser ones, from the regions' edges
