@@ -4,8 +4,10 @@
 /// tigerlod-color, tigerlod-simplify and tigerlod-verify: the options, the
 /// tolerance of each chain (the contract simplify keeps and verify checks),
 /// the halo segments within reach of a partition, the stencil colouring of a
-/// store (paper, Section 4.2: chains whose eps-neighbourhoods can meet get
-/// different stencil classes), and the point part of the partition contract.
+/// store (the paper's Section 5.1 draws each chain's eps-Voronoi region in
+/// the stencil buffer, so the map must be 255-colourable: chains whose
+/// eps-neighbourhoods can meet get different classes, per render tile), and
+/// the point part of the partition contract.
 
 #include "formats/chains/chain_store.hpp"
 #include "simplification/coloring.hpp"
