@@ -594,6 +594,178 @@ PreparedTile Raster::prepare(const TileSpec& tile, std::span<const TentChain> te
     return out;
 }
 
+struct Raster::Frame {
+    float size = 0;       ///< the framebuffer's width and height, pixels
+    float ox = 0, oy = 0; ///< the box's origin within the tile, pixels
+    int64_t w = 0, h = 0; ///< the box's width and height, pixels
+};
+
+void Raster::bind_tile_flags(const PreparedTile::Data& d, size_t base)
+{
+    auto& I = *m_impl;
+    const auto& gl = I.gl;
+    // The flags land in the tile's buffer, read back by end_batch: no wait per tile.
+    const size_t t = I.tile_flags.size();
+    if (t == I.flag_buffers.size()) {
+        I.flag_buffers.push_back(0);
+        gl.GenBuffers(1, &I.flag_buffers.back());
+    }
+    I.tile_flags.push_back(base);
+    I.batch_ids.insert(I.batch_ids.end(), d.ids.begin(), d.ids.end());
+    if (I.zeros.size() < d.ids.size()) {
+        I.zeros.resize(d.ids.size(), 0);
+    }
+    gl.BindBuffer(GL_SHADER_STORAGE_BUFFER, I.flag_buffers[t]);
+    gl.BufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(std::max<size_t>(1, d.ids.size()) * 4), I.zeros.data(),
+                  GL_STREAM_READ);
+    gl.BindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, I.flag_buffers[t]);
+}
+
+Raster::Frame Raster::bind_frame(const PreparedTile::Data& d)
+{
+    auto& I = *m_impl;
+    const auto& gl = I.gl;
+    // The box is drawn with its corner at the framebuffer's, in the smallest
+    // framebuffer that holds it. The shift is an integer number of pixels,
+    // so the pixel centres keep their places, and the shaders subtract it
+    // from coordinates within the tile exactly. llvmpipe's cost per flush
+    // grows with the framebuffer's area (it walks every 64-pixel bin of it
+    // under a lock), and the batches of small boxes that most tiles have
+    // are flushed often.
+    const int64_t ox = d.sx0, oy = d.sy0, ex = d.sx1, ey = d.sy1;
+    size_t target = 0;
+    while (target + 1 < I.targets.size() && (ex - ox > I.targets[target].size || ey - oy > I.targets[target].size)) {
+        ++target;
+    }
+    if (ex - ox > I.targets[target].size || ey - oy > I.targets[target].size) {
+        throw std::logic_error("tile larger than the framebuffer");
+    }
+    m_stats.small_boxes += target == 0 && I.targets.size() > 1;
+    // Bound each time: engines may share a context (Mesa skips a binding
+    // that changes nothing).
+    gl.BindFramebuffer(GL_FRAMEBUFFER, I.targets[target].fbo);
+    gl.Viewport(0, 0, I.targets[target].size, I.targets[target].size);
+    gl.Enable(GL_SCISSOR_TEST); // off again at the end of draw: the context may serve other engines
+    gl.Scissor(0, 0, static_cast<GLsizei>(ex - ox), static_cast<GLsizei>(ey - oy));
+    return {static_cast<float>(I.targets[target].size), static_cast<float>(ox), static_cast<float>(oy), ex - ox,
+            ey - oy};
+}
+
+void Raster::use_tent_quads(unsigned prog, const Frame& f, float z)
+{
+    auto& I = *m_impl;
+    const auto& gl = I.gl;
+    gl.UseProgram(prog);
+    gl.Uniform2f(I.loc(prog, "u_size"), f.size, f.size);
+    gl.Uniform2f(I.loc(prog, "u_origin"), f.ox, f.oy);
+    gl.Uniform1f(I.loc(prog, "u_reach"), float(l2_reach(m_opt.metric)));
+    gl.Uniform1f(I.loc(prog, "u_pad"), float(m_opt.margin_px));
+    gl.Uniform1f(I.loc(prog, "u_z"), z);
+}
+
+void Raster::draw_tents(const PreparedTile::Data& d, const Frame& f)
+{
+    auto& I = *m_impl;
+    const auto& gl = I.gl;
+    use_tent_quads(I.tent_prog, f, 0.0f);
+    gl.Uniform1f(I.loc(I.tent_prog, "u_depth_scale"), float(d.eps_max * 1.001 + 1e-6));
+    gl.BindVertexArray(I.vao_tent);
+    gl.Enable(GL_DEPTH_TEST);
+    gl.DepthFunc(GL_LESS);
+    gl.DepthMask(GL_TRUE);
+    gl.ColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
+    gl.StencilMask(0xFF);
+    gl.StencilOp(GL_KEEP, GL_KEEP, GL_REPLACE);
+    for (const auto& [cls, range] : d.ranges) {
+        gl.StencilFunc(GL_ALWAYS, cls, 0xFF);
+        draw_quads(gl, range.first, size_t(range.second));
+    }
+}
+
+void Raster::test_parts(const PreparedTile::Data& d, const Frame& f, bool ssbo, std::vector<uint8_t>& removed)
+{
+    auto& I = *m_impl;
+    const auto& gl = I.gl;
+    // A fragment fails where another class's region is: stencil != class,
+    // and a tent was drawn there (depth below the background's 1). Pixels
+    // outside every band are no one's region: a shortcut's half-pixel quad
+    // grazing the edge of its own band is not a failure.
+    gl.Enable(GL_DEPTH_TEST);
+    gl.DepthFunc(GL_GREATER);
+    gl.DepthMask(GL_FALSE);
+    gl.StencilMask(0);
+    gl.StencilOp(GL_KEEP, GL_KEEP, GL_KEEP);
+    gl.UseProgram(I.test_prog);
+    gl.Uniform2f(I.loc(I.test_prog, "u_size"), f.size, f.size);
+    gl.Uniform2f(I.loc(I.test_prog, "u_origin"), f.ox, f.oy);
+    gl.Uniform1f(I.loc(I.test_prog, "u_half_width"), 0.5f);
+    gl.Uniform1f(I.loc(I.test_prog, "u_end_margin"), float(m_opt.endpoint_margin_px));
+    gl.BindVertexArray(I.vao_test);
+    if (d.ids.empty()) {
+        return;
+    }
+    if (ssbo) {
+        for (const auto& [cls, range] : d.sranges) {
+            gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
+            draw_quads(gl, range.first, size_t(range.second));
+        }
+    } else {
+        read_back_failures(d, f, removed);
+    }
+}
+
+void Raster::read_back_failures(const PreparedTile::Data& d, const Frame& f, std::vector<uint8_t>& removed)
+{
+    auto& I = *m_impl;
+    const auto& gl = I.gl;
+    std::vector<uint8_t> pixels(size_t(f.w) * size_t(f.h) * 4);
+    gl.ColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+    for (;;) {
+        ++m_stats.readback_rounds;
+        gl.Clear(GL_COLOR_BUFFER_BIT);
+        for (const auto& [cls, range] : d.sranges) {
+            gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
+            for (GLuint k = range.first; k < range.first + GLuint(range.second); ++k) {
+                if (!removed[k]) {
+                    draw_quads(gl, k, 1);
+                }
+            }
+        }
+        gl.PixelStorei(GL_PACK_ALIGNMENT, 1);
+        gl.ReadPixels(0, 0, static_cast<GLsizei>(f.w), static_cast<GLsizei>(f.h), GL_RGBA, GL_UNSIGNED_BYTE,
+                      pixels.data());
+        bool changed = false;
+        for (size_t i = 0; i < pixels.size(); i += 4) {
+            const uint32_t c = uint32_t(pixels[i]) | (uint32_t(pixels[i + 1]) << 8) | (uint32_t(pixels[i + 2]) << 16);
+            if (c != 0 && c <= removed.size() && !removed[c - 1]) {
+                removed[c - 1] = 1;
+                changed = true;
+            }
+        }
+        if (!changed) {
+            break;
+        }
+    }
+    gl.ColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
+}
+
+void Raster::reset_tents(const PreparedTile::Data& d, const Frame& f)
+{
+    auto& I = *m_impl;
+    const auto& gl = I.gl;
+    use_tent_quads(I.reset_prog, f, 1.0f);
+    gl.BindVertexArray(I.vao_tent);
+    gl.Enable(GL_DEPTH_TEST);
+    gl.DepthFunc(GL_ALWAYS);
+    gl.DepthMask(GL_TRUE);
+    gl.StencilMask(0xFF);
+    gl.StencilFunc(GL_ALWAYS, 0, 0xFF);
+    gl.StencilOp(GL_REPLACE, GL_REPLACE, GL_REPLACE);
+    if (!d.inst.empty()) {
+        draw_quads(gl, 0, d.inst.size());
+    }
+}
+
 void Raster::draw(const PreparedTile& prepared, std::vector<uint8_t>& fails)
 {
     auto& I = *m_impl;
@@ -615,22 +787,7 @@ void Raster::draw(const PreparedTile& prepared, std::vector<uint8_t>& fails)
     m_stats.tent_segments += d.tent_segments;
     m_stats.tent_segments_skipped += d.tent_skipped;
     if (ssbo) {
-        // The flags land in the tile's buffer, read back by end_batch: no
-        // wait per tile.
-        const size_t t = I.tile_flags.size();
-        if (t == I.flag_buffers.size()) {
-            I.flag_buffers.push_back(0);
-            gl.GenBuffers(1, &I.flag_buffers.back());
-        }
-        I.tile_flags.push_back(base);
-        I.batch_ids.insert(I.batch_ids.end(), d.ids.begin(), d.ids.end());
-        if (I.zeros.size() < d.ids.size()) {
-            I.zeros.resize(d.ids.size(), 0);
-        }
-        gl.BindBuffer(GL_SHADER_STORAGE_BUFFER, I.flag_buffers[t]);
-        gl.BufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(std::max<size_t>(1, d.ids.size()) * 4), I.zeros.data(),
-                      GL_STREAM_READ);
-        gl.BindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, I.flag_buffers[t]);
+        bind_tile_flags(d, base);
     }
     const auto t0 = std::chrono::steady_clock::now();
     gl.BindVertexArray(I.vao_tent);
@@ -640,140 +797,20 @@ void Raster::draw(const PreparedTile& prepared, std::vector<uint8_t>& fails)
     gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_test);
     I.upload_quads(d.sorted, I.test_vertices);
     std::vector<uint8_t> removed; // Algorithm 5.1: the segments seen failing
-    std::vector<uint8_t> pixels;
     if (!ssbo) {
         removed.assign(d.ids.size(), 0);
     }
     m_stats.voronoi_seconds += seconds_since(t0);
-
-    // The box is drawn with its corner at the framebuffer's, in the smallest
-    // framebuffer that holds it. The shift is an integer number of pixels,
-    // so the pixel centres keep their places, and the shaders subtract it
-    // from coordinates within the tile exactly. llvmpipe's cost per flush
-    // grows with the framebuffer's area (it walks every 64-pixel bin of it
-    // under a lock), and the batches of small boxes that most tiles have
-    // are flushed often.
     if (d.sx1 > d.sx0 && d.sy1 > d.sy0) {
-        const int64_t ox = d.sx0, oy = d.sy0, ex = d.sx1, ey = d.sy1;
-        size_t target = 0;
-        while (target + 1 < I.targets.size() &&
-               (ex - ox > I.targets[target].size || ey - oy > I.targets[target].size)) {
-            ++target;
-        }
-        if (ex - ox > I.targets[target].size || ey - oy > I.targets[target].size) {
-            throw std::logic_error("tile larger than the framebuffer");
-        }
-        m_stats.small_boxes += target == 0 && I.targets.size() > 1;
-        // Bound each time: engines may share a context (Mesa skips a
-        // binding that changes nothing).
-        gl.BindFramebuffer(GL_FRAMEBUFFER, I.targets[target].fbo);
-        gl.Viewport(0, 0, I.targets[target].size, I.targets[target].size);
-        const auto ws = static_cast<float>(I.targets[target].size);
         const auto tw = std::chrono::steady_clock::now();
-        gl.Enable(GL_SCISSOR_TEST); // off again at the end: the context may serve other engines
-        gl.Scissor(0, 0, static_cast<GLsizei>(ex - ox), static_cast<GLsizei>(ey - oy));
-        const auto fx = static_cast<float>(ox), fy = static_cast<float>(oy);
-
-        // The tents' quads, as tent_vs places them: the tent pass and the
-        // reset pass share it, so both cover the same pixels.
-        auto use_tent_quads = [&](GLuint prog, float z) {
-            gl.UseProgram(prog);
-            gl.Uniform2f(I.loc(prog, "u_size"), ws, ws);
-            gl.Uniform2f(I.loc(prog, "u_origin"), fx, fy);
-            gl.Uniform1f(I.loc(prog, "u_reach"), float(l2_reach(m_opt.metric)));
-            gl.Uniform1f(I.loc(prog, "u_pad"), float(m_opt.margin_px));
-            gl.Uniform1f(I.loc(prog, "u_z"), z);
-        };
-
-        // Step 1: lower envelope of the distance tents; the stencil gets the class.
-        use_tent_quads(I.tent_prog, 0.0f);
-        gl.Uniform1f(I.loc(I.tent_prog, "u_depth_scale"), float(d.eps_max * 1.001 + 1e-6));
-        gl.BindVertexArray(I.vao_tent);
-        gl.Enable(GL_DEPTH_TEST);
-        gl.DepthFunc(GL_LESS);
-        gl.DepthMask(GL_TRUE);
-        gl.ColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
-        gl.StencilMask(0xFF);
-        gl.StencilOp(GL_KEEP, GL_KEEP, GL_REPLACE);
-        for (const auto& [cls, range] : d.ranges) {
-            gl.StencilFunc(GL_ALWAYS, cls, 0xFF);
-            draw_quads(gl, range.first, size_t(range.second));
-        }
+        const Frame f = bind_frame(d);
+        draw_tents(d, f); // Step 1
         m_stats.voronoi_seconds += seconds_since(tw);
-
-        // Step 2: shortcuts under stencil != class. A fragment fails
-        // where another class's region is: stencil != class, and a tent
-        // was drawn there (depth below the background's 1). Pixels
-        // outside every band are no one's region: a shortcut's
-        // half-pixel quad grazing the edge of its own band is not a
-        // failure.
         const auto t1 = std::chrono::steady_clock::now();
-        gl.Enable(GL_DEPTH_TEST);
-        gl.DepthFunc(GL_GREATER);
-        gl.DepthMask(GL_FALSE);
-        gl.StencilMask(0);
-        gl.StencilOp(GL_KEEP, GL_KEEP, GL_KEEP);
-        gl.UseProgram(I.test_prog);
-        gl.Uniform2f(I.loc(I.test_prog, "u_size"), ws, ws);
-        gl.Uniform2f(I.loc(I.test_prog, "u_origin"), fx, fy);
-        gl.Uniform1f(I.loc(I.test_prog, "u_half_width"), 0.5f);
-        gl.Uniform1f(I.loc(I.test_prog, "u_end_margin"), float(m_opt.endpoint_margin_px));
-
-        gl.BindVertexArray(I.vao_test);
-        if (!d.ids.empty() && ssbo) {
-            for (const auto& [cls, range] : d.sranges) {
-                gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
-                draw_quads(gl, range.first, size_t(range.second));
-            }
-        } else if (!d.ids.empty()) {
-            // Algorithm 5.1: unique colours, read back, drop the colours
-            // seen, repeat until nothing changes (a segment may hide another).
-            gl.ColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
-            pixels.resize(size_t(ex - ox) * size_t(ey - oy) * 4);
-            for (;;) {
-                ++m_stats.readback_rounds;
-                gl.Clear(GL_COLOR_BUFFER_BIT);
-                for (const auto& [cls, range] : d.sranges) {
-                    gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
-                    for (GLuint k = range.first; k < range.first + GLuint(range.second); ++k) {
-                        if (!removed[k]) {
-                            draw_quads(gl, k, 1);
-                        }
-                    }
-                }
-                gl.PixelStorei(GL_PACK_ALIGNMENT, 1);
-                gl.ReadPixels(0, 0, static_cast<GLsizei>(ex - ox), static_cast<GLsizei>(ey - oy), GL_RGBA,
-                              GL_UNSIGNED_BYTE, pixels.data());
-                bool changed = false;
-                for (size_t i = 0; i < pixels.size(); i += 4) {
-                    const uint32_t c =
-                        uint32_t(pixels[i]) | (uint32_t(pixels[i + 1]) << 8) | (uint32_t(pixels[i + 2]) << 16);
-                    if (c != 0 && c <= removed.size() && !removed[c - 1]) {
-                        removed[c - 1] = 1;
-                        changed = true;
-                    }
-                }
-                if (!changed) {
-                    break;
-                }
-            }
-            gl.ColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
-        }
+        test_parts(d, f, ssbo, removed); // Step 2
         m_stats.compliance_seconds += seconds_since(t1);
-
-        // Restore the buffer where the tents were drawn: depth 1, stencil 0.
         const auto t2 = std::chrono::steady_clock::now();
-        use_tent_quads(I.reset_prog, 1.0f);
-        gl.BindVertexArray(I.vao_tent);
-        gl.Enable(GL_DEPTH_TEST);
-        gl.DepthFunc(GL_ALWAYS);
-        gl.DepthMask(GL_TRUE);
-        gl.StencilMask(0xFF);
-        gl.StencilFunc(GL_ALWAYS, 0, 0xFF);
-        gl.StencilOp(GL_REPLACE, GL_REPLACE, GL_REPLACE);
-        if (!d.inst.empty()) {
-            draw_quads(gl, 0, d.inst.size());
-        }
+        reset_tents(d, f);
         m_stats.voronoi_seconds += seconds_since(t2);
     }
     gl.Disable(GL_SCISSOR_TEST);

@@ -122,6 +122,28 @@ class Raster {
 
   private:
     struct Impl;
+    /// Where a tile's box is drawn: the framebuffer's size, the box's
+    /// origin in pixels, its width and height.
+    struct Frame;
+    /// With the storage-buffer compliance: the buffer the tile's test
+    /// shader writes its flags into, from index `base` of the batch.
+    void bind_tile_flags(const PreparedTile::Data& d, size_t base);
+    /// The framebuffer that holds the tile's box, bound, scissored to it.
+    Frame bind_frame(const PreparedTile::Data& d);
+    /// Use `prog` on the tents' quads as tent_vs places them (the tent and
+    /// the reset pass share it, so both cover the same pixels).
+    void use_tent_quads(unsigned prog, const Frame& f, float z);
+    /// Step 1: the lower envelope of the distance tents; the stencil gets each region's class.
+    void draw_tents(const PreparedTile::Data& d, const Frame& f);
+    /// Step 2: the shortcut parts under stencil != class; with the
+    /// read-back compliance, `removed` gets the parts seen failing.
+    void test_parts(const PreparedTile::Data& d, const Frame& f, bool ssbo, std::vector<uint8_t>& removed);
+    /// The paper's Algorithm 5.1: unique colours, read back, drop the
+    /// colours seen, repeat until nothing changes (a part may hide another).
+    void read_back_failures(const PreparedTile::Data& d, const Frame& f, std::vector<uint8_t>& removed);
+    /// Restore the buffer where the tents were drawn: depth 1, stencil 0.
+    void reset_tents(const PreparedTile::Data& d, const Frame& f);
+
     gl::Context& m_ctx;
     RasterOptions m_opt;
     RasterStats m_stats;
