@@ -201,6 +201,41 @@ class Verifier {
     /// The chain store partition whose map node `n` shows.
     std::string partition_of(uint32_t n) const { return n == 0 ? std::string("all") : node_code(n); }
 
+    /// A level's original stores, the owned chains by id, the stores by partition.
+    struct LevelStores {
+        std::vector<chains::ChainStore> stores;
+        std::unordered_map<uint64_t, Original> owned;
+        std::map<std::string, const chains::ChainStore*> by_partition;
+    };
+
+    /// Read the original stores of a level (every store of its folder) into `ls`.
+    void read_level(const fs::path& dir, LevelStores& ls) const
+    {
+        auto& stores = ls.stores;
+        auto& owned = ls.owned;
+        auto& by_partition = ls.by_partition;
+        std::vector<fs::path> paths;
+        for (const auto& f : fs::directory_iterator(dir)) {
+            if (f.path().extension() == ".tlc") {
+                paths.push_back(f.path());
+            }
+        }
+        std::sort(paths.begin(), paths.end());
+        stores.resize(paths.size());
+        parallel_each(paths.size(), m_options.threads, [&](size_t i) { stores[i] = chains::read(paths[i]); });
+        for (const auto& s : stores) {
+            by_partition[s.partition] = &s;
+            for (size_t i = 0; i < s.chains.size(); ++i) {
+                if (!(s.chains[i].flags & chains::chain_halo)) {
+                    owned[s.chains[i].id] = {&s, &s.chains[i], i};
+                }
+            }
+        }
+    }
+
+    /// One level at every LOD: each node checked against its original
+    /// store (check_node), then the level as a whole (gather_nodes,
+    /// check_meetings), into the report.
     void verify_level(uint32_t l)
     {
         const std::string& level = m_sk.level_names[l];
@@ -218,25 +253,9 @@ class Verifier {
         if (!fs::is_directory(dir)) {
             throw input_error(dir.string() + ": no stores for level '" + level + "' of the tree");
         }
-        std::vector<fs::path> paths;
-        for (const auto& f : fs::directory_iterator(dir)) {
-            if (f.path().extension() == ".tlc") {
-                paths.push_back(f.path());
-            }
-        }
-        std::sort(paths.begin(), paths.end());
-        std::vector<chains::ChainStore> stores(paths.size());
-        parallel_each(paths.size(), m_options.threads, [&](size_t i) { stores[i] = chains::read(paths[i]); });
-        std::unordered_map<uint64_t, Original> owned;
-        std::map<std::string, const chains::ChainStore*> by_partition;
-        for (const auto& s : stores) {
-            by_partition[s.partition] = &s;
-            for (size_t i = 0; i < s.chains.size(); ++i) {
-                if (!(s.chains[i].flags & chains::chain_halo)) {
-                    owned[s.chains[i].id] = {&s, &s.chains[i], i};
-                }
-            }
-        }
+        LevelStores ls;
+        read_level(dir, ls);
+        const auto& by_partition = ls.by_partition;
         for (uint32_t n : nodes) {
             const std::string partition = partition_of(n);
             if (!by_partition.contains(partition)) {
@@ -263,121 +282,145 @@ class Verifier {
             // Tolerances of the LOD, per original chain.
             std::map<const chains::ChainStore*, std::vector<double>> eps;
             if (k > 0) {
-                for (const auto& s : stores) {
+                for (const auto& s : ls.stores) {
                     eps[&s] = simplify::chain_tolerances(s, ll.eps_m, m_opt);
                 }
             }
             std::vector<NodeResult> results(nodes.size());
             parallel_each(nodes.size(), m_options.threads, [&](size_t i) {
-                results[i] = check_node(nodes[i], k, owned, *by_partition.at(partition_of(nodes[i])), eps, area_sign[i],
-                                        user_points[i]);
+                results[i] = check_node(nodes[i], k, ls.owned, *by_partition.at(partition_of(nodes[i])), eps,
+                                        area_sign[i], user_points[i]);
             });
-            // Node by node, in order: their own findings, then the level as a whole.
-            std::unordered_map<uint64_t, std::pair<size_t, size_t>> first_seen; // id -> (node slot, chain)
-            std::vector<std::pair<size_t, size_t>> unique;                      // (node slot, chain)
-            for (size_t i = 0; i < nodes.size(); ++i) {
-                auto& r = results[i];
-                ++ll.nodes;
-                ll.points += r.points;
-                for (auto& v : r.violations) {
-                    v.level = level;
-                    v.lod = k;
-                    add(ll, std::move(v));
-                }
-                if (!r.ok) {
-                    continue;
-                }
-                for (size_t c = 0; c < r.table.chains.size(); ++c) {
-                    const uint64_t id = r.table.chains[c].id;
-                    const auto [it, fresh] = first_seen.try_emplace(id, i, c);
-                    if (fresh) {
-                        unique.emplace_back(i, c);
-                        continue;
-                    }
-                    const auto a = results[it->second.first].geometry.chain(it->second.second);
-                    const auto b = r.geometry.chain(c);
-                    if (!std::equal(a.begin(), a.end(), b.begin(), b.end())) {
-                        add(ll, {"border_mismatch",
-                                 level,
-                                 k,
-                                 node_code(nodes[i]),
-                                 {id},
-                                 double(b.front().x),
-                                 double(b.front().y),
-                                 0,
-                                 0,
-                                 "shown by nodes " + node_code(nodes[it->second.first]) + " and " +
-                                     node_code(nodes[i]) + " with different coordinates"});
-                    }
-                }
-            }
-            // Crossings, overlaps and self-intersections over the whole level.
-            std::vector<Segment> segs;
-            std::vector<std::pair<size_t, size_t>> seg_chain; // unique index of each segment's chain, segment index
-            for (size_t u = 0; u < unique.size(); ++u) {
-                const auto pts = results[unique[u].first].geometry.chain(unique[u].second);
-                ll.chains += 1;
-                ll.vertices += pts.size();
-                for (size_t s = 0; s + 1 < pts.size(); ++s) {
-                    if (pts[s] == pts[s + 1]) {
-                        continue; // a zero-length segment is the subsequence check's to report
-                    }
-                    segs.push_back({pts[s], pts[s + 1], static_cast<uint32_t>(segs.size())});
-                    seg_chain.emplace_back(u, s);
-                }
-            }
-            ll.segments = segs.size();
-            // One violation per pair of chains (or per chain, meeting itself):
-            // the worst way they meet (overlap, then cross, then touch), at the
-            // first place found.
-            struct Meeting {
-                Intersection x;
-                size_t ua, ub;
-                int rank;
-            };
-            auto rank_of = [](SegmentRelation r) {
-                return r == SegmentRelation::overlap ? 3 : r == SegmentRelation::cross ? 2 : 1;
-            };
-            std::map<std::pair<uint64_t, uint64_t>, Meeting> meetings;
-            for (const auto& x : find_intersections(segs, m_options.threads)) {
-                const size_t ua = seg_chain[x.first].first, ub = seg_chain[x.second].first;
-                const uint64_t ida = results[unique[ua].first].table.chains[unique[ua].second].id;
-                const uint64_t idb = results[unique[ub].first].table.chains[unique[ub].second].id;
-                const auto key = std::make_pair(std::min(ida, idb), std::max(ida, idb));
-                const int rank = rank_of(x.relation);
-                auto [it, fresh] = meetings.try_emplace(key, Meeting{x, ua, ub, rank});
-                if (!fresh && rank > it->second.rank) {
-                    it->second = Meeting{x, ua, ub, rank};
-                }
-            }
-            if (k == 0) {
-                for (const auto& [ids, m] : meetings) {
-                    input_meetings.insert(ids);
-                }
-            }
-            for (const auto& [ids, m] : meetings) {
-                // Chains that already meet in the original map: an input problem
-                // (ingest reported and flagged it), not one the pipeline made.
-                const char* kind = input_meetings.contains(ids)               ? "input_problem"
-                                   : m.ua == m.ub                             ? "self_intersections"
-                                   : m.x.relation == SegmentRelation::overlap ? "overlaps"
-                                                                              : "crossings";
-                const char* rel = m.x.relation == SegmentRelation::cross     ? "cross"
-                                  : m.x.relation == SegmentRelation::touch   ? "touch"
-                                  : m.x.relation == SegmentRelation::overlap ? "overlap"
-                                                                             : "meet";
-                std::vector<uint64_t> chain_ids{ids.first};
-                if (ids.second != ids.first) {
-                    chain_ids.push_back(ids.second);
-                }
-                add(ll, {kind, level, k, node_code(nodes[unique[m.ua].first]), chain_ids, m.x.x, m.x.y, 0, 0,
-                         std::string("segments ") + std::to_string(seg_chain[m.x.first].second) + " and " +
-                             std::to_string(seg_chain[m.x.second].second) + " " + rel});
-            }
+            const auto unique = gather_nodes(ll, nodes, results);
+            check_meetings(ll, nodes, results, unique, input_meetings);
             m_report.chains += ll.chains;
             m_report.segments += ll.segments;
             m_report.points += ll.points;
             m_report.by_level_lod.push_back(std::move(ll));
+        }
+    }
+
+    /// Node by node, in order, their own findings into `ll`, and each chain
+    /// shown by two nodes compared (border_mismatch). Returns each chain once:
+    /// (node slot, chain) where it was first seen.
+    std::vector<std::pair<size_t, size_t>> gather_nodes(LevelLod& ll, const std::vector<uint32_t>& nodes,
+                                                        std::vector<NodeResult>& results)
+    {
+        const std::string& level = ll.level;
+        const uint32_t k = ll.lod;
+        std::unordered_map<uint64_t, std::pair<size_t, size_t>> first_seen; // id -> (node slot, chain)
+        std::vector<std::pair<size_t, size_t>> unique;                      // (node slot, chain)
+        for (size_t i = 0; i < nodes.size(); ++i) {
+            auto& r = results[i];
+            ++ll.nodes;
+            ll.points += r.points;
+            for (auto& v : r.violations) {
+                v.level = level;
+                v.lod = k;
+                add(ll, std::move(v));
+            }
+            if (!r.ok) {
+                continue;
+            }
+            for (size_t c = 0; c < r.table.chains.size(); ++c) {
+                const uint64_t id = r.table.chains[c].id;
+                const auto [it, fresh] = first_seen.try_emplace(id, i, c);
+                if (fresh) {
+                    unique.emplace_back(i, c);
+                    continue;
+                }
+                const auto a = results[it->second.first].geometry.chain(it->second.second);
+                const auto b = r.geometry.chain(c);
+                if (!std::equal(a.begin(), a.end(), b.begin(), b.end())) {
+                    add(ll, {"border_mismatch",
+                             level,
+                             k,
+                             node_code(nodes[i]),
+                             {id},
+                             double(b.front().x),
+                             double(b.front().y),
+                             0,
+                             0,
+                             "shown by nodes " + node_code(nodes[it->second.first]) + " and " + node_code(nodes[i]) +
+                                 " with different coordinates"});
+                }
+            }
+        }
+        return unique;
+    }
+
+    /// Crossings, overlaps and self-intersections over the whole level at
+    /// one LOD, one violation per pair of chains (or per chain, meeting
+    /// itself): the worst way they meet (overlap, then cross, then touch), at
+    /// the first place found. Pairs that already meet at LOD 0 are input
+    /// problems (ingest reported and flagged them), listed, not counted.
+    void check_meetings(LevelLod& ll, const std::vector<uint32_t>& nodes, const std::vector<NodeResult>& results,
+                        const std::vector<std::pair<size_t, size_t>>& unique,
+                        std::set<std::pair<uint64_t, uint64_t>>& input_meetings)
+    {
+        const std::string& level = ll.level;
+        const uint32_t k = ll.lod;
+        std::vector<Segment> segs;
+        std::vector<std::pair<size_t, size_t>> seg_chain; // unique index of each segment's chain, segment index
+        for (size_t u = 0; u < unique.size(); ++u) {
+            const auto pts = results[unique[u].first].geometry.chain(unique[u].second);
+            ll.chains += 1;
+            ll.vertices += pts.size();
+            for (size_t s = 0; s + 1 < pts.size(); ++s) {
+                if (pts[s] == pts[s + 1]) {
+                    continue; // a zero-length segment is the subsequence check's to report
+                }
+                segs.push_back({pts[s], pts[s + 1], static_cast<uint32_t>(segs.size())});
+                seg_chain.emplace_back(u, s);
+            }
+        }
+        ll.segments = segs.size();
+        // One violation per pair of chains (or per chain, meeting itself):
+        // the worst way they meet (overlap, then cross, then touch), at the
+        // first place found.
+        struct Meeting {
+            Intersection x;
+            size_t ua, ub;
+            int rank;
+        };
+        auto rank_of = [](SegmentRelation r) {
+            return r == SegmentRelation::overlap ? 3 : r == SegmentRelation::cross ? 2 : 1;
+        };
+        std::map<std::pair<uint64_t, uint64_t>, Meeting> meetings;
+        for (const auto& x : find_intersections(segs, m_options.threads)) {
+            const size_t ua = seg_chain[x.first].first, ub = seg_chain[x.second].first;
+            const uint64_t ida = results[unique[ua].first].table.chains[unique[ua].second].id;
+            const uint64_t idb = results[unique[ub].first].table.chains[unique[ub].second].id;
+            const auto key = std::make_pair(std::min(ida, idb), std::max(ida, idb));
+            const int rank = rank_of(x.relation);
+            auto [it, fresh] = meetings.try_emplace(key, Meeting{x, ua, ub, rank});
+            if (!fresh && rank > it->second.rank) {
+                it->second = Meeting{x, ua, ub, rank};
+            }
+        }
+        if (k == 0) {
+            for (const auto& [ids, m] : meetings) {
+                input_meetings.insert(ids);
+            }
+        }
+        for (const auto& [ids, m] : meetings) {
+            // Chains that already meet in the original map: an input problem
+            // (ingest reported and flagged it), not one the pipeline made.
+            const char* kind = input_meetings.contains(ids)               ? "input_problem"
+                               : m.ua == m.ub                             ? "self_intersections"
+                               : m.x.relation == SegmentRelation::overlap ? "overlaps"
+                                                                          : "crossings";
+            const char* rel = m.x.relation == SegmentRelation::cross     ? "cross"
+                              : m.x.relation == SegmentRelation::touch   ? "touch"
+                              : m.x.relation == SegmentRelation::overlap ? "overlap"
+                                                                         : "meet";
+            std::vector<uint64_t> chain_ids{ids.first};
+            if (ids.second != ids.first) {
+                chain_ids.push_back(ids.second);
+            }
+            add(ll, {kind, level, k, node_code(nodes[unique[m.ua].first]), chain_ids, m.x.x, m.x.y, 0, 0,
+                     std::string("segments ") + std::to_string(seg_chain[m.x.first].second) + " and " +
+                         std::to_string(seg_chain[m.x.second].second) + " " + rel});
         }
     }
 
