@@ -53,50 +53,94 @@ std::vector<LevelCodes> level_codes(const RawMap& raw, std::vector<std::pair<uin
     return out;
 }
 
-Level build_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw, const std::vector<LevelCodes>& lcs, size_t L)
-{
-    const auto& lc = lcs[L];
-    const bool lines = raw.kind == RawMap::Kind::lines;
-    auto is_boundary = [&](size_t e) { return lines || lc.side(g.left[e]) != lc.side(g.right[e]); };
-    const size_t nends = ends.vertex.size();
-    // Incidences of boundary edge ends at the edge ends' vertices (CSR, by end index).
-    std::vector<uint32_t> deg(nends, 0);
-    std::vector<uint8_t> boundary(g.edge_count(), 0);
-    for (size_t e = 0; e < g.edge_count(); ++e) {
-        if (is_boundary(e)) {
-            boundary[e] = 1;
-            const auto ev = g.edge(e);
-            ++deg[ends.of_vertex[ev.front()]];
-            ++deg[ends.of_vertex[ev.back()]];
-        }
-    }
-    std::vector<uint64_t> start(nends + 1, 0);
-    for (size_t k = 0; k < nends; ++k) {
-        start[k + 1] = start[k] + deg[k];
-    }
-    std::vector<uint32_t> inc(start[nends]); // edge * 2 + (0: starts here, 1: ends here)
+namespace {
+
+/// build_level step by step: the boundary edges' incidences at the edge
+/// ends, the walks from every junction and then around the rings left, each
+/// chain in its canonical direction with its class and id, and the ids made
+/// unique.
+class LevelWalker {
+  public:
+    LevelWalker(const Graph& g, const EdgeEnds& ends, const RawMap& raw, const LevelCodes& lc)
+        : m_g(g), m_ends(ends), m_lc(lc), m_lines(raw.kind == RawMap::Kind::lines)
     {
-        std::vector<uint64_t> fill(start.begin(), start.end() - 1);
+        index_boundary_ends();
+        m_lev.chain_of_edge.assign(g.edge_count(), none);
+        m_visited.assign(g.edge_count(), 0);
+    }
+
+    Level run()
+    {
+        const size_t nends = m_ends.vertex.size();
+        for (uint32_t k = 0; k < nends; ++k) {
+            const uint32_t v = m_ends.vertex[k];
+            if (m_deg[k] == 0 || !is_junction(v)) {
+                continue;
+            }
+            m_lev.junctions.push_back(v);
+            m_lev.junction_degree.push_back(m_deg[k]);
+            for (uint64_t i = m_start[k]; i < m_start[k + 1]; ++i) {
+                if (!m_visited[m_inc[i] / 2]) {
+                    walk(v, m_inc[i]);
+                }
+            }
+        }
+        for (uint32_t e = 0; e < m_g.edge_count(); ++e) {
+            if (m_boundary[e] && !m_visited[e]) {
+                walk(m_g.edge(e).front(), e * 2);
+            }
+        }
+        make_ids_unique();
+        return std::move(m_lev);
+    }
+
+  private:
+    /// Incidences of boundary edge ends at the edge ends' vertices (CSR, by
+    /// end index): edge * 2 + (0: starts here, 1: ends here).
+    void index_boundary_ends()
+    {
+        const auto& g = m_g;
+        const size_t nends = m_ends.vertex.size();
+        m_deg.assign(nends, 0);
+        m_boundary.assign(g.edge_count(), 0);
         for (size_t e = 0; e < g.edge_count(); ++e) {
-            if (boundary[e]) {
+            if (m_lines || m_lc.side(g.left[e]) != m_lc.side(g.right[e])) {
+                m_boundary[e] = 1;
                 const auto ev = g.edge(e);
-                inc[fill[ends.of_vertex[ev.front()]]++] = static_cast<uint32_t>(e * 2);
-                inc[fill[ends.of_vertex[ev.back()]]++] = static_cast<uint32_t>(e * 2 + 1);
+                ++m_deg[m_ends.of_vertex[ev.front()]];
+                ++m_deg[m_ends.of_vertex[ev.back()]];
+            }
+        }
+        m_start.assign(nends + 1, 0);
+        for (size_t k = 0; k < nends; ++k) {
+            m_start[k + 1] = m_start[k] + m_deg[k];
+        }
+        m_inc.assign(m_start[nends], 0);
+        std::vector<uint64_t> fill(m_start.begin(), m_start.end() - 1);
+        for (size_t e = 0; e < g.edge_count(); ++e) {
+            if (m_boundary[e]) {
+                const auto ev = g.edge(e);
+                m_inc[fill[m_ends.of_vertex[ev.front()]]++] = static_cast<uint32_t>(e * 2);
+                m_inc[fill[m_ends.of_vertex[ev.back()]]++] = static_cast<uint32_t>(e * 2 + 1);
             }
         }
     }
-    // Codes (left, right) of an edge walked away from its end `end`.
-    auto codes_out = [&](uint32_t in) -> std::pair<uint32_t, uint32_t> {
+
+    /// Codes (left, right) of an edge walked away from its end `in`.
+    std::pair<uint32_t, uint32_t> codes_out(uint32_t in) const
+    {
         const uint32_t e = in / 2;
-        const uint32_t l = lc.side(g.left[e]), r = lc.side(g.right[e]);
+        const uint32_t l = m_lc.side(m_g.left[e]), r = m_lc.side(m_g.right[e]);
         return (in & 1U) ? std::pair{r, l} : std::pair{l, r};
-    };
-    auto is_junction = [&](uint32_t v) {
-        const uint32_t k = ends.of_vertex[v];
-        if (deg[k] != 2) {
+    }
+
+    bool is_junction(uint32_t v) const
+    {
+        const uint32_t k = m_ends.of_vertex[v];
+        if (m_deg[k] != 2) {
             return true;
         }
-        const uint32_t a = inc[start[k]], b = inc[start[k] + 1];
+        const uint32_t a = m_inc[m_start[k]], b = m_inc[m_start[k] + 1];
         if (a / 2 == b / 2) {
             return false; // a closed edge alone
         }
@@ -104,45 +148,53 @@ Level build_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw, const
         const auto out_b = codes_out(b);
         const auto out_a = codes_out(a);
         return !(out_b.first == out_a.second && out_b.second == out_a.first);
-    };
-    Level lev;
-    lev.chain_of_edge.assign(g.edge_count(), none);
-    std::vector<uint8_t> visited(g.edge_count(), 0);
-    std::vector<uint32_t> cv;
-    std::vector<uint32_t> chain_edges;
+    }
 
-    auto walk = [&](uint32_t v0, uint32_t first_inc) {
-        cv.assign(1, v0);
-        chain_edges.clear();
+    /// The chain from v0 out along `first_inc`, through vertices that are
+    /// not junctions, to a junction or back to its start.
+    void walk(uint32_t v0, uint32_t first_inc)
+    {
+        m_cv.assign(1, v0);
+        m_chain_edges.clear();
         uint32_t in = first_inc;
-        const auto codes = codes_out(first_inc);
         while (true) {
             const uint32_t e = in / 2;
-            visited[e] = 1;
-            chain_edges.push_back(e);
-            const auto ev = g.edge(e);
+            m_visited[e] = 1;
+            m_chain_edges.push_back(e);
+            const auto ev = m_g.edge(e);
             if (in & 1U) {
-                cv.insert(cv.end(), ev.rbegin() + 1, ev.rend());
+                m_cv.insert(m_cv.end(), ev.rbegin() + 1, ev.rend());
             } else {
-                cv.insert(cv.end(), ev.begin() + 1, ev.end());
+                m_cv.insert(m_cv.end(), ev.begin() + 1, ev.end());
             }
-            const uint32_t u = cv.back();
+            const uint32_t u = m_cv.back();
             if (is_junction(u)) {
                 break;
             }
-            const uint32_t arrived = in ^ 1U;               // the incidence of e at u
-            const uint64_t at_u = start[ends.of_vertex[u]]; // u has degree 2: its two incidences
-            const uint32_t a = inc[at_u], b = inc[at_u + 1];
+            const uint32_t arrived = in ^ 1U;                   // the incidence of e at u
+            const uint64_t at_u = m_start[m_ends.of_vertex[u]]; // u has degree 2: its two incidences
+            const uint32_t a = m_inc[at_u], b = m_inc[at_u + 1];
             const uint32_t next = a == arrived ? b : a;
-            if (visited[next / 2]) {
+            if (m_visited[next / 2]) {
                 break; // back at the start of a ring
             }
             in = next;
         }
         LevelChain c;
-        c.left = codes.first;
-        c.right = codes.second;
-        // Canonical direction and, for rings, start.
+        std::tie(c.left, c.right) = codes_out(first_inc);
+        canonical_direction(c);
+        class_and_id(c);
+        c.first = m_lev.verts.size();
+        c.count = static_cast<uint32_t>(m_cv.size());
+        m_lev.verts.insert(m_lev.verts.end(), m_cv.begin(), m_cv.end());
+        m_lev.chains.push_back(c);
+    }
+
+    /// The walked chain in its canonical direction and, for a ring, from its
+    /// smallest vertex.
+    void canonical_direction(LevelChain& c)
+    {
+        auto& cv = m_cv;
         const bool closed = cv.front() == cv.back();
         c.ring = closed && !is_junction(cv.front());
         bool reverse = false;
@@ -160,20 +212,27 @@ Level build_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw, const
             std::reverse(cv.begin(), cv.end());
             std::swap(c.left, c.right);
         }
-        // Dominant feature class by segments; smallest class id on a tie.
+    }
+
+    /// The chain's feature class (the dominant one by segments; the
+    /// smallest class id on a tie) and id (the smallest source id of its
+    /// edges, else a hash of its smallest segment); its edges marked as its.
+    void class_and_id(LevelChain& c)
+    {
+        const auto& g = m_g;
         std::unordered_map<uint32_t, uint64_t> votes;
         uint64_t min_sid = UINT64_MAX;
         uint64_t min_seg = UINT64_MAX, min_seg2 = UINT64_MAX;
-        const auto id = static_cast<uint32_t>(lev.chains.size());
-        for (uint32_t e : chain_edges) {
+        const auto id = static_cast<uint32_t>(m_lev.chains.size());
+        for (uint32_t e : m_chain_edges) {
             votes[g.cls[e]] += g.off[e + 1] - g.off[e] - 1;
             if (g.sid[e] != 0) {
                 min_sid = std::min(min_sid, g.sid[e]);
             }
-            lev.chain_of_edge[e] = id;
+            m_lev.chain_of_edge[e] = id;
         }
-        for (size_t k = 0; k + 1 < cv.size(); ++k) {
-            uint64_t a = g.keys[cv[k]], b = g.keys[cv[k + 1]];
+        for (size_t k = 0; k + 1 < m_cv.size(); ++k) {
+            uint64_t a = g.keys[m_cv[k]], b = g.keys[m_cv[k + 1]];
             if (b < a) {
                 std::swap(a, b);
             }
@@ -190,53 +249,54 @@ Level build_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw, const
             }
         }
         c.id = min_sid != UINT64_MAX ? min_sid : (splitmix(min_seg ^ splitmix(min_seg2)) >> 1);
-        c.first = lev.verts.size();
-        c.count = static_cast<uint32_t>(cv.size());
-        lev.verts.insert(lev.verts.end(), cv.begin(), cv.end());
-        lev.chains.push_back(c);
-    };
+    }
 
-    for (uint32_t k = 0; k < nends; ++k) {
-        const uint32_t v = ends.vertex[k];
-        if (deg[k] == 0 || !is_junction(v)) {
-            continue;
-        }
-        lev.junctions.push_back(v);
-        lev.junction_degree.push_back(deg[k]);
-        for (uint64_t i = start[k]; i < start[k + 1]; ++i) {
-            if (!visited[inc[i] / 2]) {
-                walk(v, inc[i]);
+    /// Ids unique within the level: on a collision take the next free value,
+    /// in a deterministic order.
+    void make_ids_unique()
+    {
+        auto& lev = m_lev;
+        std::vector<uint32_t> order(lev.chains.size());
+        std::iota(order.begin(), order.end(), 0U);
+        std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
+            const auto& ca = lev.chains[a];
+            const auto& cb = lev.chains[b];
+            if (ca.id != cb.id) {
+                return ca.id < cb.id;
+            }
+            return std::lexicographical_compare(lev.verts.begin() + static_cast<std::ptrdiff_t>(ca.first),
+                                                lev.verts.begin() + static_cast<std::ptrdiff_t>(ca.first + ca.count),
+                                                lev.verts.begin() + static_cast<std::ptrdiff_t>(cb.first),
+                                                lev.verts.begin() + static_cast<std::ptrdiff_t>(cb.first + cb.count));
+        });
+        for (size_t i = 1; i < order.size(); ++i) {
+            auto& prev = lev.chains[order[i - 1]];
+            auto& cur = lev.chains[order[i]];
+            if (cur.id <= prev.id) {
+                cur.id = prev.id + 1;
             }
         }
     }
-    for (uint32_t e = 0; e < g.edge_count(); ++e) {
-        if (boundary[e] && !visited[e]) {
-            walk(g.edge(e).front(), e * 2);
-        }
-    }
-    // Ids unique within the level: on a collision take the next free value, in a
-    // deterministic order.
-    std::vector<uint32_t> order(lev.chains.size());
-    std::iota(order.begin(), order.end(), 0U);
-    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
-        const auto& ca = lev.chains[a];
-        const auto& cb = lev.chains[b];
-        if (ca.id != cb.id) {
-            return ca.id < cb.id;
-        }
-        return std::lexicographical_compare(lev.verts.begin() + static_cast<std::ptrdiff_t>(ca.first),
-                                            lev.verts.begin() + static_cast<std::ptrdiff_t>(ca.first + ca.count),
-                                            lev.verts.begin() + static_cast<std::ptrdiff_t>(cb.first),
-                                            lev.verts.begin() + static_cast<std::ptrdiff_t>(cb.first + cb.count));
-    });
-    for (size_t i = 1; i < order.size(); ++i) {
-        auto& prev = lev.chains[order[i - 1]];
-        auto& cur = lev.chains[order[i]];
-        if (cur.id <= prev.id) {
-            cur.id = prev.id + 1;
-        }
-    }
-    return lev;
+
+    const Graph& m_g;
+    const EdgeEnds& m_ends;
+    const LevelCodes& m_lc;
+    const bool m_lines;
+    std::vector<uint32_t> m_deg;     ///< boundary edge ends at each edge end's vertex
+    std::vector<uint8_t> m_boundary; ///< per edge
+    std::vector<uint64_t> m_start;   ///< CSR offsets into m_inc, per edge end
+    std::vector<uint32_t> m_inc;
+    std::vector<uint8_t> m_visited;      ///< per edge
+    std::vector<uint32_t> m_cv;          ///< the chain being walked: its vertices
+    std::vector<uint32_t> m_chain_edges; ///< and its edges
+    Level m_lev;
+}; // class LevelWalker
+
+} // namespace
+
+Level build_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw, const std::vector<LevelCodes>& lcs, size_t L)
+{
+    return LevelWalker(g, ends, raw, lcs[L]).run();
 }
 
 } // namespace tigerlod::ingest::detail
