@@ -55,25 +55,10 @@ void build_levels(const Graph& g, const RawMap& raw, const std::vector<LevelCode
     }
 }
 
-/// A whole map, or with `scope` one region of it (its levels finer than the
-/// region level, and in `out` what the coarse levels need).
-BuildResult build(RawMap raw, const Projection& projection, const BuildOptions& options, const StoreSink& sink,
-                  const RegionScope* scope, RegionOutput* out)
+/// Who owns what a build counts: everything for a whole map; for a region,
+/// the units under its own region-level codes.
+Owner owner_of(const std::vector<LevelCodes>& lcs, const RegionScope* scope)
 {
-    BuildResult result;
-    Problems problems(result, projection, options.max_problem_samples);
-    const size_t nlev = raw.level_names.size();
-    result.input_vertices = raw.points_read;
-    problems.count("empty_geometries", raw.empty_geometries);
-    auto note = [&](const std::string& what) { log_progress(options, what); };
-    auto last = std::chrono::steady_clock::now();
-    auto phase = [&](std::string name) {
-        const auto now = std::chrono::steady_clock::now();
-        result.seconds.emplace_back(std::move(name), std::chrono::duration<double>(now - last).count());
-        last = now;
-    };
-    std::vector<std::pair<uint32_t, uint32_t>> non_nesting;
-    const auto lcs = level_codes(raw, non_nesting);
     Owner owner;
     if (scope != nullptr) {
         const auto& lr = lcs[scope->level];
@@ -82,9 +67,16 @@ BuildResult build(RawMap raw, const Projection& projection, const BuildOptions& 
             owner.own_rank.push_back(std::binary_search(scope->own.begin(), scope->own.end(), c) ? 1 : 0);
         }
     }
-    // A unit of a level in two units of the level before: the config's
-    // levels do not nest on this data (a level without its parent's code,
-    // levels out of order), and every level below would be built wrong.
+    return owner;
+}
+
+/// A unit of a level in two units of the level before: the config's levels
+/// do not nest on this data (a level without its parent's code, levels out
+/// of order), and every level below would be built wrong. Throws
+/// input_error naming the level, the unit, its two parents and where they are.
+void refuse_non_nesting(const RawMap& raw, const std::vector<LevelCodes>& lcs,
+                        const std::vector<std::pair<uint32_t, uint32_t>>& non_nesting, const Owner& owner)
+{
     for (auto [u, L] : non_nesting) {
         if (!owner.unit(u)) {
             continue;
@@ -110,14 +102,12 @@ BuildResult build(RawMap raw, const Projection& projection, const BuildOptions& 
                           up.codes[up.of_unit[u]] + " (" + at(u) + "); each unit must lie in one unit of the level " +
                           "before: check the order of the levels and their fields or prefixes");
     }
-    Graph g = make_graph(raw, projection, options.threads, problems, owner);
-    phase("intern_project");
-    note("interned and projected " + std::to_string(g.keys.size()) + " vertices");
-    if (raw.kind != RawMap::Kind::edges) {
-        join_pieces(g, merge_segments(g, raw, options.threads, problems, owner));
-    }
-    phase("merge_join");
-    note("merged shared segments: " + std::to_string(g.edge_count()) + " edges");
+}
+
+/// The graph's counts for the report: unique vertices, edges, and the units
+/// no edge bounds (a problem each).
+void count_graph(const Graph& g, const RawMap& raw, const Owner& owner, BuildResult& result, Problems& problems)
+{
     for (uint32_t v = 0; v < g.keys.size(); ++v) {
         result.unique_vertices += owner.vertex(v) ? 1 : 0;
     }
@@ -140,8 +130,15 @@ BuildResult build(RawMap raw, const Projection& projection, const BuildOptions& 
             }
         }
     }
-    // One planarity check over every edge that bounds something at some level,
-    // with safe repairs of crossings that snapping made.
+}
+
+/// One planarity check over every edge that bounds something at some level,
+/// with safe repairs of crossings that snapping made; the meetings left are
+/// problems. Returns the edges in them, sorted.
+std::vector<uint32_t> check_planarity(Graph& g, const RawMap& raw, const std::vector<LevelCodes>& lcs,
+                                      const Projection& projection, const BuildOptions& options, Problems& problems,
+                                      const Owner& owner)
+{
     const double max_shift = options.max_snap_shift_m / projection.params().grid_m;
     std::vector<uint32_t> bad_edges;
     for (const auto& f : repair_snap_crossings(g, raw, lcs, max_shift, options.threads, problems, owner)) {
@@ -156,62 +153,113 @@ BuildResult build(RawMap raw, const Projection& projection, const BuildOptions& 
         bad_edges.push_back(f.first);
         bad_edges.push_back(f.second);
     }
-    phase("planarity");
-    note("checked planarity");
     std::sort(bad_edges.begin(), bad_edges.end());
     bad_edges.erase(std::unique(bad_edges.begin(), bad_edges.end()), bad_edges.end());
+    return bad_edges;
+}
+
+/// For a region: the codes of each level at and below the region level that
+/// it owns (by their region-level code).
+OwnedCodes owned_codes(const RawMap& raw, const std::vector<LevelCodes>& lcs, const Owner& owner,
+                       const RegionScope& scope)
+{
+    const size_t nlev = lcs.size();
+    OwnedCodes owned(nlev);
+    for (size_t L = scope.level; L < nlev; ++L) {
+        owned[L].assign(lcs[L].codes.size(), 0);
+        for (size_t u = 0; u < raw.units.size(); ++u) {
+            if (owner.unit(static_cast<uint32_t>(u))) {
+                owned[L][lcs[L].of_unit[u]] = 1;
+            }
+        }
+    }
+    return owned;
+}
+
+/// For a region: what the coarse levels need, into `out`: the edges between
+/// region-level codes that this region owns, and a representative unit per
+/// own code.
+void hand_on_to_coarse(const Graph& g, const RawMap& raw, const std::vector<LevelCodes>& lcs, const Owner& owner,
+                       const RegionScope& scope, const std::vector<uint32_t>& bad_edges, RegionOutput& out)
+{
+    const auto& lr = lcs[scope.level];
+    for (size_t e = 0; e < g.edge_count(); ++e) {
+        const uint32_t l = lr.side(g.left[e]), r = lr.side(g.right[e]);
+        if (l == r || !owner.units(g.left[e], g.right[e])) {
+            continue;
+        }
+        CoarseEdge ce;
+        for (uint32_t v : g.edge(e)) {
+            ce.keys.push_back(g.keys[v]);
+            ce.points.push_back(g.grid[v]);
+        }
+        ce.left = l == none ? std::string() : lr.codes[l];
+        ce.right = r == none ? std::string() : lr.codes[r];
+        ce.cls = g.cls[e];
+        ce.sid = g.sid[e];
+        ce.src = g.src[e];
+        ce.problem = std::binary_search(bad_edges.begin(), bad_edges.end(), static_cast<uint32_t>(e));
+        out.edges.push_back(std::move(ce));
+    }
+    std::vector<uint32_t> rep(lr.codes.size(), none);
+    for (uint32_t u = 0; u < raw.units.size(); ++u) {
+        if (!owner.unit(u)) {
+            continue;
+        }
+        uint32_t& r = rep[lr.of_unit[u]];
+        const auto& cand = raw.units[u];
+        if (r == none || (cand.intpt && (!raw.units[r].intpt || cand.weight > raw.units[r].weight))) {
+            r = u;
+        }
+    }
+    for (uint32_t r : rep) {
+        if (r != none) {
+            out.units.push_back(raw.units[r]);
+        }
+    }
+}
+
+/// A whole map, or with `scope` one region of it (its levels finer than the
+/// region level, and in `out` what the coarse levels need).
+BuildResult build(RawMap raw, const Projection& projection, const BuildOptions& options, const StoreSink& sink,
+                  const RegionScope* scope, RegionOutput* out)
+{
+    BuildResult result;
+    Problems problems(result, projection, options.max_problem_samples);
+    const size_t nlev = raw.level_names.size();
+    result.input_vertices = raw.points_read;
+    problems.count("empty_geometries", raw.empty_geometries);
+    auto note = [&](const std::string& what) { log_progress(options, what); };
+    auto last = std::chrono::steady_clock::now();
+    auto phase = [&](std::string name) {
+        const auto now = std::chrono::steady_clock::now();
+        result.seconds.emplace_back(std::move(name), std::chrono::duration<double>(now - last).count());
+        last = now;
+    };
+    std::vector<std::pair<uint32_t, uint32_t>> non_nesting;
+    const auto lcs = level_codes(raw, non_nesting);
+    Owner owner = owner_of(lcs, scope);
+    refuse_non_nesting(raw, lcs, non_nesting, owner);
+    Graph g = make_graph(raw, projection, options.threads, problems, owner);
+    phase("intern_project");
+    note("interned and projected " + std::to_string(g.keys.size()) + " vertices");
+    if (raw.kind != RawMap::Kind::edges) {
+        join_pieces(g, merge_segments(g, raw, options.threads, problems, owner));
+    }
+    phase("merge_join");
+    note("merged shared segments: " + std::to_string(g.edge_count()) + " edges");
+    count_graph(g, raw, owner, result, problems);
+    const std::vector<uint32_t> bad_edges = check_planarity(g, raw, lcs, projection, options, problems, owner);
+    phase("planarity");
+    note("checked planarity");
 
     result.levels.resize(nlev);
     OwnedCodes owned(nlev);
     size_t first = 0;
     if (scope != nullptr) {
-        // Codes at the region level and below go by their region-level code.
         first = scope->level + 1;
-        for (size_t L = scope->level; L < nlev; ++L) {
-            owned[L].assign(lcs[L].codes.size(), 0);
-            for (size_t u = 0; u < raw.units.size(); ++u) {
-                if (owner.unit(static_cast<uint32_t>(u))) {
-                    owned[L][lcs[L].of_unit[u]] = 1;
-                }
-            }
-        }
-        // What the coarse levels need: the edges between region-level codes
-        // that this region owns, and a representative unit per own code.
-        const auto& lr = lcs[scope->level];
-        for (size_t e = 0; e < g.edge_count(); ++e) {
-            const uint32_t l = lr.side(g.left[e]), r = lr.side(g.right[e]);
-            if (l == r || !owner.units(g.left[e], g.right[e])) {
-                continue;
-            }
-            CoarseEdge ce;
-            for (uint32_t v : g.edge(e)) {
-                ce.keys.push_back(g.keys[v]);
-                ce.points.push_back(g.grid[v]);
-            }
-            ce.left = l == none ? std::string() : lr.codes[l];
-            ce.right = r == none ? std::string() : lr.codes[r];
-            ce.cls = g.cls[e];
-            ce.sid = g.sid[e];
-            ce.src = g.src[e];
-            ce.problem = std::binary_search(bad_edges.begin(), bad_edges.end(), static_cast<uint32_t>(e));
-            out->edges.push_back(std::move(ce));
-        }
-        std::vector<uint32_t> rep(lr.codes.size(), none);
-        for (uint32_t u = 0; u < raw.units.size(); ++u) {
-            if (!owner.unit(u)) {
-                continue;
-            }
-            uint32_t& r = rep[lr.of_unit[u]];
-            const auto& cand = raw.units[u];
-            if (r == none || (cand.intpt && (!raw.units[r].intpt || cand.weight > raw.units[r].weight))) {
-                r = u;
-            }
-        }
-        for (uint32_t r : rep) {
-            if (r != none) {
-                out->units.push_back(raw.units[r]);
-            }
-        }
+        owned = owned_codes(raw, lcs, owner, *scope);
+        hand_on_to_coarse(g, raw, lcs, owner, *scope, bad_edges, *out);
         for (size_t L = 0; L < first; ++L) {
             result.levels[L].name = raw.level_names[L];
         }
