@@ -21,11 +21,13 @@
 
 namespace tigerlod::ingest::detail {
 
-Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems& problems, Owner& owner)
+namespace {
+
+/// Intern the snapped points: sort (key, occurrence) by key, so that vertex
+/// ids follow the keys and do not depend on the order of the input. Returns
+/// each occurrence's vertex id; the points themselves are released.
+std::vector<uint32_t> intern_vertices(RawMap& raw, Graph& g, unsigned threads)
 {
-    Graph g;
-    // Sort (key, occurrence) by key: vertex ids follow the keys, so they do not
-    // depend on the order of the input.
     std::vector<std::pair<uint64_t, uint32_t>> occ(raw.coords.size());
     for (size_t i = 0; i < occ.size(); ++i) {
         occ[i] = {pack_key(raw.coords[i]), static_cast<uint32_t>(i)};
@@ -47,6 +49,15 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
         id[occ[i].second] = static_cast<uint32_t>(g.keys.size() - 1);
     }
     release(occ);
+    return id;
+}
+
+/// Project every vertex onto the grid; returns the range of latitudes
+/// (1e-6 degrees). Throws input_error naming the input of the first vertex
+/// outside the projection's domain.
+std::pair<int32_t, int32_t> project_vertices(Graph& g, const RawMap& raw, const std::vector<uint32_t>& id,
+                                             const Projection& proj, unsigned threads)
+{
     g.grid.resize(g.keys.size());
     std::vector<uint8_t> bad(g.keys.size(), 0);
     std::mutex lat_mutex;
@@ -87,13 +98,22 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
                       ll.lat * 1e-6);
         throw input_error(where + ": " + buf + proj.describe());
     }
-    // Distinct snapped points that round onto one grid point become one vertex.
-    // That needs points closer than a grid cell's diagonal, which the 1e-6
-    // degree lattice cannot have where its projected spacing is wider (a 1 cm
-    // grid anywhere short of the polar caps): then the search is skipped.
+    return {lat_lo, lat_hi};
+}
+
+/// Distinct snapped points that round onto one grid point become one vertex
+/// (the smallest id): returns each vertex's replacement; `merged` gets the
+/// vertices merged away, counted later for a region, now for a whole map.
+/// That needs points closer than a grid cell's diagonal, which the 1e-6
+/// degree lattice cannot have where its projected spacing is wider (a 1 cm
+/// grid anywhere short of the polar caps): then the search is skipped.
+std::vector<uint32_t> merge_grid_twins(const Graph& g, const Projection& proj, std::pair<int32_t, int32_t> lat,
+                                       unsigned threads, Problems& problems, const Owner& owner,
+                                       std::vector<uint32_t>& merged)
+{
+    const auto [lat_lo, lat_hi] = lat;
     std::vector<uint32_t> remap(g.keys.size());
     std::iota(remap.begin(), remap.end(), 0U);
-    std::vector<uint32_t> merged;
     const double spacing =
         g.keys.empty() ? 0.0 : proj.lattice_separation_m(1e-6, lat_lo * 1e-6, lat_hi * 1e-6) / proj.params().grid_m;
     if (!(spacing > std::numbers::sqrt2)) {
@@ -116,8 +136,14 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
             }
         }
     }
-    // Clean each polyline: repeated points, then p-q-p spikes.
-    g.verts.reserve(id.size());
+    return remap;
+}
+
+/// For a region: each vertex's rank (the smallest region-level code of the
+/// polylines through it), then the merged vertices it owns counted.
+void rank_vertices(Owner& owner, const RawMap& raw, const std::vector<uint32_t>& id, const Graph& g,
+                   const std::vector<uint32_t>& merged, Problems& problems)
+{
     if (!owner.whole()) {
         owner.vertex_rank.assign(g.keys.size(), none);
         for (size_t p = 0; p < raw.polyline_count(); ++p) {
@@ -132,6 +158,15 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
             }
         }
     }
+}
+
+/// Clean each polyline (repeated points, then p-q-p spikes, then a closed
+/// one's spike at its start) into the graph's edges; a polyline left with
+/// too few points is a degenerate one.
+void clean_polylines(Graph& g, const RawMap& raw, const std::vector<uint32_t>& id, const std::vector<uint32_t>& remap,
+                     Problems& problems, const Owner& owner)
+{
+    g.verts.reserve(id.size());
     std::vector<uint32_t> buf;
     for (size_t p = 0; p < raw.polyline_count(); ++p) {
         const bool mine = owner.units(raw.left[p], raw.right[p]);
@@ -175,6 +210,19 @@ Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems
         g.sid.push_back(raw.source_id[p]);
         g.src.push_back(raw.source[p]);
     }
+}
+
+} // namespace
+
+Graph make_graph(RawMap& raw, const Projection& proj, unsigned threads, Problems& problems, Owner& owner)
+{
+    Graph g;
+    const std::vector<uint32_t> id = intern_vertices(raw, g, threads);
+    const auto lat = project_vertices(g, raw, id, proj, threads);
+    std::vector<uint32_t> merged;
+    const std::vector<uint32_t> remap = merge_grid_twins(g, proj, lat, threads, problems, owner, merged);
+    rank_vertices(owner, raw, id, g, merged, problems);
+    clean_polylines(g, raw, id, remap, problems, owner);
     release(raw.offsets);
     return g;
 }
