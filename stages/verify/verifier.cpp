@@ -509,6 +509,21 @@ class Verifier {
         return sign(a);
     }
 
+    /// Adds a violation to a node's result.
+    struct Emit {
+        NodeResult& r;
+        uint32_t k;
+        const std::string& code;
+        void operator()(const char* kind, std::vector<uint64_t> ids, GridPoint at, std::string detail) const
+        {
+            r.violations.push_back(
+                {kind, "", k, code, std::move(ids), double(at.x), double(at.y), 0, 0, std::move(detail)});
+        }
+    };
+
+    /// Node n at LOD k against its original store: each chain (checks 1, 2
+    /// and 4, and its points in the node's box), the LOD's error bound
+    /// (check 7), the units (checks 5 and 6) and the points.
     NodeResult check_node(uint32_t n, uint32_t k, const std::unordered_map<uint64_t, Original>& owned,
                           const chains::ChainStore& store,
                           const std::map<const chains::ChainStore*, std::vector<double>>& eps,
@@ -517,10 +532,7 @@ class Verifier {
         NodeResult r;
         const auto& node = m_sk.nodes[n];
         const std::string code = node_code(n);
-        auto violation = [&](const char* kind, std::vector<uint64_t> ids, GridPoint at, std::string detail) {
-            r.violations.push_back(
-                {kind, "", k, code, std::move(ids), double(at.x), double(at.y), 0, 0, std::move(detail)});
-        };
+        const Emit violation{r, k, code};
         const GridPoint corner{node.box.min_x, node.box.min_y};
         if (auto st = m_tree.read_table(n, r.table); !st.ok()) {
             violation("skeleton", {}, corner, st.error);
@@ -533,63 +545,7 @@ class Verifier {
         r.ok = true;
         double worst = 0.0; // largest L2 deviation, grid units
         for (size_t c = 0; c < r.table.chains.size(); ++c) {
-            const auto& e = r.table.chains[c];
-            const auto pts = r.geometry.chain(c);
-            for (const auto& p : pts) {
-                if (p.x < node.box.min_x || p.x > node.box.max_x || p.y < node.box.min_y || p.y > node.box.max_y) {
-                    violation("skeleton", {e.id}, p, "point outside the node's bounding box");
-                    break;
-                }
-            }
-            const auto it = owned.find(e.id);
-            if (it == owned.end()) {
-                violation("skeleton", {e.id}, pts.front(), "chain not in the original stores of its level");
-                continue;
-            }
-            const Original& o = it->second;
-            const auto orig = o.store->chain_points(*o.info);
-            // Check 1: a subsequence with the same ends.
-            std::vector<size_t> at; // position in orig of each simplified point
-            const bool subsequence = match_subsequence(orig, pts, at);
-            if (!subsequence) {
-                violation("not_subsequence", {e.id}, pts.front(),
-                          "not a subsequence of its original (" + std::to_string(orig.size()) +
-                              " points) with the same ends");
-                continue;
-            }
-            // Check 2: every skipped vertex within eps (exact), and the reverse direction.
-            const Tolerance tol(k == 0 ? 0.0 : eps.at(o.store)[o.index], m_metric);
-            bool exceeded = false;
-            for (size_t i = 0; i + 1 < pts.size() && !exceeded; ++i) {
-                for (size_t m = at[i] + 1; m < at[i + 1]; ++m) {
-                    worst = std::max(worst, point_segment_distance(orig[m], pts[i], pts[i + 1]));
-                    if (!within(orig[m], pts[i], pts[i + 1], tol)) {
-                        violation("eps_exceeded", {e.id}, orig[m],
-                                  "original vertex " + std::to_string(m) + " farther than eps " +
-                                      std::to_string(tol.eps * m_sk.grid_m()) + " m (grid units " +
-                                      std::to_string(tol.eps) + ")");
-                        exceeded = true;
-                        break;
-                    }
-                }
-                if (!exceeded && m_metric != Metric::l2 && at[i + 1] > at[i] + 1) {
-                    exceeded = reverse_exceeded(orig.subspan(at[i], at[i + 1] - at[i] + 1), pts[i], pts[i + 1], tol);
-                    if (exceeded) {
-                        violation("eps_exceeded", {e.id}, pts[i],
-                                  "segment " + std::to_string(i) + " strays farther than eps from its original");
-                    }
-                }
-            }
-            // Check 4: rings keep 3 vertices and their orientation.
-            if (e.flags & chains::chain_closed) {
-                std::set<GridPoint> distinct(pts.begin(), pts.end());
-                if (pts.size() < 4 || pts.front() != pts.back() || distinct.size() < 3) {
-                    violation("ring_collapsed", {e.id}, pts.front(),
-                              "closed ring with " + std::to_string(distinct.size()) + " distinct vertices");
-                } else if (sign(twice_area(pts)) != sign(twice_area(orig))) {
-                    violation("ring_orientation", {e.id}, pts.front(), "orientation differs from the original's");
-                }
-            }
+            check_chain(r, c, n, k, owned, eps, violation, worst);
         }
         // Check 7: the skeleton's error bound holds.
         if (worst * m_sk.grid_m() > node.lods[k].error_m * (1 + 1e-9) + 1e-9) {
@@ -597,7 +553,87 @@ class Verifier {
                       "LOD error_m " + std::to_string(node.lods[k].error_m) + " below the measured " +
                           std::to_string(worst * m_sk.grid_m()));
         }
-        // Checks 5 and 6: internal points inside their units, units' boundaries closed with their area sign.
+        check_units(r, store, area_sign, violation);
+        if (m_options.tolerance.point_constraints) { // else simplify let points change side
+            check_points(r, store, user_points, violation);
+        }
+        return r;
+    }
+
+    /// Chain c of a node's result: its points in the node's box, a chain of
+    /// the original stores, check 1 (a subsequence with the same ends),
+    /// check 2 (every skipped vertex within eps, exactly, and the reverse
+    /// direction), check 4 (a ring keeps 3 vertices and its orientation).
+    /// `worst` gets the largest L2 deviation, grid units.
+    void check_chain(const NodeResult& r, size_t c, uint32_t n, uint32_t k,
+                     const std::unordered_map<uint64_t, Original>& owned,
+                     const std::map<const chains::ChainStore*, std::vector<double>>& eps, const Emit& violation,
+                     double& worst) const
+    {
+        const auto& node = m_sk.nodes[n];
+        const auto& e = r.table.chains[c];
+        const auto pts = r.geometry.chain(c);
+        for (const auto& p : pts) {
+            if (p.x < node.box.min_x || p.x > node.box.max_x || p.y < node.box.min_y || p.y > node.box.max_y) {
+                violation("skeleton", {e.id}, p, "point outside the node's bounding box");
+                break;
+            }
+        }
+        const auto it = owned.find(e.id);
+        if (it == owned.end()) {
+            violation("skeleton", {e.id}, pts.front(), "chain not in the original stores of its level");
+            return;
+        }
+        const Original& o = it->second;
+        const auto orig = o.store->chain_points(*o.info);
+        // Check 1: a subsequence with the same ends.
+        std::vector<size_t> at; // position in orig of each simplified point
+        const bool subsequence = match_subsequence(orig, pts, at);
+        if (!subsequence) {
+            violation("not_subsequence", {e.id}, pts.front(),
+                      "not a subsequence of its original (" + std::to_string(orig.size()) +
+                          " points) with the same ends");
+            return;
+        }
+        // Check 2: every skipped vertex within eps (exact), and the reverse direction.
+        const Tolerance tol(k == 0 ? 0.0 : eps.at(o.store)[o.index], m_metric);
+        bool exceeded = false;
+        for (size_t i = 0; i + 1 < pts.size() && !exceeded; ++i) {
+            for (size_t m = at[i] + 1; m < at[i + 1]; ++m) {
+                worst = std::max(worst, point_segment_distance(orig[m], pts[i], pts[i + 1]));
+                if (!within(orig[m], pts[i], pts[i + 1], tol)) {
+                    violation("eps_exceeded", {e.id}, orig[m],
+                              "original vertex " + std::to_string(m) + " farther than eps " +
+                                  std::to_string(tol.eps * m_sk.grid_m()) + " m (grid units " +
+                                  std::to_string(tol.eps) + ")");
+                    exceeded = true;
+                    break;
+                }
+            }
+            if (!exceeded && m_metric != Metric::l2 && at[i + 1] > at[i] + 1) {
+                exceeded = reverse_exceeded(orig.subspan(at[i], at[i + 1] - at[i] + 1), pts[i], pts[i + 1], tol);
+                if (exceeded) {
+                    violation("eps_exceeded", {e.id}, pts[i],
+                              "segment " + std::to_string(i) + " strays farther than eps from its original");
+                }
+            }
+        }
+        // Check 4: rings keep 3 vertices and their orientation.
+        if (e.flags & chains::chain_closed) {
+            std::set<GridPoint> distinct(pts.begin(), pts.end());
+            if (pts.size() < 4 || pts.front() != pts.back() || distinct.size() < 3) {
+                violation("ring_collapsed", {e.id}, pts.front(),
+                          "closed ring with " + std::to_string(distinct.size()) + " distinct vertices");
+            } else if (sign(twice_area(pts)) != sign(twice_area(orig))) {
+                violation("ring_orientation", {e.id}, pts.front(), "orientation differs from the original's");
+            }
+        }
+    }
+
+    /// Checks 5 and 6: every unit's boundary closes, with its original area sign.
+    void check_units(const NodeResult& r, const chains::ChainStore& store, const std::map<std::string, int>& area_sign,
+                     const Emit& violation) const
+    {
         for (uint32_t u : units_in_table(r.table, store)) {
             const auto rings = view::unit_rings(r.table, r.geometry, u);
             bool closed = !rings.empty();
@@ -619,14 +655,17 @@ class Verifier {
                 }
             }
         }
-        if (!m_options.tolerance.point_constraints) {
-            return r; // simplify was run without point constraints: points may change side
-        }
-        // Every point strictly inside its own unit (a neighbour's unit is
-        // checked in the node of the partition that owns it), and inside no
-        // other unit of the node: a hole or an island that a shortcut passed
-        // to the other side of a chain leaves the points of the units in it
-        // inside the unit around them too, though each stays in its own.
+    }
+
+    /// The points: every internal point strictly inside its own unit (a
+    /// neighbour's unit is checked in the node of the partition that owns
+    /// it), and inside no other unit of the node: a hole or an island that
+    /// a shortcut passed to the other side of a chain leaves the points of
+    /// the units in it inside the unit around them too, though each stays in
+    /// its own. Every user point in the unit it was in.
+    void check_points(NodeResult& r, const chains::ChainStore& store, const std::vector<UserPoint>& user_points,
+                      const Emit& violation) const
+    {
         const UnitLocator locator(r.table, r.geometry);
         std::vector<uint8_t> own(r.table.strings.size(), 0);
         for (const uint32_t u : units_in_table(r.table, store)) {
@@ -665,7 +704,6 @@ class Verifier {
                           "user point " + std::to_string(up.index) + " left unit " + up.unit);
             }
         }
-        return r;
     }
 
     /// The reverse direction for L1 and Linf (for L2 it follows from the
