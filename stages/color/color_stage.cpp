@@ -64,8 +64,10 @@ int ColorStage::run(const StageContext& ctx)
             }
             const fs::path dir = out.path() / simplify::tolerance_dir(eps_m) / sf.level;
             fs::create_directories(dir);
-            write_file_atomic(dir / (sf.partition + ".colors.json"),
-                              simplify::colors_to_json(store, eps_m, m_common.options.metric, r));
+            // Inside the output folder, renamed into place whole: no rename
+            // and folder sync per file (a file per partition and tolerance).
+            write_file(dir / (sf.partition + ".colors.json"),
+                       simplify::colors_to_json(store, eps_m, m_common.options.metric, r));
             auto& t = totals[ti];
             ++t.stores;
             t.tiles += r.tiles.size();
