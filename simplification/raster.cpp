@@ -429,59 +429,48 @@ Raster::~Raster()
     }
 }
 
-PreparedTile Raster::prepare(const TileSpec& tile, std::span<const TentChain> tents,
-                             std::span<const TestSegment> segs) const
-{
-    PreparedTile out;
-    auto& d = *out.m;
-    const double inv = 1.0 / tile.pixel;
-    auto px = [&](GridPoint p, float& x, float& y) {
-        x = static_cast<float>((double(p.x) - tile.x0) * inv);
-        y = static_cast<float>((double(p.y) - tile.y0) * inv);
-    };
+namespace {
 
-    // Cells (of kCell pixels) that a tested part's fragments can fall in.
-    // Only the tents reaching one of them are drawn: every tent covering a
-    // tested pixel is among them, in the same order, so the stencil there is
-    // what drawing them all gives.
-    constexpr double kCell = 8;
-    const auto cw = static_cast<int64_t>(std::ceil(tile.width / kCell)),
-               ch = static_cast<int64_t>(std::ceil(tile.height / kCell));
-    std::vector<uint8_t> near(size_t(cw * ch), 0);
-    auto in_grid = [&](int64_t x, int64_t y) { return x >= 0 && y >= 0 && x < cw && y < ch; };
-    std::vector<TestInstance> tinst(segs.size());
-    int64_t near_x0 = cw, near_y0 = ch, near_x1 = -1, near_y1 = -1; // the marked cells' box
-    for (size_t k = 0; k < segs.size(); ++k) {
-        const auto& sg = segs[k];
-        auto& ti = tinst[k];
-        px(sg.a, ti.ax, ti.ay);
-        px(sg.b, ti.bx, ti.by);
-        ti.t0 = sg.t0;
-        ti.t1 = sg.t1;
+/// The cells (of kCell pixels) of a tile that a tested part's fragments can
+/// fall in, and their box. Only the tents reaching one of them are drawn:
+/// every tent covering a tested pixel is among them, in the same order, so
+/// the stencil there is what drawing them all gives.
+class NearCells {
+  public:
+    static constexpr double kCell = 8;
+
+    explicit NearCells(const TileSpec& tile)
+        : m_cw(static_cast<int64_t>(std::ceil(tile.width / kCell))),
+          m_ch(static_cast<int64_t>(std::ceil(tile.height / kCell))), m_near(size_t(m_cw * m_ch), 0), x0(m_cw), y0(m_ch)
+    {
+    }
+
+    /// Mark the cells within 2 pixels of the part [t0, t1] of segment ab (pixels).
+    void mark(const TestInstance& ti)
+    {
         const double dx = double(ti.bx) - ti.ax, dy = double(ti.by) - ti.ay;
-        d.drawn_pixels += std::hypot(dx, dy) * (double(sg.t1) - sg.t0);
-        cover_cells(ti.ax + sg.t0 * dx, ti.ay + sg.t0 * dy, ti.ax + sg.t1 * dx, ti.ay + sg.t1 * dy, 2.0, kCell, 0.0,
+        cover_cells(ti.ax + ti.t0 * dx, ti.ay + ti.t0 * dy, ti.ax + ti.t1 * dx, ti.ay + ti.t1 * dy, 2.0, kCell, 0.0,
                     0.0, [&](int64_t x, int64_t y) {
                         if (in_grid(x, y)) {
-                            near_x0 = std::min(near_x0, x);
-                            near_y0 = std::min(near_y0, y);
-                            near_x1 = std::max(near_x1, x);
-                            near_y1 = std::max(near_y1, y);
-                            near[size_t(y * cw + x)] = 1;
+                            x0 = std::min(x0, x);
+                            y0 = std::min(y0, y);
+                            x1 = std::max(x1, x);
+                            y1 = std::max(y1, y);
+                            m_near[size_t(y * m_cw + x)] = 1;
                         }
                     });
     }
-    // Whether tent `ti` (quad reaching r around its segment) covers a
-    // marked cell, and if so the part [t0, t1] of its segment whose quad
-    // covers every pixel of the marked cells that the whole quad covers: a
-    // long segment near a few tested parts is rasterized there only (tract
-    // set at 16 m: 55 M tent pixels -> 25 M, before the scissor box).
-    auto reaches_test = [&](TentInstance& ti, double r) {
+
+    /// Whether tent `ti` (quad reaching r around its segment) covers a
+    /// marked cell, and if so sets [t0, t1] to the part of its segment whose
+    /// quad covers every pixel of the marked cells that the whole quad
+    /// covers: a long segment near a few tested parts is rasterized there
+    /// only (tract set at 16 m: 55 M tent pixels -> 25 M, before the scissor box).
+    bool reaches(TentInstance& ti, double r) const
+    {
         // Most of a tile's chains lie mostly outside the tile: a box test first.
-        if (std::max(ti.ax, ti.bx) + r < double(near_x0) * kCell ||
-            std::min(ti.ax, ti.bx) - r > double(near_x1 + 1) * kCell ||
-            std::max(ti.ay, ti.by) + r < double(near_y0) * kCell ||
-            std::min(ti.ay, ti.by) - r > double(near_y1 + 1) * kCell) {
+        if (std::max(ti.ax, ti.bx) + r < double(x0) * kCell || std::min(ti.ax, ti.bx) - r > double(x1 + 1) * kCell ||
+            std::max(ti.ay, ti.by) + r < double(y0) * kCell || std::min(ti.ay, ti.by) - r > double(y1 + 1) * kCell) {
             return false;
         }
         const double dx = double(ti.bx) - ti.ax, dy = double(ti.by) - ti.ay;
@@ -489,7 +478,7 @@ PreparedTile Raster::prepare(const TileSpec& tile, std::span<const TentChain> te
         const double ux = len > 0 ? dx / len : 1.0, uy = len > 0 ? dy / len : 0.0;
         double s_min = INFINITY, s_max = -INFINITY; // along the segment from a, over the marked cells' corners
         cover_cells(ti.ax, ti.ay, ti.bx, ti.by, r, kCell, 0.0, 0.0, [&](int64_t x, int64_t y) {
-            if (!in_grid(x, y) || near[size_t(y * cw + x)] == 0) {
+            if (!in_grid(x, y) || m_near[size_t(y * m_cw + x)] == 0) {
                 return;
             }
             for (const int64_t cx : {x, x + 1}) {
@@ -517,7 +506,44 @@ PreparedTile Raster::prepare(const TileSpec& tile, std::span<const TentChain> te
         ti.t0 = static_cast<float>(from);
         ti.t1 = static_cast<float>(to);
         return true;
+    }
+
+  private:
+    bool in_grid(int64_t x, int64_t y) const { return x >= 0 && y >= 0 && x < m_cw && y < m_ch; }
+
+    int64_t m_cw, m_ch; ///< the grid's width and height in cells
+    std::vector<uint8_t> m_near;
+
+  public:
+    int64_t x0, y0, x1 = -1, y1 = -1; ///< the marked cells' box (empty: x1 < x0)
+};
+
+} // namespace
+
+PreparedTile Raster::prepare(const TileSpec& tile, std::span<const TentChain> tents,
+                             std::span<const TestSegment> segs) const
+{
+    PreparedTile out;
+    auto& d = *out.m;
+    const double inv = 1.0 / tile.pixel;
+    auto px = [&](GridPoint p, float& x, float& y) {
+        x = static_cast<float>((double(p.x) - tile.x0) * inv);
+        y = static_cast<float>((double(p.y) - tile.y0) * inv);
     };
+    // The tested parts in pixels, and the cells they can fall in.
+    NearCells near(tile);
+    std::vector<TestInstance> tinst(segs.size());
+    for (size_t k = 0; k < segs.size(); ++k) {
+        const auto& sg = segs[k];
+        auto& ti = tinst[k];
+        px(sg.a, ti.ax, ti.ay);
+        px(sg.b, ti.bx, ti.by);
+        ti.t0 = sg.t0;
+        ti.t1 = sg.t1;
+        const double dx = double(ti.bx) - ti.ax, dy = double(ti.by) - ti.ay;
+        d.drawn_pixels += std::hypot(dx, dy) * (double(sg.t1) - sg.t0);
+        near.mark(ti);
+    }
 
     // Tent instances grouped by class; one draw call per class sets the stencil reference.
     std::vector<uint32_t> order(tents.size());
@@ -543,7 +569,7 @@ PreparedTile Raster::prepare(const TileSpec& tile, std::span<const TentChain> te
             px(t.points[k], ti.ax, ti.ay);
             px(t.points[k + 1], ti.bx, ti.by);
             ti.eps = eps_px;
-            if (reaches_test(ti, reach)) {
+            if (near.reaches(ti, reach)) {
                 inst.push_back(ti);
             } else {
                 ++d.tent_skipped;
@@ -567,10 +593,11 @@ PreparedTile Raster::prepare(const TileSpec& tile, std::span<const TentChain> te
     // not with what is drawn: at 1 m on the tract set (178 k tiles of 4096
     // pixels, most with a few short shortcuts) the compliance step took 9.1 s
     // of CPU without the box and 4.3 s with it.
-    d.sx0 = std::clamp<int64_t>(near_x0 * int64_t(kCell), 0, w);
-    d.sy0 = std::clamp<int64_t>(near_y0 * int64_t(kCell), 0, h);
-    d.sx1 = std::max(d.sx0, std::clamp<int64_t>((near_x1 + 1) * int64_t(kCell), 0, w));
-    d.sy1 = std::max(d.sy0, std::clamp<int64_t>((near_y1 + 1) * int64_t(kCell), 0, h));
+    const auto cell = static_cast<int64_t>(NearCells::kCell);
+    d.sx0 = std::clamp<int64_t>(near.x0 * cell, 0, w);
+    d.sy0 = std::clamp<int64_t>(near.y0 * cell, 0, h);
+    d.sx1 = std::max(d.sx0, std::clamp<int64_t>((near.x1 + 1) * cell, 0, w));
+    d.sy1 = std::max(d.sy0, std::clamp<int64_t>((near.y1 + 1) * cell, 0, h));
 
     // Test instances by class, numbered in drawing order.
     std::vector<uint32_t> sorder(segs.size());
