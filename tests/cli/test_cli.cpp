@@ -963,6 +963,26 @@ TEST_F(Cli, VerifyChecksATreeAgainstTheContractItsManifestsCarry)
     fs::remove(m_dir / "tree" / "manifest.json");
     expect_failure(run("verify", tree + " " + in + " " + (m_dir / "v4").string()), 1,
                    "tree: no manifest.json: not a finished tigerlod-pack output");
+    // Damaged manifests: the file, and what is wrong with it; nothing written.
+    const std::string tree5 = (m_dir / "tree5").string();
+    const fs::path simp_manifest = m_dir / "simp" / "manifest.json";
+    const std::string kept = slurp(simp_manifest);
+    std::ofstream(simp_manifest) << "{\"schema\": ";
+    expect_failure(run("pack", in + " " + simp + " " + tree5), 1, "simp/manifest.json: not JSON");
+    std::ofstream(simp_manifest) << R"({"schema": "tigerlod.colors/1"})";
+    expect_failure(run("pack", in + " " + simp + " " + tree5), 1, "simp/manifest.json: not a tigerlod.manifest/1");
+    std::ofstream(simp_manifest) << R"({"schema": "tigerlod.manifest/1", "stage": "simplify", "inputs": {}})";
+    expect_failure(run("pack", in + " " + simp + " " + tree5), 1, "simp/manifest.json: no input 'ingest'");
+    std::ofstream(simp_manifest) << kept;
+    std::string no_contract = slurp(m_dir / "tree3" / "manifest.json");
+    const std::string section = "\n  \"simplify\": {"; // the top level's, not the input's
+    ASSERT_NE(no_contract.find(section), std::string::npos) << no_contract;
+    no_contract.replace(no_contract.find(section), section.size(), "\n  \"other\": {");
+    std::ofstream(m_dir / "tree3" / "manifest.json") << no_contract;
+    expect_failure(run("verify", (m_dir / "tree3").string() + " " + in + " " + (m_dir / "v5").string()), 1,
+                   "tree3/manifest.json: no 'simplify' section");
+    EXPECT_FALSE(fs::exists(m_dir / "tree5"));
+    EXPECT_FALSE(fs::exists(m_dir / "v5"));
 }
 
 TEST_F(Cli, PackRefusesALadderWithATolerancePartMissing)
