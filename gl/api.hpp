@@ -38,6 +38,8 @@ namespace tigerlod::gl {
     X(PFNGLGENBUFFERSPROC, GenBuffers)                                                                                 \
     X(PFNGLBINDBUFFERPROC, BindBuffer)                                                                                 \
     X(PFNGLBUFFERDATAPROC, BufferData)                                                                                 \
+    X(PFNGLMAPBUFFERRANGEPROC, MapBufferRange)                                                                         \
+    X(PFNGLUNMAPBUFFERPROC, UnmapBuffer)                                                                               \
     X(PFNGLGETBUFFERSUBDATAPROC, GetBufferSubData)                                                                     \
     X(PFNGLDELETEBUFFERSPROC, DeleteBuffers)                                                                           \
     X(PFNGLBINDBUFFERBASEPROC, BindBufferBase)                                                                         \

@@ -167,10 +167,16 @@ struct TestInstance {
 
 /// What Raster::draw uploads and draws for a tile.
 struct PreparedTile::Data {
-    std::vector<TentInstance> inst;                                              ///< tents, by class
-    std::vector<std::pair<uint8_t, std::pair<GLuint, GLsizei>>> ranges, sranges; ///< class -> (first, count)
-    std::vector<TestInstance> sorted;           ///< test parts by class, id = their index
-    std::vector<uint32_t> ids;                  ///< the caller's id of each of them
+    /// A part of the tile's box that fits in the framebuffer: the tents
+    /// that reach it and the tested parts in it, each by class.
+    struct Piece {
+        int64_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;                                      ///< tile pixels
+        std::vector<TentInstance> inst;                                              ///< tents, by class
+        std::vector<std::pair<uint8_t, std::pair<GLuint, GLsizei>>> ranges, sranges; ///< class -> (first, count)
+        std::vector<TestInstance> tests; ///< test parts by class, id = their index in `ids`
+    };
+    std::vector<Piece> pieces;
+    std::vector<uint32_t> ids;                  ///< the caller's id of each test part
     int64_t sx0 = 0, sy0 = 0, sx1 = 0, sy1 = 0; ///< the box of the tested parts' cells, in tile pixels
     double eps_max = 0;                         ///< pixels
     size_t tent_segments = 0, tent_skipped = 0;
@@ -227,18 +233,30 @@ struct Raster::Impl {
         gl.BufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(idx.size() * sizeof(uint32_t)), idx.data(), GL_STATIC_DRAW);
         ibo_quads = n;
     }
-    /// The quads of `items` into the bound vertex array's buffer, through
-    /// `staging`, and indices for as many.
-    template <class T> void upload_quads(const std::vector<T>& items, std::vector<QuadVertex<T>>& staging)
+    /// The quads of `items` into the bound vertex array's buffer, written
+    /// in place (mapped: no copy of the batch beside the driver's), and
+    /// indices for as many.
+    template <class T> void upload_quads(const std::vector<T>& items)
     {
-        staging.resize(items.size() * 4);
-        for (size_t i = 0; i < items.size(); ++i) {
-            for (size_t c = 0; c < 4; ++c) {
-                staging[i * 4 + c] = {items[i], static_cast<float>(c)};
+        const auto bytes = static_cast<GLsizeiptr>(std::max<size_t>(1, items.size() * 4) * sizeof(QuadVertex<T>));
+        gl.BufferData(GL_ARRAY_BUFFER, bytes, nullptr, GL_STREAM_DRAW);
+        if (!items.empty()) {
+            void* mapped =
+                gl.MapBufferRange(GL_ARRAY_BUFFER, 0, bytes, GL_MAP_WRITE_BIT | GL_MAP_INVALIDATE_BUFFER_BIT);
+            if (mapped == nullptr) {
+                throw environment_error("OpenGL: mapping a vertex buffer of " + std::to_string(bytes) +
+                                        " bytes failed");
+            }
+            auto* out = static_cast<QuadVertex<T>*>(mapped);
+            for (size_t i = 0; i < items.size(); ++i) {
+                for (size_t c = 0; c < 4; ++c) {
+                    out[i * 4 + c] = {items[i], static_cast<float>(c)};
+                }
+            }
+            if (gl.UnmapBuffer(GL_ARRAY_BUFFER) != GL_TRUE) {
+                throw environment_error("OpenGL: a vertex buffer's content was lost while mapped");
             }
         }
-        gl.BufferData(GL_ARRAY_BUFFER, GLsizeiptr(staging.size() * sizeof(QuadVertex<T>)), staging.data(),
-                      GL_STREAM_DRAW);
         ensure_indices(items.size());
     }
     /// A framebuffer: depth-stencil, and colour for the read-back compliance.
@@ -246,11 +264,47 @@ struct Raster::Impl {
         GLuint fbo = 0, rb_depth = 0, rb_color = 0;
         GLsizei size = 0; ///< width and height
     };
-    /// The small framebuffer (window_pixels), then the large one
-    /// (max_tile_pixels) if larger: a tile's box is drawn in the smallest
-    /// that holds it.
-    std::vector<Target> targets;
-    std::vector<QuadVertex<TentInstance>> tent_vertices;
+    /// The one framebuffer, of window_pixels (at most max_tile_pixels): a
+    /// tile's box larger than it is drawn in pieces of its size (Raster::draw).
+    Target target;
+    /// Make target t (its buffers, cleared to depth 1 and stencil 0).
+    void make_target(Target& t, const gl::Context& ctx, Compliance compliance) const
+    {
+        const auto s = t.size;
+        gl.GenFramebuffers(1, &t.fbo);
+        gl.BindFramebuffer(GL_FRAMEBUFFER, t.fbo);
+        gl.GenRenderbuffers(1, &t.rb_depth);
+        gl.BindRenderbuffer(GL_RENDERBUFFER, t.rb_depth);
+        gl.RenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH24_STENCIL8, s, s);
+        gl.FramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_STENCIL_ATTACHMENT, GL_RENDERBUFFER, t.rb_depth);
+        if (compliance == Compliance::readback) {
+            gl.GenRenderbuffers(1, &t.rb_color);
+            gl.BindRenderbuffer(GL_RENDERBUFFER, t.rb_color);
+            gl.RenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, s, s);
+            gl.FramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, t.rb_color);
+            const GLenum buf = GL_COLOR_ATTACHMENT0;
+            gl.DrawBuffers(1, &buf);
+            gl.ReadBuffer(GL_COLOR_ATTACHMENT0);
+        } else {
+            const GLenum none = GL_NONE;
+            gl.DrawBuffers(1, &none);
+            gl.ReadBuffer(GL_NONE);
+        }
+        if (gl.CheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
+            throw environment_error("OpenGL: a " + std::to_string(s) + "x" + std::to_string(s) +
+                                    " depth-stencil framebuffer is not supported by " + ctx.describe());
+        }
+        gl.Viewport(0, 0, s, s);
+        gl.Disable(GL_SCISSOR_TEST); // the whole buffer; tiles clip to their box
+        gl.ClearDepth(1.0);
+        gl.ClearStencil(0);
+        gl.ClearColor(0, 0, 0, 0);
+        gl.Clear(GL_DEPTH_BUFFER_BIT | GL_STENCIL_BUFFER_BIT | GL_COLOR_BUFFER_BIT);
+        if (gl.GetError() != GL_NO_ERROR) {
+            throw environment_error("OpenGL: making a " + std::to_string(s) + "x" + std::to_string(s) +
+                                    " framebuffer failed on " + ctx.describe());
+        }
+    }
     bool batching = false;           ///< between begin_batch and end_batch
     size_t batch_capacity = 0;       ///< flags allocated for the batch
     std::vector<uint32_t> batch_ids; ///< the caller's id of each flag of the batch
@@ -263,7 +317,6 @@ struct Raster::Impl {
     std::vector<GLuint> flag_buffers;
     std::vector<size_t> tile_flags; ///< per tile of the batch, its first flag; then the count
     std::vector<uint32_t> zeros;
-    std::vector<QuadVertex<TestInstance>> test_vertices;
     explicit Impl(const gl::Api& api) : gl(api) {}
 
     /// The info log of a shader or program (glGetShaderInfoLog / glGetProgramInfoLog).
@@ -362,43 +415,8 @@ Raster::Raster(gl::Context& ctx, const RasterOptions& opt)
     if (opt.max_tile_pixels < 8 || opt.max_tile_pixels > 16384 || opt.window_pixels < 8) {
         throw std::invalid_argument("RasterOptions: framebuffer sizes outside 8..16384");
     }
-    // The small framebuffer, then the large one when tiles can be larger.
-    for (const uint32_t size : {std::min(opt.window_pixels, opt.max_tile_pixels), opt.max_tile_pixels}) {
-        if (!I.targets.empty() && I.targets.back().size == GLsizei(size)) {
-            break;
-        }
-        auto& t = I.targets.emplace_back();
-        const auto s = t.size = static_cast<GLsizei>(size);
-        gl.GenFramebuffers(1, &t.fbo);
-        gl.BindFramebuffer(GL_FRAMEBUFFER, t.fbo);
-        gl.GenRenderbuffers(1, &t.rb_depth);
-        gl.BindRenderbuffer(GL_RENDERBUFFER, t.rb_depth);
-        gl.RenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH24_STENCIL8, s, s);
-        gl.FramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_STENCIL_ATTACHMENT, GL_RENDERBUFFER, t.rb_depth);
-        if (opt.compliance == Compliance::readback) {
-            gl.GenRenderbuffers(1, &t.rb_color);
-            gl.BindRenderbuffer(GL_RENDERBUFFER, t.rb_color);
-            gl.RenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, s, s);
-            gl.FramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, t.rb_color);
-            const GLenum buf = GL_COLOR_ATTACHMENT0;
-            gl.DrawBuffers(1, &buf);
-            gl.ReadBuffer(GL_COLOR_ATTACHMENT0);
-        } else {
-            const GLenum none = GL_NONE;
-            gl.DrawBuffers(1, &none);
-            gl.ReadBuffer(GL_NONE);
-        }
-        if (gl.CheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
-            throw environment_error("OpenGL: a " + std::to_string(s) + "x" + std::to_string(s) +
-                                    " depth-stencil framebuffer is not supported by " + ctx.describe());
-        }
-        gl.Viewport(0, 0, s, s);
-        gl.Disable(GL_SCISSOR_TEST); // the whole buffer; tiles clip to their box
-        gl.ClearDepth(1.0);
-        gl.ClearStencil(0);
-        gl.ClearColor(0, 0, 0, 0);
-        gl.Clear(GL_DEPTH_BUFFER_BIT | GL_STENCIL_BUFFER_BIT | GL_COLOR_BUFFER_BIT);
-    }
+    I.target.size = static_cast<GLsizei>(std::min(opt.window_pixels, opt.max_tile_pixels));
+    I.make_target(I.target, ctx, opt.compliance);
     gl.Enable(GL_STENCIL_TEST);
     if (gl.GetError() != GL_NO_ERROR) {
         throw environment_error("OpenGL: setting up the raster engine failed on " + ctx.describe());
@@ -420,12 +438,10 @@ Raster::~Raster()
     if (!I.flag_buffers.empty()) {
         gl.DeleteBuffers(GLsizei(I.flag_buffers.size()), I.flag_buffers.data());
     }
-    for (const auto& t : I.targets) {
-        gl.DeleteFramebuffers(1, &t.fbo);
-        gl.DeleteRenderbuffers(1, &t.rb_depth);
-        if (t.rb_color) {
-            gl.DeleteRenderbuffers(1, &t.rb_color);
-        }
+    gl.DeleteFramebuffers(1, &I.target.fbo);
+    gl.DeleteRenderbuffers(1, &I.target.rb_depth);
+    if (I.target.rb_color) {
+        gl.DeleteRenderbuffers(1, &I.target.rb_color);
     }
 }
 
@@ -508,6 +524,20 @@ class NearCells {
         return true;
     }
 
+    /// Whether a cell of the pixels [px0, px1) x [py0, py1) is marked.
+    bool any(int64_t px0, int64_t py0, int64_t px1, int64_t py1) const
+    {
+        const auto c = static_cast<int64_t>(kCell);
+        for (int64_t y = std::max<int64_t>(0, py0 / c); y < std::min(m_ch, (py1 + c - 1) / c); ++y) {
+            for (int64_t x = std::max<int64_t>(0, px0 / c); x < std::min(m_cw, (px1 + c - 1) / c); ++x) {
+                if (m_near[size_t(y * m_cw + x)] != 0) {
+                    return true;
+                }
+            }
+        }
+        return false;
+    }
+
   private:
     bool in_grid(int64_t x, int64_t y) const { return x >= 0 && y >= 0 && x < m_cw && y < m_ch; }
 
@@ -551,8 +581,8 @@ PreparedTile Raster::prepare(const TileSpec& tile, std::span<const TentChain> te
         order[i] = i;
     }
     std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return tents[a].cls < tents[b].cls; });
-    auto& inst = d.inst;
-    auto& ranges = d.ranges; // class -> (first, count)
+    std::vector<TentInstance> inst;
+    std::vector<std::pair<uint8_t, std::pair<GLuint, GLsizei>>> ranges; // class -> (first, count)
     for (uint32_t i : order) {
         const auto& t = tents[i];
         const auto eps_px = static_cast<float>(t.eps * inv);
@@ -605,17 +635,79 @@ PreparedTile Raster::prepare(const TileSpec& tile, std::span<const TentChain> te
         sorder[i] = i;
     }
     std::stable_sort(sorder.begin(), sorder.end(), [&](uint32_t a, uint32_t b) { return segs[a].cls < segs[b].cls; });
-    d.sorted.resize(segs.size());
+    std::vector<TestInstance> sorted(segs.size());
+    std::vector<std::pair<uint8_t, std::pair<GLuint, GLsizei>>> sranges;
     d.ids.resize(segs.size());
     for (uint32_t k = 0; k < sorder.size(); ++k) {
         const auto& sg = segs[sorder[k]];
-        d.sorted[k] = tinst[sorder[k]];
-        d.sorted[k].id = k; // the flag's index in the tile's buffer
+        sorted[k] = tinst[sorder[k]];
+        sorted[k].id = k; // the flag's index in the tile's buffer
         d.ids[k] = sg.id;
-        if (!d.sranges.empty() && d.sranges.back().first == sg.cls) {
-            ++d.sranges.back().second.second;
+        if (!sranges.empty() && sranges.back().first == sg.cls) {
+            ++sranges.back().second.second;
         } else {
-            d.sranges.push_back({sg.cls, {k, 1}});
+            sranges.push_back({sg.cls, {k, 1}});
+        }
+    }
+    if (d.sx1 <= d.sx0 || d.sy1 <= d.sy0) {
+        return out;
+    }
+    const auto side = static_cast<int64_t>(std::min(m_opt.window_pixels, m_opt.max_tile_pixels));
+    if (d.sx1 - d.sx0 <= side && d.sy1 - d.sy0 <= side) {
+        d.pieces.push_back(
+            {d.sx0, d.sy0, d.sx1, d.sy1, std::move(inst), std::move(ranges), std::move(sranges), std::move(sorted)});
+        return out;
+    }
+    // A box larger than the framebuffer: pieces of its size that hold a
+    // tested cell, each with the tents whose quad (the part, reach r around
+    // it) and the tests whose quad (2 pixels around the part) overlap it, in
+    // the same order, so each pixel gets what the whole box would give it.
+    auto overlaps = [](float ax, float ay, float bx, float by, double t0, double t1, double r, const auto& p) {
+        const double x0 = ax + t0 * (double(bx) - ax), y0 = ay + t0 * (double(by) - ay);
+        const double x1 = ax + t1 * (double(bx) - ax), y1 = ay + t1 * (double(by) - ay);
+        return std::max(x0, x1) + r >= double(p.x0) && std::min(x0, x1) - r <= double(p.x1) &&
+               std::max(y0, y1) + r >= double(p.y0) && std::min(y0, y1) - r <= double(p.y1);
+    };
+    auto add_range = [](auto& rs, uint8_t cls, GLuint at) {
+        if (!rs.empty() && rs.back().first == cls) {
+            ++rs.back().second.second;
+        } else {
+            rs.push_back({cls, {at, 1}});
+        }
+    };
+    for (int64_t oy = d.sy0; oy < d.sy1; oy += side) {
+        for (int64_t ox = d.sx0; ox < d.sx1; ox += side) {
+            PreparedTile::Data::Piece p;
+            p.x0 = ox;
+            p.y0 = oy;
+            p.x1 = std::min(ox + side, d.sx1);
+            p.y1 = std::min(oy + side, d.sy1);
+            if (!near.any(p.x0, p.y0, p.x1, p.y1)) {
+                continue;
+            }
+            for (const auto& [cls, range] : sranges) {
+                for (GLuint k = range.first; k < range.first + GLuint(range.second); ++k) {
+                    const auto& ti = sorted[k];
+                    if (overlaps(ti.ax, ti.ay, ti.bx, ti.by, ti.t0, ti.t1, 2.0, p)) {
+                        add_range(p.sranges, cls, static_cast<GLuint>(p.tests.size()));
+                        p.tests.push_back(ti);
+                    }
+                }
+            }
+            if (p.tests.empty()) {
+                continue;
+            }
+            for (const auto& [cls, range] : ranges) {
+                for (GLuint k = range.first; k < range.first + GLuint(range.second); ++k) {
+                    const auto& ti = inst[k];
+                    const double reach = double(ti.eps) * l2_reach(m_opt.metric) + m_opt.margin_px + 2.0;
+                    if (overlaps(ti.ax, ti.ay, ti.bx, ti.by, ti.t0, ti.t1, reach, p)) {
+                        add_range(p.ranges, cls, static_cast<GLuint>(p.inst.size()));
+                        p.inst.push_back(ti);
+                    }
+                }
+            }
+            d.pieces.push_back(std::move(p));
         }
     }
     return out;
@@ -648,34 +740,23 @@ void Raster::bind_tile_flags(const PreparedTile::Data& d, size_t base)
     gl.BindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, I.flag_buffers[t]);
 }
 
-Raster::Frame Raster::bind_frame(const PreparedTile::Data& d)
+Raster::Frame Raster::bind_frame(int64_t ox, int64_t oy, int64_t ex, int64_t ey)
 {
     auto& I = *m_impl;
     const auto& gl = I.gl;
-    // The box is drawn with its corner at the framebuffer's, in the smallest
-    // framebuffer that holds it. The shift is an integer number of pixels,
-    // so the pixel centres keep their places, and the shaders subtract it
-    // from coordinates within the tile exactly. llvmpipe's cost per flush
-    // grows with the framebuffer's area (it walks every 64-pixel bin of it
-    // under a lock), and the batches of small boxes that most tiles have
-    // are flushed often.
-    const int64_t ox = d.sx0, oy = d.sy0, ex = d.sx1, ey = d.sy1;
-    size_t target = 0;
-    while (target + 1 < I.targets.size() && (ex - ox > I.targets[target].size || ey - oy > I.targets[target].size)) {
-        ++target;
+    // The piece is drawn with its corner at the framebuffer's. The shift is
+    // an integer number of pixels, so the pixel centres keep their places,
+    // and the shaders subtract it from coordinates within the tile exactly.
+    if (ex - ox > I.target.size || ey - oy > I.target.size) {
+        throw std::logic_error("piece larger than the framebuffer");
     }
-    if (ex - ox > I.targets[target].size || ey - oy > I.targets[target].size) {
-        throw std::logic_error("tile larger than the framebuffer");
-    }
-    m_stats.small_boxes += target == 0 && I.targets.size() > 1;
     // Bound each time: engines may share a context (Mesa skips a binding
     // that changes nothing).
-    gl.BindFramebuffer(GL_FRAMEBUFFER, I.targets[target].fbo);
-    gl.Viewport(0, 0, I.targets[target].size, I.targets[target].size);
+    gl.BindFramebuffer(GL_FRAMEBUFFER, I.target.fbo);
+    gl.Viewport(0, 0, I.target.size, I.target.size);
     gl.Enable(GL_SCISSOR_TEST); // off again at the end of draw: the context may serve other engines
     gl.Scissor(0, 0, static_cast<GLsizei>(ex - ox), static_cast<GLsizei>(ey - oy));
-    return {static_cast<float>(I.targets[target].size), static_cast<float>(ox), static_cast<float>(oy), ex - ox,
-            ey - oy};
+    return {static_cast<float>(I.target.size), static_cast<float>(ox), static_cast<float>(oy), ex - ox, ey - oy};
 }
 
 void Raster::use_tent_quads(unsigned prog, const Frame& f, float z)
@@ -690,8 +771,9 @@ void Raster::use_tent_quads(unsigned prog, const Frame& f, float z)
     gl.Uniform1f(I.loc(prog, "u_z"), z);
 }
 
-void Raster::draw_tents(const PreparedTile::Data& d, const Frame& f)
+void Raster::draw_tents(const PreparedTile::Data& d, size_t piece, const Frame& f)
 {
+    const auto& p = d.pieces[piece];
     auto& I = *m_impl;
     const auto& gl = I.gl;
     use_tent_quads(I.tent_prog, f, 0.0f);
@@ -703,14 +785,16 @@ void Raster::draw_tents(const PreparedTile::Data& d, const Frame& f)
     gl.ColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
     gl.StencilMask(0xFF);
     gl.StencilOp(GL_KEEP, GL_KEEP, GL_REPLACE);
-    for (const auto& [cls, range] : d.ranges) {
+    for (const auto& [cls, range] : p.ranges) {
         gl.StencilFunc(GL_ALWAYS, cls, 0xFF);
         draw_quads(gl, range.first, size_t(range.second));
     }
 }
 
-void Raster::test_parts(const PreparedTile::Data& d, const Frame& f, bool ssbo, std::vector<uint8_t>& removed)
+void Raster::test_parts(const PreparedTile::Data& d, size_t piece, const Frame& f, bool ssbo,
+                        std::vector<uint8_t>& removed)
 {
+    const auto& p = d.pieces[piece];
     auto& I = *m_impl;
     const auto& gl = I.gl;
     // A fragment fails where another class's region is: stencil != class,
@@ -728,21 +812,23 @@ void Raster::test_parts(const PreparedTile::Data& d, const Frame& f, bool ssbo, 
     gl.Uniform1f(I.loc(I.test_prog, "u_half_width"), 0.5f);
     gl.Uniform1f(I.loc(I.test_prog, "u_end_margin"), float(m_opt.endpoint_margin_px));
     gl.BindVertexArray(I.vao_test);
-    if (d.ids.empty()) {
+    if (p.tests.empty()) {
         return;
     }
     if (ssbo) {
-        for (const auto& [cls, range] : d.sranges) {
+        for (const auto& [cls, range] : p.sranges) {
             gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
             draw_quads(gl, range.first, size_t(range.second));
         }
     } else {
-        read_back_failures(d, f, removed);
+        read_back_failures(d, piece, f, removed);
     }
 }
 
-void Raster::read_back_failures(const PreparedTile::Data& d, const Frame& f, std::vector<uint8_t>& removed)
+void Raster::read_back_failures(const PreparedTile::Data& d, size_t piece, const Frame& f,
+                                std::vector<uint8_t>& removed)
 {
+    const auto& p = d.pieces[piece];
     auto& I = *m_impl;
     const auto& gl = I.gl;
     std::vector<uint8_t> pixels(size_t(f.w) * size_t(f.h) * 4);
@@ -750,10 +836,10 @@ void Raster::read_back_failures(const PreparedTile::Data& d, const Frame& f, std
     for (;;) {
         ++m_stats.readback_rounds;
         gl.Clear(GL_COLOR_BUFFER_BIT);
-        for (const auto& [cls, range] : d.sranges) {
+        for (const auto& [cls, range] : p.sranges) {
             gl.StencilFunc(GL_NOTEQUAL, cls, 0xFF);
             for (GLuint k = range.first; k < range.first + GLuint(range.second); ++k) {
-                if (!removed[k]) {
+                if (!removed[p.tests[k].id]) {
                     draw_quads(gl, k, 1);
                 }
             }
@@ -776,8 +862,9 @@ void Raster::read_back_failures(const PreparedTile::Data& d, const Frame& f, std
     gl.ColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
 }
 
-void Raster::reset_tents(const PreparedTile::Data& d, const Frame& f)
+void Raster::reset_tents(const PreparedTile::Data& d, size_t piece, const Frame& f)
 {
+    const auto& p = d.pieces[piece];
     auto& I = *m_impl;
     const auto& gl = I.gl;
     use_tent_quads(I.reset_prog, f, 1.0f);
@@ -788,8 +875,8 @@ void Raster::reset_tents(const PreparedTile::Data& d, const Frame& f)
     gl.StencilMask(0xFF);
     gl.StencilFunc(GL_ALWAYS, 0, 0xFF);
     gl.StencilOp(GL_REPLACE, GL_REPLACE, GL_REPLACE);
-    if (!d.inst.empty()) {
-        draw_quads(gl, 0, d.inst.size());
+    if (!p.inst.empty()) {
+        draw_quads(gl, 0, p.inst.size());
     }
 }
 
@@ -816,28 +903,28 @@ void Raster::draw(const PreparedTile& prepared, std::vector<uint8_t>& fails)
     if (ssbo) {
         bind_tile_flags(d, base);
     }
-    const auto t0 = std::chrono::steady_clock::now();
-    gl.BindVertexArray(I.vao_tent);
-    gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_tent);
-    I.upload_quads(d.inst, I.tent_vertices);
-    gl.BindVertexArray(I.vao_test);
-    gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_test);
-    I.upload_quads(d.sorted, I.test_vertices);
     std::vector<uint8_t> removed; // Algorithm 5.1: the segments seen failing
     if (!ssbo) {
         removed.assign(d.ids.size(), 0);
     }
-    m_stats.voronoi_seconds += seconds_since(t0);
-    if (d.sx1 > d.sx0 && d.sy1 > d.sy0) {
+    m_stats.one_piece_boxes += d.pieces.size() == 1;
+    for (size_t pi = 0; pi < d.pieces.size(); ++pi) {
+        const auto& p = d.pieces[pi];
         const auto tw = std::chrono::steady_clock::now();
-        const Frame f = bind_frame(d);
-        draw_tents(d, f); // Step 1
+        gl.BindVertexArray(I.vao_tent);
+        gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_tent);
+        I.upload_quads(p.inst);
+        gl.BindVertexArray(I.vao_test);
+        gl.BindBuffer(GL_ARRAY_BUFFER, I.vbo_test);
+        I.upload_quads(p.tests);
+        const Frame f = bind_frame(p.x0, p.y0, p.x1, p.y1);
+        draw_tents(d, pi, f); // Step 1
         m_stats.voronoi_seconds += seconds_since(tw);
         const auto t1 = std::chrono::steady_clock::now();
-        test_parts(d, f, ssbo, removed); // Step 2
+        test_parts(d, pi, f, ssbo, removed); // Step 2
         m_stats.compliance_seconds += seconds_since(t1);
         const auto t2 = std::chrono::steady_clock::now();
-        reset_tents(d, f);
+        reset_tents(d, pi, f);
         m_stats.voronoi_seconds += seconds_since(t2);
     }
     gl.Disable(GL_SCISSOR_TEST);

@@ -28,8 +28,8 @@ struct RasterOptions {
     /// Two framebuffers: a tile's box (where its tested parts are) is drawn in
     /// the small one when it fits, else in the large one. llvmpipe pays per
     /// flush for every 64-pixel bin of the framebuffer, and most boxes are small.
-    uint32_t window_pixels = 1024;   ///< the small framebuffer's width and height
-    uint32_t max_tile_pixels = 4096; ///< the largest tile: the large framebuffer's size
+    uint32_t window_pixels = 1024;   ///< the framebuffer's width and height: larger boxes are drawn in pieces
+    uint32_t max_tile_pixels = 4096; ///< the largest tile
     /// Tents' quads reach this far beyond eps (pixels): every pixel centre
     /// within eps is inside, with room for the float rounding of the
     /// corners (a few units in the last place: under 0.1 pixel for endpoints
@@ -61,7 +61,7 @@ struct TestSegment {
 
 struct RasterStats {
     size_t tiles = 0;
-    size_t small_boxes = 0;           ///< tiles whose tested parts fit in the small framebuffer
+    size_t one_piece_boxes = 0;       ///< tiles whose tested parts fit in the framebuffer (drawn in one piece)
     size_t tent_segments = 0;         ///< drawn: those whose reach touches a tested part
     size_t tent_segments_skipped = 0; ///< of the tiles' chains, too far from every tested part
     size_t drawn_segments = 0;        ///< parts drawn
@@ -128,21 +128,24 @@ class Raster {
     /// With the storage-buffer compliance: the buffer the tile's test
     /// shader writes its flags into, from index `base` of the batch.
     void bind_tile_flags(const PreparedTile::Data& d, size_t base);
-    /// The framebuffer that holds the tile's box, bound, scissored to it.
-    Frame bind_frame(const PreparedTile::Data& d);
+    /// The framebuffer, bound, with the box's piece [ox, ex) x [oy, ey) at its
+    /// corner, scissored to it.
+    Frame bind_frame(int64_t ox, int64_t oy, int64_t ex, int64_t ey);
     /// Use `prog` on the tents' quads as tent_vs places them (the tent and
     /// the reset pass share it, so both cover the same pixels).
     void use_tent_quads(unsigned prog, const Frame& f, float z);
+    /// The passes below draw one piece of the tile's box (PreparedTile::Data::Piece).
     /// Step 1: the lower envelope of the distance tents; the stencil gets each region's class.
-    void draw_tents(const PreparedTile::Data& d, const Frame& f);
+    void draw_tents(const PreparedTile::Data& d, size_t piece, const Frame& f);
     /// Step 2: the shortcut parts under stencil != class; with the
     /// read-back compliance, `removed` gets the parts seen failing.
-    void test_parts(const PreparedTile::Data& d, const Frame& f, bool ssbo, std::vector<uint8_t>& removed);
+    void test_parts(const PreparedTile::Data& d, size_t piece, const Frame& f, bool ssbo,
+                    std::vector<uint8_t>& removed);
     /// The paper's Algorithm 5.1: unique colours, read back, drop the
     /// colours seen, repeat until nothing changes (a part may hide another).
-    void read_back_failures(const PreparedTile::Data& d, const Frame& f, std::vector<uint8_t>& removed);
+    void read_back_failures(const PreparedTile::Data& d, size_t piece, const Frame& f, std::vector<uint8_t>& removed);
     /// Restore the buffer where the tents were drawn: depth 1, stencil 0.
-    void reset_tents(const PreparedTile::Data& d, const Frame& f);
+    void reset_tents(const PreparedTile::Data& d, size_t piece, const Frame& f);
 
     gl::Context& m_ctx;
     RasterOptions m_opt;

@@ -348,8 +348,7 @@ class BorderRule {
                         if (!cbox.intersects(sbox)) {
                             continue;
                         }
-                        const auto rel = segment_relation(a, b, c, d);
-                        meets[qi] = rel != SegmentRelation::disjoint && rel != SegmentRelation::shared_endpoint;
+                        meets[qi] = meet(a, b, c, d) && !meets_subchain(pts, sc, c, d);
                     }
                     if (meets[qi]) {
                         break;
@@ -371,6 +370,32 @@ class BorderRule {
     }
 
   private:
+    static bool meet(GridPoint a, GridPoint b, GridPoint c, GridPoint d) noexcept
+    {
+        const auto rel = segment_relation(a, b, c, d);
+        return rel != SegmentRelation::disjoint && rel != SegmentRelation::shared_endpoint;
+    }
+
+    /// Whether h's shortcut cd meets an original edge of o's subchain under
+    /// o's shortcut sc. h's partition then never takes it: o is in its halo
+    /// (o comes within eps_h of h there) and its exact check tests h's path
+    /// against o's original edges. So o need not give way to it.
+    static bool meets_subchain(std::span<const GridPoint> pts, Shortcut sc, GridPoint c, GridPoint d) noexcept
+    {
+        GridBox cbox;
+        cbox.extend(c);
+        cbox.extend(d);
+        for (uint32_t k = sc.from; k < sc.to; ++k) {
+            GridBox ebox;
+            ebox.extend(pts[k]);
+            ebox.extend(pts[k + 1]);
+            if (ebox.intersects(cbox) && meet(pts[k], pts[k + 1], c, d)) {
+                return true;
+            }
+        }
+        return false;
+    }
+
     const ChainStore& m_store;
     std::span<const double> m_eps;
     const SimplifyOptions& m_opt;
@@ -577,7 +602,9 @@ class StoreSimplifier {
                     continue;
                 }
                 cover_cells(pts[i].x, pts[i].y, pts[i + 1].x, pts[i + 1].y, 0.0, m_cell, 0.0, 0.0,
-                            [&](int64_t x, int64_t y) { grid.emplace_back(m_cells.key(x, y), GridSeg{c, i}); });
+                            [&](int64_t x, int64_t y) {
+                                grid.emplace_back(m_cells.key(x, y), GridSeg{c, i});
+                            });
             }
         }
         m_grid_cells.emplace(grid); // each cell's segments in (chain, index) order

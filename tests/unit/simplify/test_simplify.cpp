@@ -715,12 +715,12 @@ TEST(Simplify, TheFarRuleAndTheNearPartsChangeNothingInEveryMetric)
     }
 }
 
-TEST(Simplify, TheSmallFramebufferChangesNothing)
+TEST(Simplify, DrawingInPiecesChangesNothing)
 {
-    // Tiles of 1024 pixels; with a small framebuffer of 64, the tiles whose
-    // tested parts fit in 64 x 64 pixels are drawn there, shifted (the
-    // star's), the others in the large one (the wiggly grid's, where the
-    // raster bans shortcuts).
+    // Tiles of 1024 pixels; with a framebuffer of 64, a tile whose tested
+    // parts fit in 64 x 64 pixels is drawn in one piece, shifted (the
+    // star's), the others in pieces of 64 (the wiggly grid's, where the
+    // raster bans shortcuts), each with only the tents and tests that reach it.
     RasterOptions one, two;
     one.max_tile_pixels = two.max_tile_pixels = 1024;
     one.window_pixels = 1024;
@@ -738,9 +738,9 @@ TEST(Simplify, TheSmallFramebufferChangesNothing)
         }
     }
     EXPECT_GT(banned, 0U) << "the raster must have had something to find";
-    EXPECT_EQ(large.stats().small_boxes, 0U);
-    EXPECT_GT(small.stats().small_boxes, 0U) << "no tile was drawn in the small framebuffer";
-    EXPECT_LT(small.stats().small_boxes, small.stats().tiles) << "every tile fit: the large one went untested";
+    EXPECT_EQ(large.stats().one_piece_boxes, large.stats().tiles);
+    EXPECT_GT(small.stats().one_piece_boxes, 0U) << "no tile was drawn in one piece";
+    EXPECT_LT(small.stats().one_piece_boxes, small.stats().tiles) << "every tile fit: no tile went in pieces";
 }
 
 TEST(Color, DsaturColoursAnOddCycleWithThreeAndFailsWithTwo)

@@ -170,9 +170,10 @@ TEST(SimplifyReal, FloydIsByteIdenticalAcrossThreadCountsAndModes)
     EXPECT_EQ(one, all(2, false));
     EXPECT_EQ(one, all(2, true));
     EXPECT_EQ(one, all(2, false, false)) << "drawing whole shortcuts, not their near parts";
-    EXPECT_EQ(one, all(2, true, true, &raster_one)) << "every tile in the large framebuffer";
-    EXPECT_EQ(one, all(2, true, true, &raster_tiny)) << "a small framebuffer of 64 pixels";
-    EXPECT_GT(raster.stats().small_boxes, 0U);
-    EXPECT_GT(raster_tiny.stats().small_boxes, 0U);
-    EXPECT_EQ(raster_one.stats().small_boxes, 0U);
+    EXPECT_EQ(one, all(2, true, true, &raster_one)) << "every tile in one framebuffer of the tile's size";
+    EXPECT_EQ(one, all(2, true, true, &raster_tiny)) << "a framebuffer of 64 pixels: most tiles in pieces";
+    EXPECT_GT(raster.stats().one_piece_boxes, 0U);
+    EXPECT_GT(raster_tiny.stats().one_piece_boxes, 0U);
+    EXPECT_LT(raster_tiny.stats().one_piece_boxes, raster_tiny.stats().tiles);
+    EXPECT_EQ(raster_one.stats().one_piece_boxes, raster_one.stats().tiles);
 }
