@@ -85,6 +85,11 @@ std::vector<Key> make_keys()
         section("ingest", "tigerlod-ingest"),
         entry("ingest.halo_m", Type::number, "halo distance in metres: at least twice the largest tolerance", "1000",
               {0, inf}, {}, "halo-m"),
+        entry("ingest.line_tile_km", Type::number,
+              "lines datasets: the side of the square grid tiles the map is cut into, in projected km, each tile "
+              "a partition; a chain is cut where it strays an eighth of a tile out of its tile, and each piece "
+              "belongs to the tile of its first vertex (0: one partition, `all`)",
+              "10", {0, inf}, {}, "line-tile-km"),
         entry("ingest.threads", Type::integer, "worker threads, 0 for all cores; outputs do not depend on it", "0",
               thread_limits, {}, "threads"),
         section("simplify", "tigerlod-color and tigerlod-simplify"),
@@ -123,8 +128,8 @@ std::vector<Key> make_keys()
         entry("simplify.max_classes", Type::integer, "stencil classes per tile; a tile needing more is split", "255",
               integer(2, 255), {}, "max-classes", both),
         entry("simplify.window_pixels", Type::integer,
-              "the small framebuffer's width and height: a tile whose tested parts fit in it is drawn there, the "
-              "others in one of `tile_pixels` (the same result)",
+              "the framebuffer's width and height: a tile whose tested parts' box is larger is drawn in pieces of "
+              "this size (the memory of the raster: 4 bytes a pixel)",
               "1024", integer(8, 16384), {}, "window-pixels", "simplify"),
         entry("simplify.threads", Type::integer, "worker threads, 0 for all cores; outputs do not depend on it", "0",
               thread_limits, {}, "threads", both),
@@ -275,7 +280,8 @@ std::string reference_markdown()
     }
     out << "\nPartitions: level k is partitioned by the units of level k-1 (tracts by\n"
            "county); the top level is one partition, `all`. A chain between two partitions\n"
-           "belongs to the one with the smaller code and is in the other's halo.\n\n"
+           "belongs to the one with the smaller code and is in the other's halo. A `lines`\n"
+           "dataset is partitioned by grid tiles (`ingest.line_tile_km`).\n\n"
            "The Data Tree goes to `out/<name>/tree/` and is updated in place on the next\n"
            "run: tiles whose content did not change are kept, the skeleton is swapped\n"
            "atomically, and tiles the new skeleton no longer names are removed.\n";

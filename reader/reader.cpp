@@ -204,7 +204,8 @@ void traverse(const datatree::Skeleton& s, uint32_t node, const View& view, cons
     }
     const double w = (double(n.box.max_x) - n.box.min_x) / view.units_per_pixel;
     const double h = (double(n.box.max_y) - n.box.min_y) / view.units_per_pixel;
-    if (n.child_count == 0 || w * h < options.node_fraction * double(view.width) * view.height) {
+    // A node without chains (the root of a line layer in tiles) is never drawn itself.
+    if (n.child_count == 0 || (n.chains > 0 && w * h < options.node_fraction * double(view.width) * view.height)) {
         out.push_back({node, select_lod(s, node, view, options)});
         return;
     }

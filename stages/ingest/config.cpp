@@ -203,6 +203,10 @@ IngestConfig load_config(const fs::path& file)
     p.false_northing_m = ctx.get<double>("projection.false_northing", p.false_northing_m);
     p.grid_m = ctx.get<double>("projection.grid_m", p.grid_m);
     cfg.halo_m = ctx.get<double>("ingest.halo_m", cfg.halo_m);
+    cfg.line_tile_km = ctx.get<double>("ingest.line_tile_km", cfg.line_tile_km);
+    if (root["ingest"] && root["ingest"]["line_tile_km"] && d.kind != DatasetSpec::Kind::lines) {
+        ctx.fail(root["ingest"]["line_tile_km"], "'ingest.line_tile_km' applies to lines datasets only");
+    }
     cfg.threads = static_cast<unsigned>(ctx.get<int>("ingest.threads", 0));
     return cfg;
 }

@@ -37,6 +37,9 @@ struct IngestConfig {
     std::vector<LevelSpec> levels;
     ProjectionParams projection;
     double halo_m = 1000.0;
+    /// A lines dataset is cut into square grid tiles of this side, in
+    /// projected kilometres, each a partition; 0: one partition, `all`.
+    double line_tile_km = 10.0;
     unsigned threads = 0; ///< 0: all cores
 };
 

@@ -84,6 +84,8 @@ void IngestStage::add_args(ArgSet& args)
              "      options, and exit without reading features or writing anything");
     config::add_option(args, "ingest.halo_m", &m_halo_m);
     args.describe_default("halo-m", "the config's ingest.halo_m, else 1000");
+    config::add_option(args, "ingest.line_tile_km", &m_line_tile_km);
+    args.describe_default("line-tile-km", "the config's ingest.line_tile_km, else 10");
     config::add_option(args, "ingest.threads", &m_threads);
     args.describe_default("threads", "the config's ingest.threads, else 0");
     args.add("max-problem-samples", &m_max_problem_samples, "problems listed with their location in the report", "N",
@@ -229,6 +231,9 @@ json report_json(const IngestConfig& cfg, const Projection& projection, const Bu
                           {"constraint_points", l.constraint_points},
                           {"neighbour_points", l.neighbour_points},
                           {"computed_internal_points", l.computed_internal_points}});
+        if (cfg.dataset.kind == DatasetSpec::Kind::lines) {
+            levels.back()["tile_cuts"] = l.tile_cuts;
+        }
     }
     report["levels"] = levels;
     json problems = json::object();
@@ -267,6 +272,9 @@ json manifest_json(const IngestConfig& cfg, const Projection& projection, const 
                            {"projection", projection.describe()},
                            {"halo_m", cfg.halo_m},
                            {"max_problem_samples", max_problem_samples}};
+    if (cfg.dataset.kind == DatasetSpec::Kind::lines) {
+        manifest["options"]["line_tile_km"] = cfg.line_tile_km;
+    }
     return manifest;
 }
 
@@ -327,6 +335,12 @@ int IngestStage::run(const StageContext& ctx)
     if (m_halo_m >= 0) {
         cfg.halo_m = m_halo_m;
     }
+    if (m_line_tile_km >= 0) {
+        if (cfg.dataset.kind != DatasetSpec::Kind::lines) {
+            throw usage_error("--line-tile-km applies to lines datasets only");
+        }
+        cfg.line_tile_km = m_line_tile_km;
+    }
     if (m_threads >= 0) {
         cfg.threads = static_cast<unsigned>(m_threads);
     }
@@ -364,6 +378,7 @@ int IngestStage::run(const StageContext& ctx)
     std::atomic<uint64_t> stores{0};
     BuildOptions options;
     options.halo_m = cfg.halo_m;
+    options.line_tile_m = cfg.line_tile_km * 1000.0;
     options.threads = threads;
     options.max_problem_samples = static_cast<size_t>(m_max_problem_samples);
     options.log = &ctx.log;

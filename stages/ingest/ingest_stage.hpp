@@ -26,6 +26,7 @@ class IngestStage final : public Stage {
     bool m_validate = false;
     bool m_whole_map = false;
     double m_halo_m = -1.0;
+    double m_line_tile_km = -1.0;
     int m_threads = -1;
     int m_max_problem_samples = 200;
 }; // class IngestStage

@@ -35,7 +35,10 @@
 namespace tigerlod::ingest {
 
 struct BuildOptions {
-    double halo_m = 1000.0;           ///< halo distance: neighbouring chains within it go into a store's halo
+    double halo_m = 1000.0; ///< halo distance: neighbouring chains within it go into a store's halo
+    /// A line layer is cut into square grid tiles of this side (projected
+    /// metres), each a partition; 0: one partition, `all`.
+    double line_tile_m = 0.0;
     unsigned threads = 1;             ///< worker threads; the output does not depend on it
     size_t max_problem_samples = 200; ///< problems listed with their location in the report
     /// Largest move of a boundary that a snapping repair may make, in metres: one
@@ -60,6 +63,8 @@ struct LevelStats {
     /// Internal points of other partitions' units that a store's own chains
     /// bound, summed over the stores (the partition contract).
     uint64_t neighbour_points = 0;
+    /// A line layer in tiles: the vertices where a chain was cut at a tile's edge.
+    uint64_t tile_cuts = 0;
 };
 
 /// Keep the first `max` samples in their order: by kind, longitude, latitude,

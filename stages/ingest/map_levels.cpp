@@ -55,6 +55,32 @@ std::vector<LevelCodes> level_codes(const RawMap& raw, std::vector<std::pair<uin
 
 namespace {
 
+/// Ids unique within the level: on a collision take the next free value,
+/// in a deterministic order (by id, then by vertices).
+void make_ids_unique(Level& lev)
+{
+    std::vector<uint32_t> order(lev.chains.size());
+    std::iota(order.begin(), order.end(), 0U);
+    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
+        const auto& ca = lev.chains[a];
+        const auto& cb = lev.chains[b];
+        if (ca.id != cb.id) {
+            return ca.id < cb.id;
+        }
+        return std::lexicographical_compare(lev.verts.begin() + static_cast<std::ptrdiff_t>(ca.first),
+                                            lev.verts.begin() + static_cast<std::ptrdiff_t>(ca.first + ca.count),
+                                            lev.verts.begin() + static_cast<std::ptrdiff_t>(cb.first),
+                                            lev.verts.begin() + static_cast<std::ptrdiff_t>(cb.first + cb.count));
+    });
+    for (size_t i = 1; i < order.size(); ++i) {
+        auto& prev = lev.chains[order[i - 1]];
+        auto& cur = lev.chains[order[i]];
+        if (cur.id <= prev.id) {
+            cur.id = prev.id + 1;
+        }
+    }
+}
+
 /// build_level step by step: the boundary edges' incidences at the edge
 /// ends, the walks from every junction and then around the rings left, each
 /// chain in its canonical direction with its class and id, and the ids made
@@ -90,7 +116,7 @@ class LevelWalker {
                 walk(m_g.edge(e).front(), e * 2);
             }
         }
-        make_ids_unique();
+        make_ids_unique(m_lev);
         return std::move(m_lev);
     }
 
@@ -251,33 +277,6 @@ class LevelWalker {
         c.id = min_sid != UINT64_MAX ? min_sid : (splitmix(min_seg ^ splitmix(min_seg2)) >> 1);
     }
 
-    /// Ids unique within the level: on a collision take the next free value,
-    /// in a deterministic order.
-    void make_ids_unique()
-    {
-        auto& lev = m_lev;
-        std::vector<uint32_t> order(lev.chains.size());
-        std::iota(order.begin(), order.end(), 0U);
-        std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
-            const auto& ca = lev.chains[a];
-            const auto& cb = lev.chains[b];
-            if (ca.id != cb.id) {
-                return ca.id < cb.id;
-            }
-            return std::lexicographical_compare(lev.verts.begin() + static_cast<std::ptrdiff_t>(ca.first),
-                                                lev.verts.begin() + static_cast<std::ptrdiff_t>(ca.first + ca.count),
-                                                lev.verts.begin() + static_cast<std::ptrdiff_t>(cb.first),
-                                                lev.verts.begin() + static_cast<std::ptrdiff_t>(cb.first + cb.count));
-        });
-        for (size_t i = 1; i < order.size(); ++i) {
-            auto& prev = lev.chains[order[i - 1]];
-            auto& cur = lev.chains[order[i]];
-            if (cur.id <= prev.id) {
-                cur.id = prev.id + 1;
-            }
-        }
-    }
-
     const Graph& m_g;
     const EdgeEnds& m_ends;
     const LevelCodes& m_lc;
@@ -297,6 +296,90 @@ class LevelWalker {
 Level build_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw, const std::vector<LevelCodes>& lcs, size_t L)
 {
     return LevelWalker(g, ends, raw, lcs[L]).run();
+}
+
+uint64_t cut_at_tiles(Level& lev, const Graph& g, const TileGrid& grid)
+{
+    Level out;
+    out.junctions = lev.junctions;
+    out.junction_degree = lev.junction_degree;
+    out.verts.reserve(lev.verts.size());
+    out.chains.reserve(lev.chains.size());
+    std::vector<uint32_t> cut_vertices;
+    std::vector<size_t> cuts;
+    for (const auto& c : lev.chains) {
+        const auto cv = lev.chain(c);
+        // The vertices where the walk strays out of its current tile.
+        cuts.assign(1, 0);
+        auto tile = grid.tile(g.grid[cv.front()]);
+        for (size_t k = 1; k + 1 < cv.size(); ++k) {
+            if (grid.strays(g.grid[cv[k]], tile)) {
+                cuts.push_back(k);
+                tile = grid.tile(g.grid[cv[k]]);
+            }
+        }
+        const bool ring = cv.front() == cv.back();
+        std::vector<uint32_t> walk(cv.begin(), cv.end());
+        if (ring) {
+            // Around a closed chain the walk goes on past its first vertex:
+            // that one is a cut only if it strays from the tile the walk ends in.
+            if (!grid.strays(g.grid[cv.front()], tile)) {
+                cuts.erase(cuts.begin());
+            }
+            if (cuts.size() < 2) {
+                cuts.assign(1, 0); // whole
+            } else {
+                // From the first cut around to it again.
+                walk.assign(cv.begin() + static_cast<std::ptrdiff_t>(cuts.front()), cv.end() - 1);
+                walk.insert(walk.end(), cv.begin(), cv.begin() + static_cast<std::ptrdiff_t>(cuts.front()) + 1);
+                const size_t shift = cuts.front();
+                for (size_t& k : cuts) {
+                    k -= shift;
+                }
+            }
+        }
+        cuts.push_back(walk.size() - 1);
+        for (size_t p = 0; p + 1 < cuts.size(); ++p) {
+            LevelChain piece = c;
+            piece.first = out.verts.size();
+            piece.count = static_cast<uint32_t>(cuts[p + 1] - cuts[p] + 1);
+            piece.ring = c.ring && cuts.size() == 2;
+            if (p > 0) {
+                piece.id = splitmix(c.id ^ splitmix(p)) >> 1;
+            }
+            if (cuts.size() > 2) {
+                cut_vertices.push_back(walk[cuts[p]]);
+            }
+            out.verts.insert(out.verts.end(), walk.begin() + static_cast<std::ptrdiff_t>(cuts[p]),
+                             walk.begin() + static_cast<std::ptrdiff_t>(cuts[p + 1]) + 1);
+            out.chains.push_back(piece);
+        }
+    }
+    // A cut vertex of an open chain is an end of two pieces; of a ring, too
+    // (the walk starts at one): each is a junction of degree 2.
+    std::sort(cut_vertices.begin(), cut_vertices.end());
+    cut_vertices.erase(std::unique(cut_vertices.begin(), cut_vertices.end()), cut_vertices.end());
+    uint64_t cuts_made = 0;
+    for (uint32_t v : cut_vertices) {
+        if (!std::binary_search(lev.junctions.begin(), lev.junctions.end(), v)) {
+            out.junctions.push_back(v);
+            out.junction_degree.push_back(2);
+            ++cuts_made;
+        }
+    }
+    std::vector<uint32_t> order(out.junctions.size());
+    std::iota(order.begin(), order.end(), 0U);
+    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return out.junctions[a] < out.junctions[b]; });
+    Level sorted;
+    for (uint32_t i : order) {
+        sorted.junctions.push_back(out.junctions[i]);
+        sorted.junction_degree.push_back(out.junction_degree[i]);
+    }
+    out.junctions = std::move(sorted.junctions);
+    out.junction_degree = std::move(sorted.junction_degree);
+    make_ids_unique(out);
+    lev = std::move(out);
+    return cuts_made;
 }
 
 } // namespace tigerlod::ingest::detail

@@ -9,8 +9,10 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <cstdio>
 #include <cmath>
 #include <future>
+#include <map>
 #include <mutex>
 #include <numbers>
 #include <numeric>
@@ -95,6 +97,14 @@ void log_progress(const BuildOptions& options, const std::string& what)
 
 namespace {
 
+/// A tile's partition name: `x<column>y<row>`.
+std::string tile_name(std::pair<int64_t, int64_t> t)
+{
+    char buf[48];
+    std::snprintf(buf, sizeof buf, "x%lldy%lld", static_cast<long long>(t.first), static_cast<long long>(t.second));
+    return buf;
+}
+
 /// A unit's internal point: the given one if strictly inside, else one computed.
 struct UnitPoint {
     std::optional<GridPoint> pt;
@@ -153,10 +163,15 @@ class LevelBuild {
     bool owns_part(uint32_t part) const { return m_L == 0 || owns(m_L - 1, part); }
 
     /// Partitions: the parent unit; a chain between two parents belongs to the smaller code.
+    /// A line layer cut into tiles: the tile holding the chain's smallest vertex.
     void assign_owners()
     {
         const size_t L = m_L;
         const auto& lcs = m_lcs;
+        if (m_raw.kind == RawMap::Kind::lines && m_options.line_tile_m > 0) {
+            assign_tiles();
+            return;
+        }
         if (L > 0) {
             m_part_names = lcs[L - 1].codes;
             m_npart = static_cast<uint32_t>(m_part_names.size());
@@ -170,6 +185,40 @@ class LevelBuild {
             }
             c.owner = o == none ? 0 : o;
         }
+    }
+
+    /// A line layer's grid tiles (TileGrid): squares of `line_tile_m`
+    /// projected metres from the projection's origin, named by column and
+    /// row (`x-3y12`). The chains are first cut where they stray out of their
+    /// tile by more than an eighth of its side (cut_at_tiles), so that a
+    /// tile's own chains lie in it and that margin; each piece belongs to the
+    /// tile of its first vertex. Partitions are the tiles that own a chain,
+    /// in name order.
+    void assign_tiles()
+    {
+        const auto side = static_cast<int64_t>(std::llround(m_options.line_tile_m / m_projection.params().grid_m));
+        if (side < 8) {
+            throw input_error("the line tile side (" + std::to_string(m_options.line_tile_m) +
+                              " m) is below 8 grid steps");
+        }
+        const TileGrid grid{side, side / 8};
+        m_st.tile_cuts = cut_at_tiles(m_lev, m_g, grid);
+        std::map<std::string, std::vector<uint32_t>> by_name;
+        for (uint32_t ci = 0; ci < m_lev.chains.size(); ++ci) {
+            const auto t = grid.tile(m_g.grid[m_lev.chain(m_lev.chains[ci]).front()]);
+            by_name[tile_name(t)].push_back(ci);
+        }
+        m_part_names.clear();
+        for (const auto& [name, chains] : by_name) {
+            for (uint32_t ci : chains) {
+                m_lev.chains[ci].owner = static_cast<uint32_t>(m_part_names.size());
+            }
+            m_part_names.push_back(name);
+        }
+        if (m_part_names.empty()) {
+            m_part_names.emplace_back("all");
+        }
+        m_npart = static_cast<uint32_t>(m_part_names.size());
     }
 
     /// Halo: chains of other partitions that bound one of the partition's

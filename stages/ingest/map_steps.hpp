@@ -256,6 +256,34 @@ std::vector<LevelCodes> level_codes(const RawMap& raw, std::vector<std::pair<uin
 Level build_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw, const std::vector<LevelCodes>& lcs,
                   size_t L);
 
+/// A line layer's grid tiles: squares of `side` grid units from the
+/// projection's origin, column and row by floor division.
+struct TileGrid {
+    int64_t side = 0;   ///< grid units
+    int64_t margin = 0; ///< how far a chain may stray out of its tile before it is cut
+    std::pair<int64_t, int64_t> tile(GridPoint p) const noexcept
+    {
+        auto floor_div = [this](int64_t v) { return v >= 0 ? v / side : -((-v + side - 1) / side); };
+        return {floor_div(p.x), floor_div(p.y)};
+    }
+    /// p lies farther than the margin outside tile t.
+    bool strays(GridPoint p, std::pair<int64_t, int64_t> t) const noexcept
+    {
+        return p.x < t.first * side - margin || p.x >= (t.first + 1) * side + margin ||
+               p.y < t.second * side - margin || p.y >= (t.second + 1) * side + margin;
+    }
+};
+
+/// Cut a line layer's chains where they stray out of their tile: walking a
+/// chain, the vertex that first lies farther than the margin outside the
+/// current tile ends the piece and starts the next, in that vertex's tile.
+/// A ring cut at fewer than two vertices stays whole. The first piece keeps
+/// the chain's id, the others take a hash of it and their rank, and the ids
+/// are then made unique as build_level makes them. The cut vertices become
+/// junctions of degree 2. chain_of_edge is cleared (the pieces do not follow
+/// edges). Returns the number of cuts.
+uint64_t cut_at_tiles(Level& lev, const Graph& g, const TileGrid& grid);
+
 /// Snapping to the grid can push a vertex that lies within a fraction of the
 /// input precision of a segment across it. Where a vertex of a crossing,
 /// touching or overlapping pair is a plain pass-through vertex (degree 2 in the

@@ -66,6 +66,7 @@ struct NodeBuild {
     std::string table;
     std::vector<std::string> lod_payloads;
     double last_error = 0.0;
+    bool tiles = false; ///< the root of a line layer cut into tiles: no chains, no store
 };
 
 /// Where each owned chain of a level lies, by id.
@@ -122,6 +123,16 @@ class TreeBuilder {
         }
         for (uint32_t l = 0; l < m_level_names.size(); ++l) {
             pack_level(l);
+        }
+        if (m_nodes.front().tiles) {
+            auto& root = m_tree.skeleton.nodes.front();
+            datatree::Box box{INT32_MAX, INT32_MAX, INT32_MIN, INT32_MIN};
+            for (uint32_t c = root.first_child; c < root.first_child + root.child_count; ++c) {
+                const auto& b = m_tree.skeleton.nodes[c].box;
+                box = {std::min(box.min_x, b.min_x), std::min(box.min_y, b.min_y), std::max(box.max_x, b.max_x),
+                       std::max(box.max_y, b.max_y)};
+            }
+            root.box = box;
         }
         std::vector<std::vector<std::string>> payloads(m_nodes.size());
         for (size_t i = 0; i < m_nodes.size(); ++i) {
@@ -257,18 +268,37 @@ class TreeBuilder {
         const auto& level_names = m_level_names;
         auto& sk = m_tree.skeleton;
         auto& nodes = m_nodes;
-        if (units[0].size() != 1) {
-            throw input_error(original.string() + ": the top level must have one partition, it has " +
-                              std::to_string(units[0].size()));
+        if (units[0].empty()) {
+            throw input_error(original.string() + "/" + level_names[0] + ": no stores");
         }
-        nodes.push_back({0, units[0].begin()->first, units[0].begin()->second, {}, {}, {}, {}, 0.0});
+        if (units[0].size() == 1) {
+            nodes.push_back({0, units[0].begin()->first, units[0].begin()->second, {}, {}, {}, {}, 0.0});
+        } else {
+            // A top level of several partitions (a line layer cut into
+            // tiles): the root holds no chains, its children are the tiles.
+            if (nlevels != 1) {
+                throw input_error(original.string() + "/" + level_names[0] + ": the top level of a map of " +
+                                  std::to_string(nlevels) + " levels must have one partition, it has " +
+                                  std::to_string(units[0].size()));
+            }
+            nodes.push_back({0, "", {}, {}, {}, {}, {}, 0.0});
+            nodes.front().tiles = true;
+        }
         sk.nodes.push_back({});
         for (size_t i = 0; i < nodes.size(); ++i) {
             const uint32_t l = nodes[i].level;
             auto& n = sk.nodes[i];
             n.level = l;
             n.first_child = static_cast<uint32_t>(nodes.size());
-            if (l + 1 < nlevels) {
+            if (nodes[i].tiles) {
+                for (const auto& [tile, tile_units] : units[0]) {
+                    nodes.push_back({0, tile, tile_units, {}, {}, {}, {}, 0.0});
+                    datatree::Node child;
+                    child.parent = static_cast<uint32_t>(i);
+                    sk.nodes.push_back(child);
+                    ++sk.nodes[i].child_count;
+                }
+            } else if (l + 1 < nlevels) {
                 for (const auto& u : nodes[i].units) {
                     if (auto it = units[l + 1].find(u); it != units[l + 1].end()) {
                         nodes.push_back({l + 1, u, it->second, {}, {}, {}, {}, 0.0});
@@ -286,7 +316,7 @@ class TreeBuilder {
         {
             std::vector<size_t> per_level(nlevels);
             for (const auto& n : nodes) {
-                ++per_level[n.level];
+                per_level[n.level] += n.tiles ? 0 : 1;
             }
             for (uint32_t l = 0; l < nlevels; ++l) {
                 if (per_level[l] != units[l].size()) {
@@ -345,6 +375,10 @@ class TreeBuilder {
             }
             const ChainIndex owned = index_owned(stores, paths);
             parallel_each(at_level.size(), m_options.threads, [&](size_t a) {
+                if (m_nodes[at_level[a]].tiles) {
+                    pack_tiles_root(m_nodes[at_level[a]], sk.nodes[at_level[a]], k);
+                    return;
+                }
                 const auto sit = store_of.find(m_nodes[at_level[a]].partition);
                 if (sit == store_of.end()) {
                     throw input_error(paths.front().parent_path().string() + ": no store for partition " +
@@ -362,6 +396,19 @@ class TreeBuilder {
             m_nodes[i].original = {};
             m_tree.table_bytes += m_nodes[i].table.size();
         }
+    }
+
+    /// The root of a line layer cut into tiles at LOD k: no chains; its box
+    /// (every tile's, set once the tiles are packed) and errors (0) follow.
+    void pack_tiles_root(NodeBuild& nb, datatree::Node& node, size_t k) const
+    {
+        if (k == 0) {
+            node.chains = 0;
+            nb.table = datatree::encode_table({});
+            node.lods.resize(m_lod_eps.size());
+        }
+        node.lods[k] = {};
+        nb.lod_payloads.push_back(datatree::encode_geometry({}, {0, 0}, {m_options.draco_speed}));
     }
 
     /// One node at LOD k from its partition's store (stores[store_index]):

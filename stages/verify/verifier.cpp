@@ -198,6 +198,13 @@ class Verifier {
     }
 
     std::string node_code(uint32_t n) const { return m_sk.strings[m_sk.nodes[n].code]; }
+    /// The root of a line layer cut into tiles: no chains, its children
+    /// the tiles, of its own level. It shows nothing and has no store.
+    bool tiles_root(uint32_t n) const
+    {
+        const auto& node = m_sk.nodes[n];
+        return n == 0 && node.chains == 0 && node.child_count > 0 && m_sk.nodes[node.first_child].level == node.level;
+    }
     /// The chain store partition whose map node `n` shows.
     std::string partition_of(uint32_t n) const { return n == 0 ? std::string("all") : node_code(n); }
 
@@ -241,7 +248,7 @@ class Verifier {
         const std::string& level = m_sk.level_names[l];
         std::vector<uint32_t> nodes;
         for (uint32_t n = 0; n < m_sk.nodes.size(); ++n) {
-            if (m_sk.nodes[n].level == l) {
+            if (m_sk.nodes[n].level == l && !tiles_root(n)) {
                 nodes.push_back(n);
             }
         }

@@ -352,7 +352,7 @@ TEST_F(Cli, ConfigErrors)
     make_tiger();
     expect_failure(
         run("ingest", tiger_config("edges.zip", "faces.zip", "ingest: {halo_m: 5, nope: 1}\n").string() + " " + out()),
-        2, "config.yaml:6: unknown key 'ingest.nope' (known: halo_m, threads)");
+        2, "config.yaml:6: unknown key 'ingest.nope' (known: halo_m, line_tile_km, threads)");
     expect_failure(run("ingest", config("dataset: {kind: tiger\n").string() + " " + out()), 2, "not valid YAML");
     expect_failure(run("ingest", config("dataset: {kind: raster}\n").string() + " " + out()), 2,
                    "'dataset.kind' must be tiger, polygons or lines, got 'raster'");
@@ -361,6 +361,11 @@ TEST_F(Cli, ConfigErrors)
         "'projection.grid_m' must be in");
     expect_failure(run("ingest", tiger_config().string() + " " + out() + " --halo-m -3"), 2,
                    "option '--halo-m' must be >= 0");
+    expect_failure(
+        run("ingest", tiger_config("edges.zip", "faces.zip", "ingest: {line_tile_km: 5}\n").string() + " " + out()), 2,
+        "config.yaml:6: 'ingest.line_tile_km' applies to lines datasets only");
+    expect_failure(run("ingest", tiger_config().string() + " " + out() + " --line-tile-km 5"), 2,
+                   "--line-tile-km applies to lines datasets only");
 }
 
 TEST_F(Cli, DumpRejectsACorruptStore)

@@ -5,6 +5,7 @@
 // the gaps between strips are narrower than a pixel), and verify must find
 // nothing. Seeds 1-3 by default; TIGERLOD_PROPERTY_SEEDS=A-B sweeps others
 // (scripts/property-sweep).
+#include "../support/adversarial_lines.hpp"
 #include "../support/adversarial_map.hpp"
 #include "../support/run_tool.hpp"
 
@@ -14,10 +15,13 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <map>
+#include <sstream>
 #include <string>
 #include <unistd.h>
 
 namespace fs = std::filesystem;
+using tigerlod::testing::AdversarialLines;
 using tigerlod::testing::AdversarialMap;
 using json = nlohmann::json;
 
@@ -113,4 +117,79 @@ TEST(Partitions, AdversarialMapsVerifyCleanHoweverPartitioned)
     EXPECT_GT(neighbour_points, 0U);
     std::printf("%zu of %zu runs clean; %zu neighbour points; %zu shortcuts banned by the border rule\n", clean, runs,
                 neighbour_points, border_bans);
+}
+
+TEST(Partitions, LineLayersInTilesVerifyClean)
+{
+    // Nests of rings a few metres apart and bundles of near-parallel lines
+    // (tests/support/adversarial_lines.hpp), whole and cut into tiles of 400
+    // and 250 m (a 900 m hill spans several), at both ladders.
+    const auto [first, last] = seed_range();
+    const fs::path dir = fs::temp_directory_path() / ("tigerlod-lines-" + std::to_string(::getpid()));
+    const std::pair<const char*, const char*> tilings[] = {{"whole", "0"}, {"400 m", "0.4"}, {"250 m", "0.25"}};
+    size_t runs = 0, clean = 0;
+    std::map<std::string, uint64_t> out_vertices, cuts; // per tiling, over seeds, ladders and tolerances
+    for (uint64_t seed = first; seed <= last; ++seed) {
+        const AdversarialLines map(seed);
+        for (const Ladder& ladder : ladders) {
+            for (const auto& [tname, km] : tilings) {
+                const std::string what = "seed " + std::to_string(seed) + ", " + tname + ", " + ladder.name + " ladder";
+                SCOPED_TRACE(what);
+                fs::remove_all(dir);
+                fs::create_directories(dir);
+                std::ofstream(dir / "map.geojson") << map.geojson();
+                std::ofstream(dir / "config.yaml") << "name: lines\ndataset: {kind: lines, inputs: [map.geojson]}\n"
+                                                      "ingest: {halo_m: 150, line_tile_km: "
+                                                   << km << "}\n";
+                const std::string d = dir.string();
+                const fs::path log = dir / "log";
+                ASSERT_EQ(run("ingest", d + "/config.yaml " + d + "/ingest --threads 2", log), 0) << slurp(log);
+                const json ingest = json::parse(slurp(dir / "ingest" / "ingest-report.json"));
+                ASSERT_EQ(ingest["problems"]["crossings"], 0) << "the generator made a map that is not planar";
+                ASSERT_EQ(ingest["problems"]["touches"], 0) << "the generator made a map that is not planar";
+                const json& level = ingest["levels"][0];
+                if (std::string(km) != "0") {
+                    EXPECT_GT(level["partitions"].get<size_t>(), 4U);
+                    EXPECT_GT(level["tile_cuts"].get<size_t>(), 0U);
+                }
+                ASSERT_EQ(run("color", std::string(ladder.options) + " " + d + "/ingest " + d + "/color", log), 0)
+                    << slurp(log);
+                ASSERT_EQ(run("simplify",
+                              std::string(ladder.options) + " --threads 2 --colors " + d + "/color " + d + "/ingest " +
+                                  d + "/simp",
+                              log),
+                          0)
+                    << slurp(log);
+                ASSERT_EQ(run("pack", d + "/ingest " + d + "/simp " + d + "/tree", log), 0) << slurp(log);
+                const int verified = run("verify", d + "/tree " + d + "/ingest " + d + "/verify", log);
+                EXPECT_EQ(verified, 0) << slurp(log);
+                ++runs;
+                clean += verified == 0;
+                // The tree: a root without chains over one node per tile.
+                ASSERT_EQ(run("dump", d + "/tree", dir / "dump"), 0) << slurp(dir / "dump");
+                const std::string dump = slurp(dir / "dump");
+                const size_t root = dump.find("\nnode 0 ");
+                ASSERT_NE(root, std::string::npos);
+                const std::string root_line = dump.substr(root + 1, dump.find('\n', root + 1) - root - 1);
+                if (std::string(km) != "0") {
+                    EXPECT_NE(root_line.find(" chains=0 "), std::string::npos) << root_line;
+                    EXPECT_NE(root_line.find(" children=1.." + std::to_string(level["partitions"].get<size_t>())),
+                              std::string::npos)
+                        << root_line;
+                }
+                // What the tiles cost (BENCHMARKS.md measures it on real contours).
+                const json simp = json::parse(slurp(dir / "simp" / "simplify-report.json"));
+                for (const auto& t : simp["tolerances"]) {
+                    out_vertices[tname] += t["output_vertices"].get<uint64_t>();
+                }
+                cuts[tname] += level["tile_cuts"].is_null() ? 0 : level["tile_cuts"].get<uint64_t>();
+            }
+        }
+    }
+    fs::remove_all(dir);
+    std::printf("%zu of %zu line-layer runs clean; output vertices whole %llu, 400 m tiles %llu (%llu cuts), "
+                "250 m tiles %llu (%llu cuts)\n",
+                clean, runs, static_cast<unsigned long long>(out_vertices["whole"]),
+                static_cast<unsigned long long>(out_vertices["400 m"]), static_cast<unsigned long long>(cuts["400 m"]),
+                static_cast<unsigned long long>(out_vertices["250 m"]), static_cast<unsigned long long>(cuts["250 m"]));
 }

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <mutex>
 #include <random>
+#include <set>
 #include <tuple>
 #include <sstream>
 
@@ -491,4 +492,132 @@ TEST(MapBuilder, IdenticalLineworkInALineLayerBecomesOneChain)
     EXPECT_EQ(b.result.problems.at("duplicate_segments"), 3U);
     EXPECT_EQ(b.result.problems.at("overlaps"), 0U);
     EXPECT_EQ(describe(b.store("lines")), (std::vector<std::string>{"| 0,0 1,0 2,0", "| 2,-2 2,0", "| 2,0 3,0"}));
+}
+
+namespace {
+
+/// A chain as "x,y x,y ..." in map units (searched over a wider range than describe()).
+std::string points_of(const chains::ChainStore& s, const chains::ChainInfo& c)
+{
+    std::ostringstream o;
+    for (GridPoint p : s.chain_points(c)) {
+        bool found = false;
+        for (int x = -6; x <= 9 && !found; ++x) {
+            for (int y = -6; y <= 9 && !found; ++y) {
+                if (gp(x, y) == p) {
+                    o << (o.tellp() > 0 ? " " : "") << x << "," << y;
+                    found = true;
+                }
+            }
+        }
+        if (!found) {
+            o << " ?";
+        }
+    }
+    return o.str();
+}
+
+/// Every store's chains: "partition: [halo ]points", sorted.
+std::vector<std::string> tiled(const Built& b)
+{
+    std::vector<std::string> out;
+    for (const auto& s : b.stores) {
+        for (const auto& c : s.chains) {
+            out.push_back(s.partition + ": " + ((c.flags & chains::chain_halo) ? "halo " : "") + points_of(s, c));
+        }
+    }
+    std::sort(out.begin(), out.end());
+    return out;
+}
+
+} // namespace
+
+TEST(MapBuilder, ALineLayerIsCutIntoGridTilesWhereItsChainsStrayOut)
+{
+    // Tiles of 1 km: the central meridian (-96, map x = 0) is the edge between
+    // columns -1 and 0, and a chain may stray 125 m (an eighth) out of its
+    // tile before it is cut; a map unit is about 85 m east, 111 m north.
+    //
+    //   y=8..9  a ring from x=-1 that strays east once (at 2,8) and comes
+    //           back within the margin: one cut, so it stays whole
+    //   y=5..7  a line zigzagging across the edge within the margin: whole
+    //   y=4..5  a ring inside column 0
+    //   y=3     a line from x=-3 to 6: cut at 2,3, where it strays
+    //   y=1..2  a ring across the edge: cut twice, two pieces
+    auto make = [] {
+        RawMap m;
+        m.kind = RawMap::Kind::lines;
+        m.level_names = {"lines"};
+        m.files = {"hand"};
+        auto line = [&](std::vector<std::pair<int, int>> pts, uint64_t id) {
+            std::vector<LonLatE6> v;
+            for (auto [x, y] : pts) {
+                v.push_back(ll(x, y));
+            }
+            m.add_polyline(v, no_unit, no_unit, 0, 0, {0, static_cast<int64_t>(id)});
+        };
+        line({{-3, 3}, {-2, 3}, {-1, 3}, {0, 3}, {1, 3}, {2, 3}, {3, 3}, {4, 3}, {5, 3}, {6, 3}}, 0);
+        line({{-1, 5}, {1, 5}, {1, 6}, {-1, 6}, {-1, 7}, {1, 7}}, 1);
+        line({{-3, 1}, {4, 1}, {4, 2}, {-3, 2}, {-3, 1}}, 2);
+        line({{5, 4}, {6, 4}, {6, 5}, {5, 5}, {5, 4}}, 3);
+        line({{-1, 8}, {2, 8}, {1, 9}, {-1, 9}, {-1, 8}}, 4);
+        return m;
+    };
+    BuildOptions o;
+    o.halo_m = 100;
+    o.threads = 2;
+    o.line_tile_m = 1000;
+    const Built b = build(make(), o);
+    // Every point lies in one row of tiles (the test's premise).
+    const int64_t side = std::llround(1000 / proj().params().grid_m);
+    auto row = [&](int y) { return gp(0, y).y >= 0 ? gp(0, y).y / side : -((-gp(0, y).y + side - 1) / side); };
+    ASSERT_EQ(row(1), row(9));
+    const std::string west = "x-1y" + std::to_string(row(1)), east = "x0y" + std::to_string(row(1));
+    // The line is cut at 2,3; the ring at 1..2 walks -3,1 -3,2 4,2 (strays:
+    // cut) 4,1 and back to -3,1, which strays from the east tile: cut too.
+    // The ring at 8..9 strays once, at 2,8, and its first vertex -1,8 lies
+    // within the east tile's margin: whole, in the tile of its first vertex.
+    EXPECT_EQ(tiled(b), (std::vector<std::string>{
+                            west + ": -1,5 1,5 1,6 -1,6 -1,7 1,7",
+                            west + ": -1,8 -1,9 1,9 2,8 -1,8",
+                            west + ": -3,1 -3,2 4,2",
+                            west + ": -3,3 -2,3 -1,3 0,3 1,3 2,3",
+                            west + ": halo 2,3 3,3 4,3 5,3 6,3",
+                            west + ": halo 4,2 4,1 -3,1",
+                            east + ": 2,3 3,3 4,3 5,3 6,3",
+                            east + ": 4,2 4,1 -3,1",
+                            east + ": 5,4 5,5 6,5 6,4 5,4",
+                            east + ": halo -3,1 -3,2 4,2",
+                            east + ": halo -3,3 -2,3 -1,3 0,3 1,3 2,3",
+                        }));
+    ASSERT_EQ(b.result.levels.size(), 1U);
+    EXPECT_EQ(b.result.levels[0].partitions, 2U);
+    EXPECT_EQ(b.result.levels[0].chains, 7U);
+    EXPECT_EQ(b.result.levels[0].tile_cuts, 3U);
+    // Ids unique over the level; the cut vertices are junctions of degree 2.
+    std::set<uint64_t> ids;
+    size_t own = 0;
+    for (const auto& s : b.stores) {
+        for (const auto& c : s.chains) {
+            if ((c.flags & chains::chain_halo) == 0) {
+                ids.insert(c.id);
+                ++own;
+            }
+        }
+    }
+    EXPECT_EQ(ids.size(), own);
+    size_t degree_two = 0;
+    for (const auto& s : b.stores) {
+        for (const auto& j : s.junctions) {
+            degree_two += j.degree == 2;
+        }
+    }
+    EXPECT_EQ(degree_two, 6U) << "each of the 3 cut vertices ends an own chain in both tiles";
+    // The same map without tiles: one partition, `all`, of the five chains whole.
+    o.line_tile_m = 0;
+    const Built whole = build(make(), o);
+    ASSERT_EQ(whole.stores.size(), 1U);
+    EXPECT_EQ(whole.stores[0].partition, "all");
+    EXPECT_EQ(whole.stores[0].chains.size(), 5U);
+    EXPECT_EQ(whole.result.levels[0].tile_cuts, 0U);
 }

@@ -97,6 +97,10 @@ TEST(Front, Algorithm61)
     FrontOptions big;
     big.node_fraction = 1.5;
     EXPECT_EQ(select_front(s, whole(), big), (std::vector<FrontItem>{{0, 1}}));
+    // A root without chains (a line layer in tiles) is never drawn itself: its children are.
+    auto tiles_root = s;
+    tiles_root.nodes[0].chains = 0;
+    EXPECT_EQ(select_front(tiles_root, whole(), big), (std::vector<FrontItem>{{1, 1}, {2, 1}, {3, 1}, {4, 1}}));
     // Zoomed into the lower-left quadrant: only its subtree survives culling,
     // and at this scale its children (leaves) are drawn at LOD 0.
     View v{side / 4.0 - 100, side / 4.0 - 100, double(side) / 2 / 512 / 8, 512, 512};
