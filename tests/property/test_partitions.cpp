@@ -60,6 +60,32 @@ const std::pair<AdversarialMap::Partitioning, const char*> partitionings[] = {
     {AdversarialMap::Partitioning::blocks, "blocks"},
     {AdversarialMap::Partitioning::scattered, "scattered"}};
 
+/// DIR/ingest through color, simplify (with the colours), pack and verify at
+/// `ladder`: verify's exit code, or -2 after a test failure naming the stage
+/// that failed before it. `border_bans` gets the border rule's bans.
+int color_to_verify(const fs::path& dir, const Ladder& ladder, size_t& border_bans)
+{
+    const std::string d = dir.string();
+    const fs::path log = dir / "log";
+    const std::string opts = ladder.options;
+    for (const auto& [tool, args] :
+         {std::pair<std::string, std::string>{"color", opts + " " + d + "/ingest " + d + "/color"},
+          {"simplify", opts + " --threads 2 --colors " + d + "/color " + d + "/ingest " + d + "/simp"},
+          {"pack", d + "/ingest " + d + "/simp " + d + "/tree"}}) {
+        if (run(tool, args, log) != 0) {
+            ADD_FAILURE() << tool << " failed: " << slurp(log);
+            return -2;
+        }
+    }
+    const json simp = json::parse(slurp(dir / "simp" / "simplify-report.json"));
+    for (const auto& t : simp["tolerances"]) {
+        border_bans += t["banned"]["border"].get<size_t>();
+    }
+    const int verified = run("verify", d + "/tree " + d + "/ingest " + d + "/verify", log);
+    EXPECT_EQ(verified, 0) << slurp(log);
+    return verified;
+}
+
 } // namespace
 
 TEST(Partitions, AdversarialMapsVerifyCleanHoweverPartitioned)
@@ -91,21 +117,8 @@ TEST(Partitions, AdversarialMapsVerifyCleanHoweverPartitioned)
                     neighbour_points += l["neighbour_points"].get<size_t>();
                 }
                 ASSERT_EQ(ingest["problems"]["crossings"], 0) << "the generator made a map that is not planar";
-                ASSERT_EQ(run("color", std::string(ladder.options) + " " + d + "/ingest " + d + "/color", log), 0)
-                    << slurp(log);
-                ASSERT_EQ(run("simplify",
-                              std::string(ladder.options) + " --threads 2 --colors " + d + "/color " + d + "/ingest " +
-                                  d + "/simp",
-                              log),
-                          0)
-                    << slurp(log);
-                const json simp = json::parse(slurp(dir / "simp" / "simplify-report.json"));
-                for (const auto& t : simp["tolerances"]) {
-                    border_bans += t["banned"]["border"].get<size_t>();
-                }
-                ASSERT_EQ(run("pack", d + "/ingest " + d + "/simp " + d + "/tree", log), 0) << slurp(log);
-                const int verified = run("verify", d + "/tree " + d + "/ingest " + d + "/verify", log);
-                EXPECT_EQ(verified, 0) << slurp(log);
+                const int verified = color_to_verify(dir, ladder, border_bans);
+                ASSERT_NE(verified, -2);
                 ++runs;
                 clean += verified == 0;
             }
@@ -127,7 +140,7 @@ TEST(Partitions, LineLayersInTilesVerifyClean)
     const auto [first, last] = seed_range();
     const fs::path dir = fs::temp_directory_path() / ("tigerlod-lines-" + std::to_string(::getpid()));
     const std::pair<const char*, const char*> tilings[] = {{"whole", "0"}, {"400 m", "0.4"}, {"250 m", "0.25"}};
-    size_t runs = 0, clean = 0;
+    size_t runs = 0, clean = 0, border_bans = 0;
     std::map<std::string, uint64_t> out_vertices, cuts; // per tiling, over seeds, ladders and tolerances
     for (uint64_t seed = first; seed <= last; ++seed) {
         const AdversarialLines map(seed);
@@ -152,17 +165,8 @@ TEST(Partitions, LineLayersInTilesVerifyClean)
                     EXPECT_GT(level["partitions"].get<size_t>(), 4U);
                     EXPECT_GT(level["tile_cuts"].get<size_t>(), 0U);
                 }
-                ASSERT_EQ(run("color", std::string(ladder.options) + " " + d + "/ingest " + d + "/color", log), 0)
-                    << slurp(log);
-                ASSERT_EQ(run("simplify",
-                              std::string(ladder.options) + " --threads 2 --colors " + d + "/color " + d + "/ingest " +
-                                  d + "/simp",
-                              log),
-                          0)
-                    << slurp(log);
-                ASSERT_EQ(run("pack", d + "/ingest " + d + "/simp " + d + "/tree", log), 0) << slurp(log);
-                const int verified = run("verify", d + "/tree " + d + "/ingest " + d + "/verify", log);
-                EXPECT_EQ(verified, 0) << slurp(log);
+                const int verified = color_to_verify(dir, ladder, border_bans);
+                ASSERT_NE(verified, -2);
                 ++runs;
                 clean += verified == 0;
                 // The tree: a root without chains over one node per tile.
@@ -179,6 +183,7 @@ TEST(Partitions, LineLayersInTilesVerifyClean)
                 }
                 // What the tiles cost (BENCHMARKS.md measures it on real contours).
                 const json simp = json::parse(slurp(dir / "simp" / "simplify-report.json"));
+
                 for (const auto& t : simp["tolerances"]) {
                     out_vertices[tname] += t["output_vertices"].get<uint64_t>();
                 }
@@ -187,9 +192,9 @@ TEST(Partitions, LineLayersInTilesVerifyClean)
         }
     }
     fs::remove_all(dir);
-    std::printf("%zu of %zu line-layer runs clean; output vertices whole %llu, 400 m tiles %llu (%llu cuts), "
-                "250 m tiles %llu (%llu cuts)\n",
-                clean, runs, static_cast<unsigned long long>(out_vertices["whole"]),
+    std::printf("%zu of %zu line-layer runs clean; %zu shortcuts banned by the border rule; output vertices whole "
+                "%llu, 400 m tiles %llu (%llu cuts), 250 m tiles %llu (%llu cuts)\n",
+                clean, runs, border_bans, static_cast<unsigned long long>(out_vertices["whole"]),
                 static_cast<unsigned long long>(out_vertices["400 m"]), static_cast<unsigned long long>(cuts["400 m"]),
                 static_cast<unsigned long long>(out_vertices["250 m"]), static_cast<unsigned long long>(cuts["250 m"]));
 }

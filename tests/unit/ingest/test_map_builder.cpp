@@ -71,6 +71,27 @@ Built build(RawMap raw, double halo_m = 1000)
     return build(std::move(raw), o);
 }
 
+/// A chain's points as "x,y x,y ..." in map units from lo to hi ("?" for one off them).
+std::string map_points(const chains::ChainStore& s, const chains::ChainInfo& c, int lo, int hi)
+{
+    std::ostringstream o;
+    for (GridPoint p : s.chain_points(c)) {
+        bool found = false;
+        for (int x = lo; x <= hi && !found; ++x) {
+            for (int y = lo; y <= hi && !found; ++y) {
+                if (gp(x, y) == p) {
+                    o << (o.tellp() > 0 ? " " : "") << x << "," << y;
+                    found = true;
+                }
+            }
+        }
+        if (!found) {
+            o << (o.tellp() > 0 ? " ?" : "?");
+        }
+    }
+    return o.str();
+}
+
 /// A chain as "LEFT|RIGHT x,y x,y ..." in map units, for exact comparisons.
 std::vector<std::string> describe(const chains::ChainStore& s, bool halo = false)
 {
@@ -79,23 +100,7 @@ std::vector<std::string> describe(const chains::ChainStore& s, bool halo = false
         if (((c.flags & chains::chain_halo) != 0) != halo) {
             continue;
         }
-        std::ostringstream o;
-        o << s.strings[c.left] << "|" << s.strings[c.right];
-        for (GridPoint p : s.chain_points(c)) {
-            bool found = false;
-            for (int x = -3; x <= 6 && !found; ++x) {
-                for (int y = -3; y <= 6 && !found; ++y) {
-                    if (gp(x, y) == p) {
-                        o << " " << x << "," << y;
-                        found = true;
-                    }
-                }
-            }
-            if (!found) {
-                o << " ?";
-            }
-        }
-        out.push_back(o.str());
+        out.push_back(s.strings[c.left] + "|" + s.strings[c.right] + " " + map_points(s, c, -3, 6));
     }
     std::sort(out.begin(), out.end());
     return out;
@@ -496,34 +501,14 @@ TEST(MapBuilder, IdenticalLineworkInALineLayerBecomesOneChain)
 
 namespace {
 
-/// A chain as "x,y x,y ..." in map units (searched over a wider range than describe()).
-std::string points_of(const chains::ChainStore& s, const chains::ChainInfo& c)
-{
-    std::ostringstream o;
-    for (GridPoint p : s.chain_points(c)) {
-        bool found = false;
-        for (int x = -6; x <= 9 && !found; ++x) {
-            for (int y = -6; y <= 9 && !found; ++y) {
-                if (gp(x, y) == p) {
-                    o << (o.tellp() > 0 ? " " : "") << x << "," << y;
-                    found = true;
-                }
-            }
-        }
-        if (!found) {
-            o << " ?";
-        }
-    }
-    return o.str();
-}
-
 /// Every store's chains: "partition: [halo ]points", sorted.
 std::vector<std::string> tiled(const Built& b)
 {
     std::vector<std::string> out;
     for (const auto& s : b.stores) {
         for (const auto& c : s.chains) {
-            out.push_back(s.partition + ": " + ((c.flags & chains::chain_halo) ? "halo " : "") + points_of(s, c));
+            out.push_back(s.partition + ": " + ((c.flags & chains::chain_halo) ? "halo " : "") +
+                          map_points(s, c, -6, 9));
         }
     }
     std::sort(out.begin(), out.end());
