@@ -116,6 +116,16 @@ void edge(RawMap& m, std::vector<LonLatE6> pts, uint32_t l, uint32_t r, uint64_t
     m.add_polyline(pts, l, r, 0, tlid, {0, static_cast<int64_t>(tlid)});
 }
 
+/// An empty line layer (level "lines"), to be filled with add_polyline.
+RawMap line_map()
+{
+    RawMap m;
+    m.kind = RawMap::Kind::lines;
+    m.level_names = {"lines"};
+    m.files = {"hand"};
+    return m;
+}
+
 /// A one-level polygon map (level "l") of `units`, to be filled by ring().
 RawMap polygon_map(std::vector<RawUnit> units)
 {
@@ -346,10 +356,7 @@ TEST(MapBuilder, SnapRoundsHalfAwayFromZeroExactlyAsLlround)
 
 TEST(MapBuilder, SnappingMergesNearPointsAndSpikesAreRepaired)
 {
-    RawMap m;
-    m.kind = RawMap::Kind::lines;
-    m.level_names = {"lines"};
-    m.files = {"hand"};
+    RawMap m = line_map();
     // 0,0 then a point 0.3 micro-degrees away (snaps onto it), then a p-q-p spike at 2,0.
     LonLatE6 near = snap_e6(-96.0 + 0.3e-6, 40.0);
     m.add_polyline(std::vector<LonLatE6>{ll(0, 0), near, ll(1, 0), ll(2, 0), ll(2, 1), ll(2, 0), ll(3, 0)}, no_unit,
@@ -365,10 +372,7 @@ TEST(MapBuilder, DistinctPointsThatRoundOntoOneGridPointBecomeOneVertexOnACoarse
     // Line b ends one micro-degree (11 cm) north of a vertex of line a.
     const LonLatE6 end{ll(1, 0).lon, ll(1, 0).lat + 1};
     auto map = [&] {
-        RawMap m;
-        m.kind = RawMap::Kind::lines;
-        m.level_names = {"lines"};
-        m.files = {"hand"};
+        RawMap m = line_map();
         m.add_polyline(std::vector<LonLatE6>{ll(0, 0), ll(1, 0), ll(2, 0)}, no_unit, no_unit, 0, 0, {0, 0});
         m.add_polyline(std::vector<LonLatE6>{ll(1, 1), end}, no_unit, no_unit, 0, 0, {0, 1});
         return m;
@@ -391,10 +395,7 @@ TEST(MapBuilder, DistinctPointsThatRoundOntoOneGridPointBecomeOneVertexOnACoarse
 
 TEST(MapBuilder, CrossingsTouchesAndOverlapsAreFoundAndMarked)
 {
-    RawMap m;
-    m.kind = RawMap::Kind::lines;
-    m.level_names = {"lines"};
-    m.files = {"hand"};
+    RawMap m = line_map();
     auto line = [&](std::vector<LonLatE6> p, int64_t f) { m.add_polyline(p, no_unit, no_unit, 0, 0, {0, f}); };
     line({ll(0, 0), ll(2, 2)}, 0); // X with the next
     line({ll(0, 2), ll(2, 0)}, 1);
@@ -453,10 +454,7 @@ TEST(MapBuilder, SnapRepairDropsAPassThroughVertexWithinThePrecisionOnly)
     //   |   \ .
     //        W1
     auto make = [] {
-        RawMap m;
-        m.kind = RawMap::Kind::lines;
-        m.level_names = {"lines"};
-        m.files = {"hand"};
+        RawMap m = line_map();
         const LonLatE6 v = ll(0, 2);
         m.add_polyline(std::vector<LonLatE6>{ll(0, 0), ll(0, 4)}, no_unit, no_unit, 0, 0, {0, 0});
         m.add_polyline(std::vector<LonLatE6>{{v.lon - 1, v.lat - 1000}, v, {v.lon - 1, v.lat + 1000}}, no_unit, no_unit,
@@ -486,10 +484,7 @@ TEST(MapBuilder, IdenticalLineworkInALineLayerBecomesOneChain)
     //   0,0 --- 1,0 --- 2,0 --- 3,0      (twice)
     //                    |
     //                   2,-2
-    RawMap m;
-    m.kind = RawMap::Kind::lines;
-    m.level_names = {"lines"};
-    m.files = {"hand"};
+    RawMap m = line_map();
     m.add_polyline(std::vector<LonLatE6>{ll(0, 0), ll(1, 0), ll(2, 0), ll(3, 0)}, no_unit, no_unit, 0, 0, {0, 0});
     m.add_polyline(std::vector<LonLatE6>{ll(3, 0), ll(2, 0), ll(1, 0), ll(0, 0)}, no_unit, no_unit, 0, 0, {0, 1});
     m.add_polyline(std::vector<LonLatE6>{ll(2, -2), ll(2, 0)}, no_unit, no_unit, 0, 0, {0, 2});
@@ -530,10 +525,7 @@ TEST(MapBuilder, ALineLayerIsCutIntoGridTilesWhereItsChainsStrayOut)
     //   y=3     a line from x=-3 to 6: cut at 2,3, where it strays
     //   y=1..2  a ring across the edge: cut twice, two pieces
     auto make = [] {
-        RawMap m;
-        m.kind = RawMap::Kind::lines;
-        m.level_names = {"lines"};
-        m.files = {"hand"};
+        RawMap m = line_map();
         auto line = [&](std::vector<std::pair<int, int>> pts, uint64_t id) {
             std::vector<LonLatE6> v;
             for (auto [x, y] : pts) {
