@@ -318,9 +318,10 @@ uint64_t cut_at_tiles(Level& lev, const Graph& g, const TileGrid& grid)
                 tile = grid.tile(g.grid[cv[k]]);
             }
         }
-        const bool ring = cv.front() == cv.back();
+        // A ring (closed, no junction on it) may be cut anywhere; a chain
+        // closed at a junction keeps that junction as its ends, as an open one.
         std::vector<uint32_t> walk(cv.begin(), cv.end());
-        if (ring) {
+        if (c.ring) {
             // Around a closed chain the walk goes on past its first vertex:
             // that one is a cut only if it strays from the tile the walk ends in.
             if (!grid.strays(g.grid[cv.front()], tile)) {

@@ -193,7 +193,7 @@ class LevelBuild {
     /// tile by more than an eighth of its side (cut_at_tiles), so that a
     /// tile's own chains lie in it and that margin; each piece belongs to the
     /// tile of its first vertex. Partitions are the tiles that own a chain,
-    /// in name order.
+    /// in name order; a layer within one tile is one partition, `all`.
     void assign_tiles()
     {
         const auto side = static_cast<int64_t>(std::llround(m_options.line_tile_m / m_projection.params().grid_m));
@@ -215,8 +215,8 @@ class LevelBuild {
             }
             m_part_names.push_back(name);
         }
-        if (m_part_names.empty()) {
-            m_part_names.emplace_back("all");
+        if (m_part_names.size() <= 1) {
+            m_part_names.assign(1, "all"); // one tile: the layer is one partition, as without tiles
         }
         m_npart = static_cast<uint32_t>(m_part_names.size());
     }

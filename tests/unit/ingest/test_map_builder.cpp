@@ -598,3 +598,56 @@ TEST(MapBuilder, ALineLayerIsCutIntoGridTilesWhereItsChainsStrayOut)
     EXPECT_EQ(whole.stores[0].chains.size(), 5U);
     EXPECT_EQ(whole.result.levels[0].tile_cuts, 0U);
 }
+
+TEST(MapBuilder, ALineLayersTilesKeepJunctionsAsEndsAndOneTileIsAll)
+{
+    // A loop closed at a junction J = 1,4 (a tail 1,4 - 3,4 ends there too)
+    // that strays west and comes back: cut where it strays, and J stays the
+    // end of its first and last pieces, never inside one.
+    //   -4,6 ------------------ 4,6
+    //    |                       |
+    //    |                      4,5
+    //   -4,4 ---------- J=1,4 --/--- 3,4
+    auto make = [](bool west) {
+        RawMap m = line_map();
+        auto line = [&](std::vector<std::pair<int, int>> pts, int64_t id) {
+            std::vector<LonLatE6> v;
+            for (auto [x, y] : pts) {
+                v.push_back(ll(x, y));
+            }
+            m.add_polyline(v, no_unit, no_unit, 0, 0, {0, id});
+        };
+        line({{1, 4}, {3, 4}}, 0);
+        if (west) {
+            line({{1, 4}, {-4, 4}, {-4, 6}, {4, 6}, {4, 5}, {1, 4}}, 1);
+        } else {
+            line({{1, 4}, {4, 4}, {4, 6}, {2, 6}, {2, 5}, {1, 4}}, 1);
+        }
+        return m;
+    };
+    BuildOptions o;
+    o.halo_m = 100;
+    o.threads = 2;
+    o.line_tile_m = 1000;
+    const int64_t side = std::llround(1000 / proj().params().grid_m);
+    auto row = [&](int y) { return gp(0, y).y >= 0 ? gp(0, y).y / side : -((-gp(0, y).y + side - 1) / side); };
+    ASSERT_EQ(row(4), row(6));
+    const std::string west = "x-1y" + std::to_string(row(4)), east = "x0y" + std::to_string(row(4));
+    std::vector<std::string> own;
+    for (const auto& line : tiled(build(make(true), o))) {
+        if (line.find("halo") == std::string::npos) {
+            own.push_back(line);
+        }
+    }
+    EXPECT_EQ(own, (std::vector<std::string>{
+                       west + ": -4,4 -4,6 4,6",
+                       east + ": 1,4 -4,4",
+                       east + ": 1,4 3,4",
+                       east + ": 4,6 4,5 1,4",
+                   }));
+    // Everything in the east tile: one partition, `all`, as without tiles.
+    const Built one = build(make(false), o);
+    ASSERT_EQ(one.stores.size(), 1U);
+    EXPECT_EQ(one.stores[0].partition, "all");
+    EXPECT_EQ(one.stores[0].chains.size(), 2U);
+}
