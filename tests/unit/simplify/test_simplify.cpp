@@ -721,19 +721,23 @@ TEST(Simplify, DrawingInPiecesChangesNothing)
     // parts fit in 64 x 64 pixels is drawn in one piece, shifted (the
     // star's), the others in pieces of 64 (the wiggly grid's, where the
     // raster bans shortcuts), each with only the tents and tests that reach it.
-    RasterOptions one, two;
-    one.max_tile_pixels = two.max_tile_pixels = 1024;
+    RasterOptions one, two, three;
+    one.max_tile_pixels = two.max_tile_pixels = three.max_tile_pixels = 1024;
     one.window_pixels = 1024;
-    two.window_pixels = 64;
-    Raster large(context(), one), small(context(), two);
+    two.window_pixels = three.window_pixels = 64;
+    three.compliance = Compliance::readback; // Algorithm 5.1 piece by piece
+    Raster large(context(), one), small(context(), two), small_readback(context(), three);
     size_t banned = 0;
     for (const auto& map : {star_map(), wiggly_map()}) {
         for (double eps : {0.3, 0.6, 1.2}) {
-            ToleranceStats sa, sb;
+            ToleranceStats sa, sb, sc;
             const auto a = simplify_store(map, eps, plain(), large, nullptr, sa);
             const auto b = simplify_store(map, eps, plain(), small, nullptr, sb);
+            const auto c = simplify_store(map, eps, plain(), small_readback, nullptr, sc);
             EXPECT_EQ(chains::to_text(a), chains::to_text(b)) << "eps " << eps;
+            EXPECT_EQ(chains::to_text(a), chains::to_text(c)) << "read back, eps " << eps;
             EXPECT_EQ(sa.banned_raster, sb.banned_raster) << "eps " << eps;
+            EXPECT_EQ(sa.banned_raster, sc.banned_raster) << "read back, eps " << eps;
             banned += sa.banned_raster;
         }
     }
@@ -741,6 +745,7 @@ TEST(Simplify, DrawingInPiecesChangesNothing)
     EXPECT_EQ(large.stats().one_piece_boxes, large.stats().tiles);
     EXPECT_GT(small.stats().one_piece_boxes, 0U) << "no tile was drawn in one piece";
     EXPECT_LT(small.stats().one_piece_boxes, small.stats().tiles) << "every tile fit: no tile went in pieces";
+    EXPECT_LT(small_readback.stats().one_piece_boxes, small_readback.stats().tiles);
 }
 
 TEST(Color, DsaturColoursAnOddCycleWithThreeAndFailsWithTwo)
