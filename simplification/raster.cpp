@@ -163,19 +163,34 @@ struct TestInstance {
     float t0, t1;
 };
 
+/// Runs of instances of one class: class -> (first, count), in drawing order.
+using ClassRanges = std::vector<std::pair<uint8_t, std::pair<GLuint, GLsizei>>>;
+
+/// Append `count` instances of class `cls` from `first` to `rs`, joining the
+/// last run when it is of the same class.
+void add_range(ClassRanges& rs, uint8_t cls, GLuint first, GLsizei count)
+{
+    if (!rs.empty() && rs.back().first == cls) {
+        rs.back().second.second += count;
+    } else {
+        rs.push_back({cls, {first, count}});
+    }
+}
+
+/// A part of a tile's box that fits in the framebuffer: the tents that
+/// reach it and the tested parts in it, each by class.
+struct TilePiece {
+    int64_t x0 = 0, y0 = 0, x1 = 0, y1 = 0; ///< tile pixels
+    std::vector<TentInstance> inst;         ///< tents, by class
+    ClassRanges ranges, sranges;
+    std::vector<TestInstance> tests; ///< test parts by class, id = their index in the tile's ids
+};
+
 } // namespace
 
 /// What Raster::draw uploads and draws for a tile.
 struct PreparedTile::Data {
-    /// A part of the tile's box that fits in the framebuffer: the tents
-    /// that reach it and the tested parts in it, each by class.
-    struct Piece {
-        int64_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;                                      ///< tile pixels
-        std::vector<TentInstance> inst;                                              ///< tents, by class
-        std::vector<std::pair<uint8_t, std::pair<GLuint, GLsizei>>> ranges, sranges; ///< class -> (first, count)
-        std::vector<TestInstance> tests; ///< test parts by class, id = their index in `ids`
-    };
-    std::vector<Piece> pieces;
+    std::vector<TilePiece> pieces;
     std::vector<uint32_t> ids;                  ///< the caller's id of each test part
     int64_t sx0 = 0, sy0 = 0, sx1 = 0, sy1 = 0; ///< the box of the tested parts' cells, in tile pixels
     double eps_max = 0;                         ///< pixels
@@ -548,6 +563,71 @@ class NearCells {
     int64_t x0, y0, x1 = -1, y1 = -1; ///< the marked cells' box (empty: x1 < x0)
 };
 
+/// How far a tent's quad reaches from its segment, in pixels: eps (times
+/// the metric's L2 reach) plus the margin and a pixel.
+double tent_reach(double eps_px, const RasterOptions& opt)
+{
+    return eps_px * l2_reach(opt.metric) + opt.margin_px + 1.0;
+}
+
+/// Whether the part [t0, t1] of segment ab, grown by r, can touch piece p's pixels.
+bool overlaps(float ax, float ay, float bx, float by, double t0, double t1, double r, const TilePiece& p)
+{
+    const double x0 = ax + t0 * (double(bx) - ax), y0 = ay + t0 * (double(by) - ay);
+    const double x1 = ax + t1 * (double(bx) - ax), y1 = ay + t1 * (double(by) - ay);
+    return std::max(x0, x1) + r >= double(p.x0) && std::min(x0, x1) - r <= double(p.x1) &&
+           std::max(y0, y1) + r >= double(p.y0) && std::min(y0, y1) - r <= double(p.y1);
+}
+
+/// The whole box `all` (with every tent and test) in pieces of at most
+/// `side` pixels: itself when it fits; else the pieces that hold a tested
+/// cell, each with the tents whose quad (reach r around their part) and the
+/// tests whose quad (2 pixels around theirs) overlap it, in the same order,
+/// so each pixel gets what the whole box would give it.
+std::vector<TilePiece> cut_into_pieces(TilePiece all, const NearCells& near, int64_t side, const RasterOptions& opt)
+{
+    std::vector<TilePiece> out;
+    if (all.x1 - all.x0 <= side && all.y1 - all.y0 <= side) {
+        out.push_back(std::move(all));
+        return out;
+    }
+    for (int64_t oy = all.y0; oy < all.y1; oy += side) {
+        for (int64_t ox = all.x0; ox < all.x1; ox += side) {
+            TilePiece p;
+            p.x0 = ox;
+            p.y0 = oy;
+            p.x1 = std::min(ox + side, all.x1);
+            p.y1 = std::min(oy + side, all.y1);
+            if (!near.any(p.x0, p.y0, p.x1, p.y1)) {
+                continue;
+            }
+            for (const auto& [cls, range] : all.sranges) {
+                for (GLuint k = range.first; k < range.first + GLuint(range.second); ++k) {
+                    const auto& ti = all.tests[k];
+                    if (overlaps(ti.ax, ti.ay, ti.bx, ti.by, ti.t0, ti.t1, 2.0, p)) {
+                        add_range(p.sranges, cls, static_cast<GLuint>(p.tests.size()), 1);
+                        p.tests.push_back(ti);
+                    }
+                }
+            }
+            if (p.tests.empty()) {
+                continue;
+            }
+            for (const auto& [cls, range] : all.ranges) {
+                for (GLuint k = range.first; k < range.first + GLuint(range.second); ++k) {
+                    const auto& ti = all.inst[k];
+                    if (overlaps(ti.ax, ti.ay, ti.bx, ti.by, ti.t0, ti.t1, tent_reach(ti.eps, opt) + 1.0, p)) {
+                        add_range(p.ranges, cls, static_cast<GLuint>(p.inst.size()), 1);
+                        p.inst.push_back(ti);
+                    }
+                }
+            }
+            out.push_back(std::move(p));
+        }
+    }
+    return out;
+}
+
 } // namespace
 
 PreparedTile Raster::prepare(const TileSpec& tile, std::span<const TentChain> tents,
@@ -582,14 +662,13 @@ PreparedTile Raster::prepare(const TileSpec& tile, std::span<const TentChain> te
     }
     std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return tents[a].cls < tents[b].cls; });
     std::vector<TentInstance> inst;
-    std::vector<std::pair<uint8_t, std::pair<GLuint, GLsizei>>> ranges; // class -> (first, count)
+    ClassRanges ranges;
     for (uint32_t i : order) {
         const auto& t = tents[i];
         const auto eps_px = static_cast<float>(t.eps * inv);
         d.eps_max = std::max(d.eps_max, double(eps_px));
         const auto first = static_cast<GLuint>(inst.size());
-        // The tent's quad reaches eps (times the metric's L2 reach) plus the margin.
-        const double reach = double(eps_px) * l2_reach(m_opt.metric) + m_opt.margin_px + 1.0;
+        const double reach = tent_reach(eps_px, m_opt);
         for (size_t k = 0; k + 1 < t.points.size(); ++k) {
             if (!takes_part(t.keep, k)) {
                 ++d.tent_skipped;
@@ -605,14 +684,8 @@ PreparedTile Raster::prepare(const TileSpec& tile, std::span<const TentChain> te
                 ++d.tent_skipped;
             }
         }
-        if (inst.size() == first) {
-            continue;
-        }
-        const auto count = static_cast<GLsizei>(inst.size() - first);
-        if (!ranges.empty() && ranges.back().first == t.cls) {
-            ranges.back().second.second += count;
-        } else {
-            ranges.push_back({t.cls, {first, count}});
+        if (inst.size() > first) {
+            add_range(ranges, t.cls, first, static_cast<GLsizei>(inst.size() - first));
         }
     }
     d.tent_segments = inst.size();
@@ -636,79 +709,19 @@ PreparedTile Raster::prepare(const TileSpec& tile, std::span<const TentChain> te
     }
     std::stable_sort(sorder.begin(), sorder.end(), [&](uint32_t a, uint32_t b) { return segs[a].cls < segs[b].cls; });
     std::vector<TestInstance> sorted(segs.size());
-    std::vector<std::pair<uint8_t, std::pair<GLuint, GLsizei>>> sranges;
+    ClassRanges sranges;
     d.ids.resize(segs.size());
     for (uint32_t k = 0; k < sorder.size(); ++k) {
         const auto& sg = segs[sorder[k]];
         sorted[k] = tinst[sorder[k]];
         sorted[k].id = k; // the flag's index in the tile's buffer
         d.ids[k] = sg.id;
-        if (!sranges.empty() && sranges.back().first == sg.cls) {
-            ++sranges.back().second.second;
-        } else {
-            sranges.push_back({sg.cls, {k, 1}});
-        }
+        add_range(sranges, sg.cls, k, 1);
     }
-    if (d.sx1 <= d.sx0 || d.sy1 <= d.sy0) {
-        return out;
-    }
-    const auto side = static_cast<int64_t>(std::min(m_opt.window_pixels, m_opt.max_tile_pixels));
-    if (d.sx1 - d.sx0 <= side && d.sy1 - d.sy0 <= side) {
-        d.pieces.push_back(
-            {d.sx0, d.sy0, d.sx1, d.sy1, std::move(inst), std::move(ranges), std::move(sranges), std::move(sorted)});
-        return out;
-    }
-    // A box larger than the framebuffer: pieces of its size that hold a
-    // tested cell, each with the tents whose quad (the part, reach r around
-    // it) and the tests whose quad (2 pixels around the part) overlap it, in
-    // the same order, so each pixel gets what the whole box would give it.
-    auto overlaps = [](float ax, float ay, float bx, float by, double t0, double t1, double r, const auto& p) {
-        const double x0 = ax + t0 * (double(bx) - ax), y0 = ay + t0 * (double(by) - ay);
-        const double x1 = ax + t1 * (double(bx) - ax), y1 = ay + t1 * (double(by) - ay);
-        return std::max(x0, x1) + r >= double(p.x0) && std::min(x0, x1) - r <= double(p.x1) &&
-               std::max(y0, y1) + r >= double(p.y0) && std::min(y0, y1) - r <= double(p.y1);
-    };
-    auto add_range = [](auto& rs, uint8_t cls, GLuint at) {
-        if (!rs.empty() && rs.back().first == cls) {
-            ++rs.back().second.second;
-        } else {
-            rs.push_back({cls, {at, 1}});
-        }
-    };
-    for (int64_t oy = d.sy0; oy < d.sy1; oy += side) {
-        for (int64_t ox = d.sx0; ox < d.sx1; ox += side) {
-            PreparedTile::Data::Piece p;
-            p.x0 = ox;
-            p.y0 = oy;
-            p.x1 = std::min(ox + side, d.sx1);
-            p.y1 = std::min(oy + side, d.sy1);
-            if (!near.any(p.x0, p.y0, p.x1, p.y1)) {
-                continue;
-            }
-            for (const auto& [cls, range] : sranges) {
-                for (GLuint k = range.first; k < range.first + GLuint(range.second); ++k) {
-                    const auto& ti = sorted[k];
-                    if (overlaps(ti.ax, ti.ay, ti.bx, ti.by, ti.t0, ti.t1, 2.0, p)) {
-                        add_range(p.sranges, cls, static_cast<GLuint>(p.tests.size()));
-                        p.tests.push_back(ti);
-                    }
-                }
-            }
-            if (p.tests.empty()) {
-                continue;
-            }
-            for (const auto& [cls, range] : ranges) {
-                for (GLuint k = range.first; k < range.first + GLuint(range.second); ++k) {
-                    const auto& ti = inst[k];
-                    const double reach = double(ti.eps) * l2_reach(m_opt.metric) + m_opt.margin_px + 2.0;
-                    if (overlaps(ti.ax, ti.ay, ti.bx, ti.by, ti.t0, ti.t1, reach, p)) {
-                        add_range(p.ranges, cls, static_cast<GLuint>(p.inst.size()));
-                        p.inst.push_back(ti);
-                    }
-                }
-            }
-            d.pieces.push_back(std::move(p));
-        }
+    if (d.sx1 > d.sx0 && d.sy1 > d.sy0) {
+        d.pieces = cut_into_pieces(
+            {d.sx0, d.sy0, d.sx1, d.sy1, std::move(inst), std::move(ranges), std::move(sranges), std::move(sorted)},
+            near, static_cast<int64_t>(std::min(m_opt.window_pixels, m_opt.max_tile_pixels)), m_opt);
     }
     return out;
 }
