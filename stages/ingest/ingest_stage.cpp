@@ -19,6 +19,7 @@
 #include <cstdlib>
 #include <cstdio>
 #include <future>
+#include <sstream>
 #include <sys/resource.h>
 #include <thread>
 #ifdef __GLIBC__
@@ -340,6 +341,13 @@ int IngestStage::run(const StageContext& ctx)
             throw usage_error("--line-tile-km applies to lines datasets only");
         }
         cfg.line_tile_km = m_line_tile_km;
+    }
+    if (cfg.dataset.kind == DatasetSpec::Kind::lines && cfg.line_tile_km > 0 &&
+        cfg.line_tile_km * 1000.0 < 8 * cfg.projection.grid_m) {
+        std::ostringstream msg;
+        msg << cfg.file.string() << ": 'ingest.line_tile_km' (" << cfg.line_tile_km
+            << ") is below 8 steps of the grid (projection.grid_m " << cfg.projection.grid_m << " m); 0 cuts no tiles";
+        throw config_error(msg.str());
     }
     if (m_threads >= 0) {
         cfg.threads = static_cast<unsigned>(m_threads);

@@ -197,9 +197,8 @@ class LevelBuild {
     void assign_tiles()
     {
         const auto side = static_cast<int64_t>(std::llround(m_options.line_tile_m / m_projection.params().grid_m));
-        if (side < 8) {
-            throw input_error("the line tile side (" + std::to_string(m_options.line_tile_m) +
-                              " m) is below 8 grid steps");
+        if (side < 8) { // tigerlod-ingest refuses such a config up front
+            throw std::invalid_argument("BuildOptions::line_tile_m below 8 grid steps");
         }
         const TileGrid grid{side, side / 8};
         m_st.tile_cuts = cut_at_tiles(m_lev, m_g, grid);

@@ -366,6 +366,20 @@ TEST_F(Cli, ConfigErrors)
         "config.yaml:6: 'ingest.line_tile_km' applies to lines datasets only");
     expect_failure(run("ingest", tiger_config().string() + " " + out() + " --line-tile-km 5"), 2,
                    "--line-tile-km applies to lines datasets only");
+    // A line layer's tiles: a side below the grid's resolution, or not a size at all.
+    const auto lines = [&](const std::string& ingest) {
+        return config("dataset: {kind: lines, inputs: [edges.zip]}\n" + ingest).string();
+    };
+    expect_failure(run("ingest", lines("ingest: {line_tile_km: 0.00001}\n") + " " + out()), 2,
+                   "'ingest.line_tile_km' (1e-05) is below 8 steps of the grid");
+    expect_failure(run("ingest", lines("") + " " + out() + " --line-tile-km 0.00001"), 2,
+                   "'ingest.line_tile_km' (1e-05) is below 8 steps of the grid");
+    expect_failure(run("ingest", lines("ingest: {line_tile_km: -2}\n") + " " + out()), 2,
+                   "'ingest.line_tile_km' must be >= 0");
+    expect_failure(run("ingest", lines("ingest: {line_tile_km: ten}\n") + " " + out()), 2,
+                   "'ingest.line_tile_km' must be a number");
+    expect_failure(run("ingest", lines("") + " " + out() + " --line-tile-km -1"), 2,
+                   "option '--line-tile-km' must be >= 0");
 }
 
 TEST_F(Cli, DumpRejectsACorruptStore)
