@@ -301,8 +301,6 @@ Level build_level(const Graph& g, const EdgeEnds& ends, const RawMap& raw, const
 uint64_t cut_at_tiles(Level& lev, const Graph& g, const TileGrid& grid)
 {
     Level out;
-    out.junctions = lev.junctions;
-    out.junction_degree = lev.junction_degree;
     out.verts.reserve(lev.verts.size());
     out.chains.reserve(lev.chains.size());
     std::vector<uint32_t> cut_vertices;
@@ -360,24 +358,22 @@ uint64_t cut_at_tiles(Level& lev, const Graph& g, const TileGrid& grid)
     // (the walk starts at one): each is a junction of degree 2.
     std::sort(cut_vertices.begin(), cut_vertices.end());
     cut_vertices.erase(std::unique(cut_vertices.begin(), cut_vertices.end()), cut_vertices.end());
+    std::vector<std::pair<uint32_t, uint32_t>> junctions; // (vertex, degree), the level's and the cuts
+    for (size_t k = 0; k < lev.junctions.size(); ++k) {
+        junctions.emplace_back(lev.junctions[k], lev.junction_degree[k]);
+    }
     uint64_t cuts_made = 0;
     for (uint32_t v : cut_vertices) {
         if (!std::binary_search(lev.junctions.begin(), lev.junctions.end(), v)) {
-            out.junctions.push_back(v);
-            out.junction_degree.push_back(2);
+            junctions.emplace_back(v, 2);
             ++cuts_made;
         }
     }
-    std::vector<uint32_t> order(out.junctions.size());
-    std::iota(order.begin(), order.end(), 0U);
-    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return out.junctions[a] < out.junctions[b]; });
-    Level sorted;
-    for (uint32_t i : order) {
-        sorted.junctions.push_back(out.junctions[i]);
-        sorted.junction_degree.push_back(out.junction_degree[i]);
+    std::sort(junctions.begin(), junctions.end());
+    for (const auto& [v, degree] : junctions) {
+        out.junctions.push_back(v);
+        out.junction_degree.push_back(degree);
     }
-    out.junctions = std::move(sorted.junctions);
-    out.junction_degree = std::move(sorted.junction_degree);
     make_ids_unique(out);
     lev = std::move(out);
     return cuts_made;
