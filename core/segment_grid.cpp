@@ -75,10 +75,12 @@ template <class S> Grid make_grid(const std::vector<S>& segs, double min_cell)
 namespace {
 
 /// The pairs that meet among the segments listed in `entries` (cell,
-/// segment) by cell; with `is_new`, only those with a new segment.
+/// segment) by cell, but those `skip(i, j)` leaves out (asked before any
+/// geometry: it is the cheap test).
+template <class Skip>
 std::vector<Intersection> meeting_pairs(const std::vector<Segment>& segs,
-                                        std::vector<std::pair<uint64_t, uint32_t>>& entries,
-                                        std::span<const uint8_t> is_new, unsigned threads)
+                                        std::vector<std::pair<uint64_t, uint32_t>>& entries, Skip skip,
+                                        unsigned threads)
 {
     // Sorted by (cell, segment): each cell lists its segments in order. A segment enters a cell once, as the cover
     // never repeats one.
@@ -96,7 +98,7 @@ std::vector<Intersection> meeting_pairs(const std::vector<Segment>& segs,
                 const Segment& s = segs[entries[i].second];
                 for (size_t j = i + 1; j < run_end && entries[j].first == entries[i].first; ++j) {
                     const Segment& r = segs[entries[j].second];
-                    if (!is_new.empty() && !is_new[entries[i].second] && !is_new[entries[j].second]) {
+                    if (skip(entries[i].second, entries[j].second)) {
                         continue;
                     }
                     if (std::max(s.a.x, s.b.x) < std::min(r.a.x, r.b.x) ||
@@ -164,13 +166,9 @@ std::vector<Intersection> meeting_pairs(const std::vector<Segment>& segs,
     return all;
 }
 
-} // namespace
-
-std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, unsigned threads)
+/// Every segment in every cell it passes through, as (cell, segment).
+std::vector<std::pair<uint64_t, uint32_t>> every_entry(const std::vector<Segment>& segs)
 {
-    if (segs.size() < 2) {
-        return {};
-    }
     const Grid grid = make_grid(segs, 1.0);
     // Sized exactly (a counting pass): the entries are this check's peak memory.
     size_t nentries = 0;
@@ -182,7 +180,19 @@ std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, u
     for (uint32_t i = 0; i < segs.size(); ++i) {
         grid.cover(segs[i].a, segs[i].b, 0, [&](uint64_t k) { entries.emplace_back(k, i); });
     }
-    return meeting_pairs(segs, entries, {}, threads);
+    return entries;
+}
+
+} // namespace
+
+std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, unsigned threads)
+{
+    if (segs.size() < 2) {
+        return {};
+    }
+    auto entries = every_entry(segs);
+    return meeting_pairs(
+        segs, entries, [](uint32_t, uint32_t) { return false; }, threads);
 }
 
 std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, std::span<const uint8_t> is_new,
@@ -227,7 +237,22 @@ std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, s
             }
         });
     }
-    return meeting_pairs(segs, entries, is_new, threads);
+    return meeting_pairs(
+        segs, entries, [&](uint32_t i, uint32_t j) { return !is_new[i] && !is_new[j]; }, threads);
+}
+
+std::vector<Intersection> find_intersections_between(const std::vector<Segment>& segs, std::span<const uint32_t> layer,
+                                                     std::span<const uint32_t> group, unsigned threads)
+{
+    if (layer.size() != segs.size() || group.size() != segs.size()) {
+        throw std::invalid_argument("find_intersections_between: one layer and one group per segment expected");
+    }
+    if (segs.size() < 2) {
+        return {};
+    }
+    auto entries = every_entry(segs);
+    return meeting_pairs(
+        segs, entries, [&](uint32_t i, uint32_t j) { return layer[i] == layer[j] || group[i] == group[j]; }, threads);
 }
 
 std::vector<std::pair<uint32_t, uint32_t>> find_near(const std::vector<SegmentRef>& segs, double distance,

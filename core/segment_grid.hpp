@@ -38,6 +38,14 @@ std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, u
 std::vector<Intersection> find_intersections(const std::vector<Segment>& segs, std::span<const uint8_t> is_new,
                                              unsigned threads);
 
+/// The pairs of find_intersections(segs, threads) whose two segments lie in
+/// different layers and different groups (`layer` and `group` hold one value
+/// per segment): for maps drawn over each other, each map a layer, pairs of
+/// the same map or of the same feature (the group) left out. Same cells and
+/// predicates as find_intersections, so nothing is missed.
+std::vector<Intersection> find_intersections_between(const std::vector<Segment>& segs, std::span<const uint32_t> layer,
+                                                     std::span<const uint32_t> group, unsigned threads);
+
 struct SegmentRef {
     GridPoint a, b;
     uint32_t chain = 0;

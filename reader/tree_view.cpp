@@ -87,7 +87,7 @@ std::string skeleton_text(const reader::Tree& tree)
 {
     const auto& s = tree.skeleton();
     std::ostringstream out;
-    out << "data-tree " << datatree::major_version << "." << datatree::minor_version << "\n";
+    out << "data-tree " << datatree::major_version << "." << s.minor << "\n";
     out << "projection " << Projection(projection_of(s)).describe() << "\n";
     out << "metric " << metric_name(s.metric) << "\n";
     out << "levels";
@@ -154,7 +154,8 @@ std::string node_text(const reader::Tree& tree, const NodeMap& m)
         const auto& c = m.table.chains[i];
         const auto pts = m.geometry.chain(i);
         out << "chain " << c.id << " left=" << m.table.strings[c.left] << " right=" << m.table.strings[c.right]
-            << " class=" << m.table.strings[c.feature_class] << " flags=" << flags_text(c.flags) << " n=" << pts.size()
+            << " class=" << m.table.strings[c.feature_class] << " flags=" << flags_text(c.flags)
+            << (c.border_level() ? " border=" + std::to_string(c.border_level()) : std::string()) << " n=" << pts.size()
             << " :";
         for (const auto& p : pts) {
             out << " " << p.x << "," << p.y;

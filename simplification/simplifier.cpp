@@ -13,6 +13,7 @@
 #include <cmath>
 #include <future>
 #include <iomanip>
+#include <map>
 #include <optional>
 #include <sstream>
 #include <stdexcept>
@@ -35,7 +36,7 @@ void ToleranceStats::add(const ToleranceStats& o)
     proved_far += o.proved_far;
     banned_raster += o.banned_raster;
     banned_exact += o.banned_exact;
-    banned_border += o.banned_border;
+    banned_region += o.banned_region;
     banned_points += o.banned_points;
     self_intersection_repairs += o.self_intersection_repairs;
     orientation_repairs += o.orientation_repairs;
@@ -96,7 +97,7 @@ struct Work {
     std::vector<uint32_t> path;          ///< vertex indices
     std::vector<uint32_t> path_cand;     ///< candidate index of each path edge, UINT32_MAX for an original edge
     std::vector<uint32_t> checked;       ///< the path the last exact check saw (empty before the first)
-    std::vector<uint8_t> border_checked; ///< per shortcut id: the border rule has looked at it (empty before)
+    std::vector<uint8_t> region_checked; ///< per shortcut id: the region rule has looked at it (empty before)
     uint32_t rounds = 0;                 ///< lazy rounds that tested this chain
     bool dirty = true;                   ///< path must be recomputed
 };
@@ -207,204 +208,6 @@ struct PointIndex {
 
 namespace {
 
-/// The border rule (formats/chains/SPEC.md, "The partition contract"): a
-/// shortcut of an owned chain o may not meet any proximate shortcut of a
-/// halo chain h with a smaller id that comes near it. h's own partition can
-/// only ever pick h's shortcuts among those (the same scan on the same
-/// points at the same eps), and it checks them against o's original edges,
-/// as this store checks o's path against h's; so however the two partitions
-/// are simplified, apart, their chains cannot meet. Every point of a
-/// proximate shortcut lies within eps_h (as an L2 distance: x l2_reach) of a
-/// segment of its subchain (near_parts.hpp), so only the shortcuts of h
-/// spanning a segment that near are listed; h's are computed once per store,
-/// when a path first comes near it.
-class BorderRule {
-  public:
-    BorderRule(const ChainStore& store, std::span<const double> eps, const SimplifyOptions& opt)
-        : m_store(store), m_eps(eps), m_opt(opt), m_cand(store.chains.size()), m_done(store.chains.size(), 0),
-          m_span(store.chains.size(), 0)
-    {
-        for (uint32_t i = 0; i < store.chains.size(); ++i) {
-            if (store.chains[i].flags & chains::chain_halo) {
-                m_eps_max = std::max(m_eps_max, eps[i]);
-            }
-        }
-    }
-
-    /// Bans the path shortcuts of `work` not looked at before that meet a
-    /// halo chain's shortcut, finding halo segments near them in the far
-    /// rule's grid (`cells` of side `cell`, `grid_cells`); `ball_l2` is the
-    /// metric's l2_reach. Returns whether it banned one.
-    bool ban(std::vector<Work>& work, const CellGrid& cells, const CellBuckets<GridSeg>& grid_cells, double cell,
-             double ball_l2, ToleranceStats& st)
-    {
-        if (m_eps_max == 0) {
-            return false; // no halo: a single partition
-        }
-        struct Query {
-            uint32_t work, cand, halo, kmin, kmax;
-        };
-        std::vector<std::vector<Query>> per_work(work.size());
-        parallel_each(work.size(), m_opt.threads, [&](size_t wi) {
-            Work& w = work[wi];
-            if (w.cand.empty()) {
-                return;
-            }
-            if (w.border_checked.empty()) {
-                w.border_checked.assign(w.cand.size(), 0);
-            }
-            const auto pts = m_store.chain_points(m_store.chains[w.chain]);
-            const uint64_t own_id = m_store.chains[w.chain].id;
-            std::vector<Query> found;
-            for (size_t e = 0; e < w.path_cand.size(); ++e) {
-                const uint32_t ci = w.path_cand[e];
-                if (ci == UINT32_MAX || w.border_checked[ci]) {
-                    continue;
-                }
-                w.border_checked[ci] = 1;
-                const GridPoint a = pts[w.path[e]], b = pts[w.path[e + 1]];
-                found.clear();
-                cover_cells(a.x, a.y, b.x, b.y, m_eps_max * ball_l2 + 2, cell, 0.0, 0.0, [&](int64_t x, int64_t y) {
-                    if (!cells.contains(x, y)) {
-                        return;
-                    }
-                    for (const GridSeg gs : grid_cells.find(cells.key(x, y))) {
-                        const auto& hc = m_store.chains[gs.chain];
-                        if (!(hc.flags & chains::chain_halo) || (hc.flags & chains::chain_problem) || hc.id >= own_id) {
-                            continue;
-                        }
-                        const auto hp = m_store.chain_points(hc);
-                        // 2 grid units of slack for the rounding of the distance.
-                        if (segment_distance(a, b, hp[gs.index], hp[gs.index + 1]) > m_eps[gs.chain] * ball_l2 + 2) {
-                            continue;
-                        }
-                        found.push_back({static_cast<uint32_t>(wi), ci, gs.chain, gs.index, gs.index});
-                    }
-                });
-                // One query per halo chain, over the hull of its near segments.
-                std::sort(found.begin(), found.end(), [](const Query& p, const Query& q) { return p.halo < q.halo; });
-                for (size_t k = 0; k < found.size();) {
-                    Query q = found[k];
-                    for (++k; k < found.size() && found[k].halo == q.halo; ++k) {
-                        q.kmin = std::min(q.kmin, found[k].kmin);
-                        q.kmax = std::max(q.kmax, found[k].kmax);
-                    }
-                    per_work[wi].push_back(q);
-                }
-            }
-        });
-        std::vector<Query> queries;
-        for (auto& q : per_work) {
-            queries.insert(queries.end(), q.begin(), q.end());
-        }
-        if (queries.empty()) {
-            return false;
-        }
-        // The halo chains' shortcuts, once per m_store.
-        std::vector<uint32_t> need;
-        for (const Query& q : queries) {
-            if (!m_done[q.halo]) {
-                m_done[q.halo] = 1;
-                need.push_back(q.halo);
-            }
-        }
-        parallel_each(need.size(), m_opt.threads, [&](size_t k) {
-            const uint32_t h = need[k];
-            m_cand[h] = proximate_shortcuts(m_store.chain_points(m_store.chains[h]), Tolerance(m_eps[h], m_opt.metric),
-                                            m_opt.max_reach);
-            for (const auto& run : m_cand[h].runs()) {
-                m_span[h] = std::max(m_span[h], run.hi - run.from);
-            }
-        });
-        std::vector<uint8_t> meets(queries.size(), 0);
-        parallel_blocks(queries.size(), m_opt.threads, 16, [&](size_t qb, size_t qe) {
-            for (size_t qi = qb; qi < qe; ++qi) {
-                const Query& q = queries[qi];
-                const auto pts = m_store.chain_points(m_store.chains[work[q.work].chain]);
-                const Shortcut sc = work[q.work].cand.at(q.cand);
-                const GridPoint a = pts[sc.from], b = pts[sc.to];
-                const auto hp = m_store.chain_points(m_store.chains[q.halo]);
-                const Candidates& hc = m_cand[q.halo];
-                const GridBox sbox = [&] {
-                    GridBox box;
-                    box.extend(a);
-                    box.extend(b);
-                    return box;
-                }();
-                // Shortcuts from <= kmax to > kmin span a near segment's hull;
-                // none starts more than the longest span before kmin + 1.
-                const uint32_t first = q.kmin + 1 > m_span[q.halo] ? q.kmin + 1 - m_span[q.halo] : 0;
-                for (const auto& run : hc.empty() ? std::span<const Candidates::Run>{}
-                                                  : hc.runs().subspan(hc.first_run(first),
-                                                                      hc.first_run(q.kmax + 1) - hc.first_run(first))) {
-                    if (run.hi <= q.kmin) {
-                        continue;
-                    }
-                    for (uint32_t to = std::max(run.lo, q.kmin + 1); to <= run.hi && !meets[qi]; ++to) {
-                        const GridPoint c = hp[run.from], d = hp[to];
-                        GridBox cbox;
-                        cbox.extend(c);
-                        cbox.extend(d);
-                        if (!cbox.intersects(sbox)) {
-                            continue;
-                        }
-                        meets[qi] = meet(a, b, c, d) && !meets_subchain(pts, sc, c, d);
-                    }
-                    if (meets[qi]) {
-                        break;
-                    }
-                }
-            }
-        });
-        bool banned = false;
-        for (size_t qi = 0; qi < queries.size(); ++qi) {
-            Work& w = work[queries[qi].work];
-            if (meets[qi] && w.state[queries[qi].cand] != bad_exact) {
-                w.state[queries[qi].cand] = bad_exact;
-                w.dirty = true;
-                ++st.banned_border;
-                banned = true;
-            }
-        }
-        return banned;
-    }
-
-  private:
-    static bool meet(GridPoint a, GridPoint b, GridPoint c, GridPoint d) noexcept
-    {
-        const auto rel = segment_relation(a, b, c, d);
-        return rel != SegmentRelation::disjoint && rel != SegmentRelation::shared_endpoint;
-    }
-
-    /// Whether h's shortcut cd meets an original edge of o's subchain under
-    /// o's shortcut sc. h's partition then never takes it: o is in its halo
-    /// (o comes within eps_h of h there) and its exact check tests h's path
-    /// against o's original edges. So o need not give way to it.
-    static bool meets_subchain(std::span<const GridPoint> pts, Shortcut sc, GridPoint c, GridPoint d) noexcept
-    {
-        GridBox cbox;
-        cbox.extend(c);
-        cbox.extend(d);
-        for (uint32_t k = sc.from; k < sc.to; ++k) {
-            GridBox ebox;
-            ebox.extend(pts[k]);
-            ebox.extend(pts[k + 1]);
-            if (ebox.intersects(cbox) && meet(pts[k], pts[k + 1], c, d)) {
-                return true;
-            }
-        }
-        return false;
-    }
-
-    const ChainStore& m_store;
-    std::span<const double> m_eps;
-    const SimplifyOptions& m_opt;
-    std::vector<Candidates> m_cand; ///< each halo chain's shortcuts, once needed
-    std::vector<uint8_t> m_done;    ///< whether m_cand holds them
-    std::vector<uint32_t> m_span;   ///< the longest shortcut of each, in vertices
-    double m_eps_max = 0;           ///< the largest halo chain's tolerance; 0 without a halo
-};                                  // class BorderRule
-
 /// A (chain, candidate) pair to test: indices into StoreSimplifier's work and that chain's candidates.
 using TestPair = std::pair<uint32_t, uint32_t>;
 
@@ -435,10 +238,9 @@ class StoreSimplifier {
         if (!m_opt.lazy) {
             test_every_candidate();
         }
-        BorderRule border(m_store, m_eps, m_opt);
         do {
             settle_paths();
-        } while (exact_check(border));
+        } while (exact_check());
         return result();
     }
 
@@ -557,7 +359,50 @@ class StoreSimplifier {
                 w.state[id] = bad_points;
             }
         }
+        ban_second_chords();
         m_st.seconds_constraints += since(t0);
+    }
+
+    /// The region rule's one blind spot: two chains between the same two
+    /// junctions (a lake's two shores) whose shortcuts are both the chord
+    /// lie on each other, each region empty. Of the chains with the same
+    /// ends, only the one with the smallest id may become its chord, at any
+    /// tolerance and in any partition (the halo holds the others).
+    void ban_second_chords()
+    {
+        auto ends = [](std::span<const GridPoint> pts) {
+            GridPoint a = pts.front(), b = pts.back();
+            if (std::tie(b.x, b.y) < std::tie(a.x, a.y)) {
+                std::swap(a, b);
+            }
+            return std::tuple{a.x, a.y, b.x, b.y};
+        };
+        std::map<std::tuple<int32_t, int32_t, int32_t, int32_t>, uint64_t> smallest; // ends -> smallest id
+        for (const auto& c : m_store.chains) {
+            const auto pts = m_store.chain_points(c);
+            if (pts.size() >= 2 && pts.front() != pts.back()) {
+                auto [it, fresh] = smallest.try_emplace(ends(pts), c.id);
+                it->second = std::min(it->second, c.id);
+            }
+        }
+        for (Work& w : m_work) {
+            const auto pts = points_of(w);
+            const auto& c = m_store.chains[w.chain];
+            if (w.cand.empty() || pts.front() == pts.back() || smallest.at(ends(pts)) == c.id) {
+                continue;
+            }
+            const auto last = static_cast<uint32_t>(pts.size() - 1);
+            const auto runs = w.cand.runs_from(0);
+            for (size_t r = 0; r < runs.size(); ++r) {
+                if (runs[r].lo <= last && last <= runs[r].hi) {
+                    const uint32_t id = w.cand.run_id(w.cand.first_run(0) + r) + (last - runs[r].lo);
+                    if (w.state[id] == unknown) {
+                        w.state[id] = bad_exact;
+                        ++m_st.banned_region;
+                    }
+                }
+            }
+        }
     }
 
     /// The far rule's grid and blocked segments. A shortcut farther from
@@ -971,12 +816,19 @@ class StoreSimplifier {
         return tests;
     }
 
-    /// The exact safety net: the simplified owned chains against each other
-    /// and the halo, with the integer predicates, then the border rule.
-    /// Bans each shortcut in a meeting and returns whether it banned any.
-    bool exact_check(BorderRule& border)
+    /// The exact rules: first the region rule, on the shortcuts the paths
+    /// newly take; once it bans none, no two chains' paths can meet (README.md
+    /// beside this file, step 7), and the simplified owned chains go through
+    /// the exact check against each other and the halo, which is left to find
+    /// a chain meeting itself (and input problems). Bans each shortcut in a
+    /// meeting and returns whether it banned any.
+    bool exact_check()
     {
         const auto t0 = Clock::now();
+        if (ban_by_region()) {
+            m_st.seconds_exact += since(t0);
+            return true;
+        }
         std::vector<Segment> segs;
         std::vector<Tag> tags;
         std::vector<uint8_t> is_new;
@@ -1007,9 +859,108 @@ class StoreSimplifier {
             }
             banned_any |= banned;
         }
-        banned_any |= border.ban(m_work, m_cells, *m_grid_cells, m_cell, m_ball_l2, m_st);
         m_st.seconds_exact += since(t0);
         return banned_any;
+    }
+
+    /// The region rule (README.md beside this file, step 7): every shortcut
+    /// of a path whose region, between it and the subchain it replaces, holds
+    /// part of another chain's original is banned. Each shortcut is looked at
+    /// once, when a path first takes it. Returns whether it banned any.
+    bool ban_by_region()
+    {
+        std::vector<std::vector<uint32_t>> banned(m_work.size());
+        parallel_each(m_work.size(), m_opt.threads, [&](size_t wi) {
+            Work& w = m_work[wi];
+            for (size_t e = 0; e < w.path_cand.size(); ++e) {
+                const uint32_t ci = w.path_cand[e];
+                if (ci == UINT32_MAX) {
+                    continue;
+                }
+                if (w.region_checked.empty()) {
+                    w.region_checked.assign(w.cand.size(), 0);
+                }
+                if (w.region_checked[ci]) {
+                    continue;
+                }
+                w.region_checked[ci] = 1;
+                if (!region_clear(w, w.path[e], w.path[e + 1])) {
+                    banned[wi].push_back(ci);
+                }
+            }
+        });
+        bool any = false;
+        for (size_t wi = 0; wi < m_work.size(); ++wi) {
+            for (const uint32_t ci : banned[wi]) {
+                m_work[wi].state[ci] = bad_exact;
+                m_work[wi].dirty = true;
+                ++m_st.banned_region;
+                any = true;
+            }
+        }
+        return any;
+    }
+
+    /// Whether no other chain's original meets the region between shortcut
+    /// from -> to of `w` and the subchain it replaces: no segment of another
+    /// chain meets the shortcut other than at a shared end point, and no
+    /// vertex of one lies strictly inside (even-odd). As the map is planar,
+    /// another chain can enter the region only across the shortcut, so these
+    /// two tests see every way in. The region lies in the subchain's box,
+    /// within the far rule's grid (every segment in reach).
+    bool region_clear(const Work& w, uint32_t from, uint32_t to) const
+    {
+        const auto pts = points_of(w);
+        const GridPoint a = pts[from], b = pts[to];
+        GridBox box;
+        for (uint32_t k = from; k <= to; ++k) {
+            box.extend(pts[k]);
+        }
+        std::vector<GridSeg> near;
+        const int64_t x0 = floor_int(double(box.min_x) / m_cell), x1 = floor_int(double(box.max_x) / m_cell);
+        const int64_t y0 = floor_int(double(box.min_y) / m_cell), y1 = floor_int(double(box.max_y) / m_cell);
+        for (int64_t x = x0; x <= x1; ++x) {
+            for (int64_t y = y0; y <= y1; ++y) {
+                if (!m_cells.contains(x, y)) {
+                    continue;
+                }
+                for (const GridSeg gs : m_grid_cells->find(m_cells.key(x, y))) {
+                    if (gs.chain != w.chain) {
+                        near.push_back(gs);
+                    }
+                }
+            }
+        }
+        std::sort(near.begin(), near.end(),
+                  [](GridSeg p, GridSeg q) { return std::tie(p.chain, p.index) < std::tie(q.chain, q.index); });
+        near.erase(std::unique(near.begin(), near.end(),
+                               [](GridSeg p, GridSeg q) { return p.chain == q.chain && p.index == q.index; }),
+                   near.end());
+        auto inside = [&](GridPoint p) {
+            if (p.x < box.min_x || p.x > box.max_x || p.y < box.min_y || p.y > box.max_y) {
+                return false;
+            }
+            PointInPolygon pip(p);
+            for (uint32_t k = from; k < to; ++k) {
+                pip.add_segment(pts[k], pts[k + 1]);
+            }
+            pip.add_segment(b, a);
+            return pip.location() == PointLocation::inside;
+        };
+        for (const GridSeg gs : near) {
+            const auto other = m_store.chain_points(m_store.chains[gs.chain]);
+            const GridPoint c = other[gs.index], d = other[gs.index + 1];
+            if (std::max(c.x, d.x) < box.min_x || std::min(c.x, d.x) > box.max_x || std::max(c.y, d.y) < box.min_y ||
+                std::min(c.y, d.y) > box.max_y) {
+                continue;
+            }
+            const SegmentRelation rel = segment_relation(a, b, c, d);
+            if ((rel != SegmentRelation::disjoint && rel != SegmentRelation::shared_endpoint) || inside(c) ||
+                inside(d)) {
+                return false;
+            }
+        }
+        return true;
     }
 
     /// What a segment of the exact check is.

@@ -28,9 +28,9 @@ struct ToleranceStats {
     size_t proved_far = 0; ///< shortcuts accepted without drawing: farther from every other chain than its reach
     size_t banned_raster = 0;
     size_t banned_exact = 0;
-    /// Shortcuts that met a proximate shortcut of a halo chain with a smaller
-    /// id (the border rule: partitions simplified apart cannot meet).
-    size_t banned_border = 0;
+    /// Shortcuts whose region (between them and the subchain they replace)
+    /// held part of another chain's original: the region rule.
+    size_t banned_region = 0;
     size_t banned_points = 0;
     size_t self_intersection_repairs = 0;
     size_t orientation_repairs = 0;

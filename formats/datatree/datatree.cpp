@@ -19,17 +19,18 @@ constexpr size_t node_fixed_size = 7 * 4 + 4 * 4 + ref_size;
 constexpr size_t lod_size = 8 + 8 + ref_size;
 constexpr uint8_t kind_table = 1;
 
-void put_header(ByteWriter& w, const char (&magic)[8], uint64_t file_size)
+void put_header(ByteWriter& w, const char (&magic)[8], uint64_t file_size, uint16_t minor = minor_version)
 {
     w.put_bytes(std::string_view(magic, 8));
     w.put(major_version);
-    w.put(minor_version);
+    w.put(minor);
     w.put(uint32_t{0});
     w.put(file_size);
 }
 
-/// Checks magic, version, flags and size; `what` names the kind of file in messages.
-void check_header(ByteReader& r, const char (&magic)[8], uint64_t file_size, const char* what)
+/// Checks magic, version, flags and size; `what` names the kind of file in
+/// messages. Returns the minor version.
+uint16_t check_header(ByteReader& r, const char (&magic)[8], uint64_t file_size, const char* what)
 {
     r.need(header_size, "header");
     const auto m = r.get_bytes(8, "magic");
@@ -37,7 +38,7 @@ void check_header(ByteReader& r, const char (&magic)[8], uint64_t file_size, con
         r.fail(std::string("not a ") + what + " (wrong magic)");
     }
     const auto major = r.get<uint16_t>("version");
-    r.get<uint16_t>("version");
+    const auto minor = r.get<uint16_t>("version");
     if (major != major_version) {
         r.fail("unsupported major version " + std::to_string(major) + " (reads " + std::to_string(major_version) + ")");
     }
@@ -51,6 +52,7 @@ void check_header(ByteReader& r, const char (&magic)[8], uint64_t file_size, con
                    : "trailing bytes: header says " + std::to_string(size) + " bytes, file has " +
                          std::to_string(file_size));
     }
+    return minor;
 }
 
 void put_ref(ByteWriter& w, const PayloadRef& p)
@@ -76,7 +78,7 @@ PayloadRef get_ref(ByteReader& r)
 std::string encode_skeleton(const Skeleton& s)
 {
     ByteWriter w;
-    put_header(w, skeleton_magic, 0);
+    put_header(w, skeleton_magic, 0, s.minor);
     w.put(s.projection_kind);
     w.put(s.utm_north);
     w.put(s.metric);
@@ -129,7 +131,7 @@ std::string encode_skeleton(const Skeleton& s)
 Skeleton decode_skeleton(std::span<const std::byte> bytes, const std::string& name)
 {
     ByteReader r(bytes, name);
-    check_header(r, skeleton_magic, bytes.size(), "Data Tree skeleton");
+    const uint16_t minor = check_header(r, skeleton_magic, bytes.size(), "Data Tree skeleton");
     uint32_t stored_crc = 0;
     std::memcpy(&stored_crc, bytes.data() + bytes.size() - 4, 4);
     if (bytes.size() < header_size + 4 || crc32(bytes.first(bytes.size() - 4)) != stored_crc) {
@@ -138,6 +140,7 @@ Skeleton decode_skeleton(std::span<const std::byte> bytes, const std::string& na
     ByteReader b(bytes.first(bytes.size() - 4), name);
     b.get_bytes(header_size, "header");
     Skeleton s;
+    s.minor = minor;
     s.projection_kind = b.get<uint8_t>("projection kind");
     s.utm_north = b.get<uint8_t>("utm_north");
     s.metric = b.get<uint8_t>("metric");

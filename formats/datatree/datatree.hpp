@@ -18,7 +18,7 @@
 namespace tigerlod::datatree {
 
 constexpr uint16_t major_version = 2;
-constexpr uint16_t minor_version = 0;
+constexpr uint16_t minor_version = 1;
 /// "Data Tree format 2.0", for --version.
 inline std::string format_version_text()
 {
@@ -72,6 +72,8 @@ struct Tile {
 
 /// The in-memory skeleton.
 struct Skeleton {
+    /// The format's minor version: the file's when decoded, this library's when new.
+    uint16_t minor = minor_version;
     /// Projection and grid, as in the chain store (kind, utm_north, utm_zone, 10 doubles).
     uint8_t projection_kind = 0;
     uint8_t utm_north = 1;
@@ -100,6 +102,10 @@ std::string tile_header(uint64_t file_size);
 /// tile) is a tile header of this major version for a file of `file_size` bytes.
 void check_tile_header(std::span<const std::byte> bytes, uint64_t file_size, const std::string& name);
 
+/// Where a chain table entry's flags keep its border level (format 2.1).
+constexpr uint32_t border_level_shift = 8;
+constexpr uint32_t border_level_mask = 0xFFU << border_level_shift;
+
 /// A node's chain table.
 struct ChainTable {
     struct Entry {
@@ -107,7 +113,11 @@ struct ChainTable {
         uint32_t left = 0;  ///< index into strings: unit code on the left
         uint32_t right = 0; ///< unit code on the right
         uint32_t feature_class = 0;
-        uint32_t flags = 0; ///< chain store flags: bit 0 closed, bit 2 problem
+        /// Chain store flags (bit 0 closed, bit 2 problem), and in bits 8-15
+        /// the border level (format 2.1): the coarsest level whose map has a
+        /// border along the chain (border_level()).
+        uint32_t flags = 0;
+        uint32_t border_level() const noexcept { return (flags & border_level_mask) >> border_level_shift; }
         friend bool operator==(const Entry&, const Entry&) = default;
     };
     std::vector<std::string> strings{""};

@@ -117,6 +117,7 @@ class TreeBuilder {
         find_levels();
         build_hierarchy(read_partitions());
         name_nodes();
+        index_units();
         m_tree.lods.resize(m_lod_eps.size());
         for (size_t k = 0; k < m_lod_eps.size(); ++k) {
             m_tree.lods[k].eps_m = m_lod_eps[k];
@@ -328,6 +329,42 @@ class TreeBuilder {
         }
     }
 
+    /// The node whose map has each unit as its own, per level.
+    void index_units()
+    {
+        m_unit_node.assign(m_level_names.size(), {});
+        for (uint32_t i = 0; i < m_nodes.size(); ++i) {
+            for (const auto& u : m_nodes[i].units) {
+                m_unit_node[m_nodes[i].level].emplace(u, i);
+            }
+        }
+    }
+
+    /// The border level of a chain of level l between units a and b: the
+    /// coarsest level whose map has a border along it (0 for the map's outer
+    /// edge, or a chain with no unit on a side; l between two units of one
+    /// node). Nodes of level l are l steps below the root, so a unit's
+    /// ancestor node at each coarser level is found by walking up.
+    uint32_t border_level(uint32_t l, const std::string& a, const std::string& b) const
+    {
+        if (a.empty() || b.empty()) {
+            return 0;
+        }
+        const auto ia = m_unit_node[l].find(a), ib = m_unit_node[l].find(b);
+        if (ia == m_unit_node[l].end() || ib == m_unit_node[l].end()) {
+            return l;
+        }
+        const auto& nodes = m_tree.skeleton.nodes;
+        uint32_t na = ia->second, nb = ib->second, level = l;
+        while (na != nb && level > 0 && nodes[na].parent != datatree::no_node &&
+               nodes[nb].parent != datatree::no_node) {
+            na = nodes[na].parent;
+            nb = nodes[nb].parent;
+            --level;
+        }
+        return na == nb ? level : 0;
+    }
+
     /// Each node's code in the skeleton's strings (the root's is empty).
     void name_nodes()
     {
@@ -454,9 +491,12 @@ class TreeBuilder {
             const auto& [os, oc] = it->second;
             const auto pts = os->chain_points(*oc);
             if (k == 0) {
-                table.chains.push_back(
-                    {oc->id, table_string(os->strings[oc->left]), table_string(os->strings[oc->right]),
-                     table_string(os->strings[oc->feature_class]), oc->flags & ~uint32_t{chains::chain_halo}});
+                const std::string& left = os->strings[oc->left];
+                const std::string& right = os->strings[oc->right];
+                table.chains.push_back({oc->id, table_string(left), table_string(right),
+                                        table_string(os->strings[oc->feature_class]),
+                                        (oc->flags & ~uint32_t{chains::chain_halo}) |
+                                            (border_level(nb.level, left, right) << datatree::border_level_shift)});
             } else {
                 const double d = deviation(nb.original.chain(ci), pts);
                 if (d < 0) {
@@ -499,6 +539,7 @@ class TreeBuilder {
     std::map<uint32_t, std::vector<fs::path>> m_level_files;
     std::vector<std::string> m_level_names;
     std::vector<NodeBuild> m_nodes;
+    std::vector<std::unordered_map<std::string, uint32_t>> m_unit_node; ///< per level: unit -> node (index_units)
     PackedTree m_tree;
 }; // class TreeBuilder
 

@@ -285,7 +285,7 @@ json SimplifyStage::report_json(size_t stores, const std::string& gl, const std:
         j["proved_far"] = t.proved_far;
         j["banned"] = {{"raster", t.banned_raster},
                        {"exact", t.banned_exact},
-                       {"border", t.banned_border},
+                       {"region", t.banned_region},
                        {"point_constraints", t.banned_points}};
         j["self_intersection_repairs"] = t.self_intersection_repairs;
         j["orientation_repairs"] = t.orientation_repairs;
@@ -343,10 +343,10 @@ void SimplifyStage::print_summary(size_t stores, const std::string& gl, const st
         std::printf("simplify: %zu stores in %.2f s on %s\n", stores, seconds, gl.c_str());
         for (const auto& t : totals) {
             std::printf("  eps %g m: %zu -> %zu vertices (%.1f%%), %zu candidates, %zu drawn, banned raster %zu "
-                        "exact %zu border %zu points %zu\n",
+                        "exact %zu region %zu points %zu\n",
                         t.eps_m, t.input_vertices, t.output_vertices,
                         t.input_vertices ? 100.0 * double(t.output_vertices) / double(t.input_vertices) : 0.0,
-                        t.candidates, t.drawn_segments, t.banned_raster, t.banned_exact, t.banned_border,
+                        t.candidates, t.drawn_segments, t.banned_raster, t.banned_exact, t.banned_region,
                         t.banned_points);
         }
         std::printf("outputs in %s\n", m_common.output.c_str());

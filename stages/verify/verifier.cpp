@@ -272,6 +272,7 @@ class Verifier {
         }
         // The units whose boundary each node's original map holds, and their original area sign.
         std::set<std::pair<uint64_t, uint64_t>> input_meetings; // chain pairs that meet at LOD 0
+        std::vector<LodChains> lods(m_sk.lod_eps_m.size());     // each LOD's chains, for check_across_lods
         std::vector<std::vector<UserPoint>> user_points(nodes.size());
         std::vector<std::map<std::string, int>> area_sign(nodes.size());
         parallel_each(nodes.size(), m_options.threads, [&](size_t i) {
@@ -300,10 +301,125 @@ class Verifier {
             });
             const auto unique = gather_nodes(ll, nodes, results);
             check_meetings(ll, nodes, results, unique, input_meetings);
+            keep_for_lods(lods[k], nodes, results, unique);
             m_report.chains += ll.chains;
             m_report.segments += ll.segments;
             m_report.points += ll.points;
             m_report.by_level_lod.push_back(std::move(ll));
+        }
+        check_across_lods(level, lods, input_meetings);
+    }
+
+    /// A level's chains at one LOD, each once, for the check across LODs.
+    struct LodChains {
+        std::vector<uint64_t> ids;
+        std::vector<std::string> nodes; ///< the node each was taken from (unit code)
+        datatree::Geometry geometry;
+    };
+
+    void keep_for_lods(LodChains& out, const std::vector<uint32_t>& nodes, const std::vector<NodeResult>& results,
+                       const std::vector<std::pair<size_t, size_t>>& unique) const
+    {
+        for (const auto& [slot, c] : unique) {
+            out.ids.push_back(results[slot].table.chains[c].id);
+            out.nodes.push_back(node_code(nodes[slot]));
+            out.geometry.add_chain(results[slot].geometry.chain(c));
+        }
+    }
+
+    /// Every LOD of a chain against every other LOD of each chain near it,
+    /// within and across nodes: a viewer's front holds neighbouring nodes at
+    /// different LODs, and a chain shown by two of them is drawn at one. A
+    /// meeting of a at LOD i with b at LOD j that is one of the same LOD in
+    /// disguise (b's segment is also b's at LOD i, or a's also a's at LOD j)
+    /// was reported by that LOD's check and is left out. One violation per
+    /// pair of chains, filed under the coarser LOD of its worst meeting (the
+    /// first found). Chains that already meet in the original map are input
+    /// problems.
+    void check_across_lods(const std::string& level, const std::vector<LodChains>& lods,
+                           const std::set<std::pair<uint64_t, uint64_t>>& input_meetings)
+    {
+        if (lods.size() < 2) {
+            return;
+        }
+        std::unordered_map<uint64_t, uint32_t> group_of; // chain id -> group
+        std::vector<std::vector<uint32_t>> index_of;     // per group, the chain's index at each LOD
+        std::vector<Segment> segs;
+        std::vector<uint32_t> layer, group;
+        struct Where {
+            uint32_t lod, chain, segment;
+        };
+        std::vector<Where> where;
+        for (uint32_t k = 0; k < lods.size(); ++k) {
+            const auto& lc = lods[k];
+            for (uint32_t c = 0; c < lc.ids.size(); ++c) {
+                const auto [it, fresh] = group_of.try_emplace(lc.ids[c], static_cast<uint32_t>(group_of.size()));
+                if (fresh) {
+                    index_of.emplace_back(lods.size(), UINT32_MAX);
+                }
+                index_of[it->second][k] = c;
+                const auto pts = lc.geometry.chain(c);
+                for (uint32_t s = 0; s + 1 < pts.size(); ++s) {
+                    if (pts[s] == pts[s + 1]) {
+                        continue; // the subsequence check's to report
+                    }
+                    segs.push_back({pts[s], pts[s + 1], static_cast<uint32_t>(segs.size())});
+                    layer.push_back(k);
+                    group.push_back(it->second);
+                    where.push_back({k, c, s});
+                }
+            }
+        }
+        // Whether segment s of chain `g` is also one of its segments at LOD k.
+        auto has_segment = [&](uint32_t g, uint32_t k, const Segment& s) {
+            const uint32_t c = index_of[g][k];
+            if (c == UINT32_MAX) {
+                return false;
+            }
+            const auto pts = lods[k].geometry.chain(c);
+            for (size_t i = 0; i + 1 < pts.size(); ++i) {
+                if (pts[i] == s.a && pts[i + 1] == s.b) {
+                    return true;
+                }
+            }
+            return false;
+        };
+        auto rank_of = [](SegmentRelation r) {
+            return r == SegmentRelation::overlap ? 3 : r == SegmentRelation::cross ? 2 : 1;
+        };
+        std::map<std::pair<uint64_t, uint64_t>, std::pair<Intersection, int>> meetings; // by chain ids
+        for (const auto& x : find_intersections_between(segs, layer, group, m_options.threads)) {
+            const Where a = where[x.first], b = where[x.second];
+            if (has_segment(group[x.second], a.lod, segs[x.second]) ||
+                has_segment(group[x.first], b.lod, segs[x.first])) {
+                continue; // the same meeting at one LOD
+            }
+            const uint64_t ida = lods[a.lod].ids[a.chain], idb = lods[b.lod].ids[b.chain];
+            const auto key = std::make_pair(std::min(ida, idb), std::max(ida, idb));
+            const int rank = rank_of(x.relation);
+            auto [it, fresh] = meetings.try_emplace(key, x, rank);
+            if (!fresh && rank > it->second.second) {
+                it->second = {x, rank};
+            }
+        }
+        for (const auto& [ids, m] : meetings) {
+            const auto& x = m.first;
+            Where a = where[x.first], b = where[x.second];
+            if (a.lod > b.lod) {
+                std::swap(a, b);
+            }
+            const char* rel = x.relation == SegmentRelation::cross     ? "cross"
+                              : x.relation == SegmentRelation::touch   ? "touch"
+                              : x.relation == SegmentRelation::overlap ? "overlap"
+                                                                       : "meet";
+            auto ll = std::find_if(m_report.by_level_lod.begin(), m_report.by_level_lod.end(),
+                                   [&](const LevelLod& l) { return l.level == level && l.lod == b.lod; });
+            add(*ll, {input_meetings.contains(ids) ? "input_problem" : "lod_crossings", level, b.lod,
+                      lods[b.lod].nodes[b.chain], std::vector<uint64_t>{ids.first, ids.second}, x.x, x.y, 0, 0,
+                      "chain " + std::to_string(lods[a.lod].ids[a.chain]) + " at LOD " + std::to_string(a.lod) +
+                          " segment " + std::to_string(a.segment) + " and chain " +
+                          std::to_string(lods[b.lod].ids[b.chain]) + " at LOD " + std::to_string(b.lod) + " segment " +
+                          std::to_string(b.segment) + " " + rel});
         }
     }
 

@@ -16,8 +16,9 @@
 namespace tigerlod::verify {
 
 /// The kinds of violation, in report order.
-inline constexpr std::array<const char*, 11> kinds = {
+inline constexpr std::array<const char*, 12> kinds = {
     "crossings",          ///< two chains cross or touch other than at a shared end point
+    "lod_crossings",      ///< two chains at two different LODs of a level meet other than at a shared end point
     "overlaps",           ///< two chains share a collinear piece
     "self_intersections", ///< a chain meets itself other than at consecutive segments
     "eps_exceeded",       ///< an original vertex farther than eps from the simplified chain, or the reverse

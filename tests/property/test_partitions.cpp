@@ -62,8 +62,8 @@ const std::pair<AdversarialMap::Partitioning, const char*> partitionings[] = {
 
 /// DIR/ingest through color, simplify (with the colours), pack and verify at
 /// `ladder`: verify's exit code, or -2 after a test failure naming the stage
-/// that failed before it. `border_bans` gets the border rule's bans.
-int color_to_verify(const fs::path& dir, const Ladder& ladder, size_t& border_bans)
+/// that failed before it. `region_bans` gets the region rule's bans.
+int color_to_verify(const fs::path& dir, const Ladder& ladder, size_t& region_bans)
 {
     const std::string d = dir.string();
     const fs::path log = dir / "log";
@@ -79,7 +79,7 @@ int color_to_verify(const fs::path& dir, const Ladder& ladder, size_t& border_ba
     }
     const json simp = json::parse(slurp(dir / "simp" / "simplify-report.json"));
     for (const auto& t : simp["tolerances"]) {
-        border_bans += t["banned"]["border"].get<size_t>();
+        region_bans += t["banned"]["region"].get<size_t>();
     }
     const int verified = run("verify", d + "/tree " + d + "/ingest " + d + "/verify", log);
     EXPECT_EQ(verified, 0) << slurp(log);
@@ -92,7 +92,7 @@ TEST(Partitions, AdversarialMapsVerifyCleanHoweverPartitioned)
 {
     const auto [first, last] = seed_range();
     const fs::path dir = fs::temp_directory_path() / ("tigerlod-partitions-" + std::to_string(::getpid()));
-    size_t runs = 0, clean = 0, neighbour_points = 0, border_bans = 0;
+    size_t runs = 0, clean = 0, neighbour_points = 0, region_bans = 0;
     for (uint64_t seed = first; seed <= last; ++seed) {
         const AdversarialMap map(seed);
         for (const auto& [partitioning, pname] : partitionings) {
@@ -117,7 +117,7 @@ TEST(Partitions, AdversarialMapsVerifyCleanHoweverPartitioned)
                     neighbour_points += l["neighbour_points"].get<size_t>();
                 }
                 ASSERT_EQ(ingest["problems"]["crossings"], 0) << "the generator made a map that is not planar";
-                const int verified = color_to_verify(dir, ladder, border_bans);
+                const int verified = color_to_verify(dir, ladder, region_bans);
                 ASSERT_NE(verified, -2);
                 ++runs;
                 clean += verified == 0;
@@ -126,10 +126,10 @@ TEST(Partitions, AdversarialMapsVerifyCleanHoweverPartitioned)
     }
     fs::remove_all(dir);
     // The maps do exercise the contract: neighbours' points in the stores,
-    // and shortcuts that the border rule turned down.
+    // and shortcuts that the region rule turned down.
     EXPECT_GT(neighbour_points, 0U);
-    std::printf("%zu of %zu runs clean; %zu neighbour points; %zu shortcuts banned by the border rule\n", clean, runs,
-                neighbour_points, border_bans);
+    std::printf("%zu of %zu runs clean; %zu neighbour points; %zu shortcuts banned by the region rule\n", clean, runs,
+                neighbour_points, region_bans);
 }
 
 TEST(Partitions, LineLayersInTilesVerifyClean)
@@ -140,7 +140,7 @@ TEST(Partitions, LineLayersInTilesVerifyClean)
     const auto [first, last] = seed_range();
     const fs::path dir = fs::temp_directory_path() / ("tigerlod-lines-" + std::to_string(::getpid()));
     const std::pair<const char*, const char*> tilings[] = {{"whole", "0"}, {"400 m", "0.4"}, {"250 m", "0.25"}};
-    size_t runs = 0, clean = 0, border_bans = 0;
+    size_t runs = 0, clean = 0, region_bans = 0;
     std::map<std::string, uint64_t> out_vertices, cuts; // per tiling, over seeds, ladders and tolerances
     for (uint64_t seed = first; seed <= last; ++seed) {
         const AdversarialLines map(seed);
@@ -165,7 +165,7 @@ TEST(Partitions, LineLayersInTilesVerifyClean)
                     EXPECT_GT(level["partitions"].get<size_t>(), 4U);
                     EXPECT_GT(level["tile_cuts"].get<size_t>(), 0U);
                 }
-                const int verified = color_to_verify(dir, ladder, border_bans);
+                const int verified = color_to_verify(dir, ladder, region_bans);
                 ASSERT_NE(verified, -2);
                 ++runs;
                 clean += verified == 0;
@@ -192,9 +192,9 @@ TEST(Partitions, LineLayersInTilesVerifyClean)
         }
     }
     fs::remove_all(dir);
-    std::printf("%zu of %zu line-layer runs clean; %zu shortcuts banned by the border rule; output vertices whole "
+    std::printf("%zu of %zu line-layer runs clean; %zu shortcuts banned by the region rule; output vertices whole "
                 "%llu, 400 m tiles %llu (%llu cuts), 250 m tiles %llu (%llu cuts)\n",
-                clean, runs, border_bans, static_cast<unsigned long long>(out_vertices["whole"]),
+                clean, runs, region_bans, static_cast<unsigned long long>(out_vertices["whole"]),
                 static_cast<unsigned long long>(out_vertices["400 m"]), static_cast<unsigned long long>(cuts["400 m"]),
                 static_cast<unsigned long long>(out_vertices["250 m"]), static_cast<unsigned long long>(cuts["250 m"]));
 }

@@ -21,7 +21,8 @@
 /// cell edges, out of every hill's reach, lie thin loops (a few metres wide,
 /// up to 220 m long): cut by a tile's edge into two pieces owned by two
 /// tiles, both pieces can take the same chord at a coarse tolerance, which
-/// only the border rule (two chains between the same two ends) refuses.
+/// only the chord rule (of two chains between the same two ends, only the
+/// smaller id may become the chord; simplification/README.md, step 7) refuses.
 ///
 /// Every coordinate is on TIGER's 1e-6 degree lattice; rounding moves a point
 /// by under 0.1 m, against gaps of 3 m or more, so the map stays planar (the

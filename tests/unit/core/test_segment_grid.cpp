@@ -96,6 +96,36 @@ TEST(SegmentGrid, NewSegmentsFindThePairsTheyAreIn)
     EXPECT_THROW(find_intersections(std::vector<Segment>(3), std::vector<uint8_t>(2), 1), std::invalid_argument);
 }
 
+TEST(SegmentGrid, BetweenLayersFindsThePairsOfDifferentLayersAndGroups)
+{
+    // Exactly the whole check's pairs whose members differ in layer and in group.
+    std::mt19937 rng(4242);
+    for (int round = 0; round < 20; ++round) {
+        const auto segs = random_segments(rng, 400, 60, round % 2 ? 50 : 5);
+        const uint32_t layers = 1 + round % 4, groups = std::array{1U, 2U, 7U, 400U}[round % 4];
+        std::vector<uint32_t> layer(segs.size()), group(segs.size());
+        for (size_t i = 0; i < segs.size(); ++i) {
+            layer[i] = static_cast<uint32_t>(rng() % layers);
+            group[i] = static_cast<uint32_t>(rng() % groups);
+        }
+        std::vector<std::tuple<uint32_t, uint32_t, SegmentRelation>> want;
+        for (const auto& [i, j, r] : brute_force(segs)) {
+            if (layer[i] != layer[j] && group[i] != group[j]) {
+                want.emplace_back(i, j, r);
+            }
+        }
+        if (layers > 1 && groups > 2) {
+            ASSERT_FALSE(want.empty()) << "round " << round << ": the case should have pairs to find";
+        }
+        for (unsigned threads : {1U, 3U}) {
+            expect_pairs(find_intersections_between(segs, layer, group, threads), want, round);
+        }
+    }
+    EXPECT_THROW(
+        find_intersections_between(std::vector<Segment>(3), std::vector<uint32_t>(3), std::vector<uint32_t>(2), 1),
+        std::invalid_argument);
+}
+
 TEST(SegmentGrid, LongDiagonalsAmongShortSegments)
 {
     // A 2^30-long diagonal among short segments: the supercover must still find the hit.

@@ -411,6 +411,35 @@ TEST(Simplify, TwoCloseChainsThatDouglasPeuckerMakesCrossDoNot)
     EXPECT_GE(st.banned_raster + st.banned_points, 1U);
 }
 
+TEST(Simplify, TheRegionRuleKeepsAShortcutOffAnotherChainsOriginal)
+{
+    // b dips 1 unit under the line of a's shortcut (0,0)-(1000,0), near the
+    // junction where a lies 1.8 units lower still: a sliver no pixel sees
+    // (pixels of 4 eps here). At 1 m both straighten without meeting, but a's
+    // shortcut crosses b's original, so a view showing a at 1 m beside b at
+    // LOD 0 would cross. b's representative point (its middle vertex) is
+    // away from a, so the point constraints do not see it either.
+    const Pts a{{0, 0}, {500, -3}, {1000, 0}};
+    const Pts b{{0, 0}, {300, -1}, {600, 50}, {900, 200}};
+    MapBuilder m;
+    m.chain(1, a).chain(2, b);
+    ASSERT_EQ(count_intersections({&m.s}), 0U);
+    auto o = plain();
+    o.color.pixel_fraction = 4;
+    ToleranceStats st;
+    const auto out = run(m.s, 1.0, o, &st);
+    EXPECT_EQ(points_of(out, 1), a) << "a's shortcut holds b's vertex (300,-1) in its region";
+    EXPECT_EQ(points_of(out, 2).size(), 2U) << "b's own shortcut holds nothing of a";
+    EXPECT_GE(st.banned_region, 1U);
+    // Every LOD of each against the other's original.
+    MapBuilder mixed;
+    mixed.chain(1, points_of(out, 1)).chain(2, b);
+    EXPECT_EQ(count_intersections({&mixed.s}), 0U);
+    MapBuilder mixed2;
+    mixed2.chain(1, a).chain(2, points_of(out, 2));
+    EXPECT_EQ(count_intersections({&mixed2.s}), 0U);
+}
+
 TEST(Raster, ShortcutThroughANeighboursRegionFailsAndOriginalEdgesPass)
 {
     const Pts a{{0, 0}, {500, 90}, {1000, 0}};
@@ -818,46 +847,53 @@ TEST(Simplify, AStoreMustHoldThePointOfEveryUnitItsOwnChainsBound)
     EXPECT_TRUE(partition_contract_fault(m.s).has_value());
 }
 
-// The border rule. A lake on a border between two partitions, its shores two
+// The chord rule. A lake on a border between two partitions, its shores two
 // chains from J to K (10 m apart, 2.5 pixels at 16 m: the raster tests no
 // pixel of J K, all within 1.5 pixels of an end). Each partition sees the
-// other's shore as halo, and both shores may become J K: simplified apart,
-// they would overlap. Chain 20 gives way to chain 10 (the smaller id).
+// other's shore as halo, and both shores may become J K, each one's region
+// empty of the other: simplified apart, or at two tolerances, they would
+// overlap. Chain 20 gives way to chain 10 (the smaller id).
 //
 //            10 (north shore)
 //          .-----.
 //       J <       > K      1 m = 100 grid units
 //          '-----'
 //            20 (south shore)
-TEST(Simplify, TheBorderRuleKeepsPartitionsSimplifiedApartFromMeeting)
+TEST(Simplify, TwoShoresBetweenTheSameJunctionsNeverBothBecomeTheChord)
 {
+    // Both shores' chords are the segment J K, each one's region empty of
+    // the other: only the chain with the smaller id (10) may become it, in
+    // its own partition or beside 20 in one store, at any tolerance.
     const Pts north{{0, 0}, {333, 300}, {666, 300}, {1000, 0}};
     const Pts south{{0, 0}, {333, -300}, {666, -300}, {1000, 0}};
     MapBuilder a, b;
     a.chain(20, south, "S", "").chain(10, north, "", "N", "", chains::chain_halo);
     b.chain(10, north, "", "N").chain(20, south, "S", "", "", chains::chain_halo);
-    ToleranceStats sa, sb;
-    const ChainStore out_a = run(a.s, 16, plain(), &sa);
-    const ChainStore out_b = run(b.s, 16, plain(), &sb);
-    ASSERT_EQ(out_a.chains.size(), 1U);
-    ASSERT_EQ(out_b.chains.size(), 1U);
-    EXPECT_EQ(out_b.chains[0].count, 2U); // 10 becomes J K
-    EXPECT_EQ(sb.banned_border, 0U);
-    EXPECT_GE(sa.banned_border, 1U); // 20's J K meets 10's J K
-    const auto pa = out_a.chain_points(out_a.chains[0]), pb = out_b.chain_points(out_b.chains[0]);
-    for (size_t i = 0; i + 1 < pa.size(); ++i) {
-        for (size_t j = 0; j + 1 < pb.size(); ++j) {
-            const auto rel = segment_relation(pa[i], pa[i + 1], pb[j], pb[j + 1]);
-            EXPECT_TRUE(rel == SegmentRelation::disjoint || rel == SegmentRelation::shared_endpoint)
-                << "segment " << i << " of 20 and " << j << " of 10";
+    for (const double eps : {16.0, 64.0}) {
+        ToleranceStats sa, sb;
+        const ChainStore out_a = run(a.s, eps, plain(), &sa);
+        const ChainStore out_b = run(b.s, eps, plain(), &sb);
+        ASSERT_EQ(out_a.chains.size(), 1U);
+        ASSERT_EQ(out_b.chains.size(), 1U);
+        EXPECT_EQ(out_b.chains[0].count, 2U); // 10 becomes J K
+        EXPECT_EQ(out_a.chains[0].count, 3U); // 20 keeps one vertex
+        EXPECT_EQ(sb.banned_region, 0U);
+        EXPECT_EQ(sa.banned_region, 1U); // 20's J K
+        const auto pa = out_a.chain_points(out_a.chains[0]), pb = out_b.chain_points(out_b.chains[0]);
+        for (size_t i = 0; i + 1 < pa.size(); ++i) {
+            for (size_t j = 0; j + 1 < pb.size(); ++j) {
+                const auto rel = segment_relation(pa[i], pa[i + 1], pb[j], pb[j + 1]);
+                EXPECT_TRUE(rel == SegmentRelation::disjoint || rel == SegmentRelation::shared_endpoint)
+                    << "segment " << i << " of 20 and " << j << " of 10";
+            }
         }
+        // Within one store the same.
+        MapBuilder whole;
+        whole.chain(10, north, "", "N").chain(20, south, "S", "");
+        ToleranceStats sw;
+        const ChainStore out_w = run(whole.s, eps, plain(), &sw);
+        EXPECT_EQ(points_of(out_w, 10).size(), 2U);
+        EXPECT_EQ(points_of(out_w, 20).size(), 3U);
+        EXPECT_EQ(sw.banned_exact, 0U);
     }
-    // Within one store the exact check decides, as before: 10 and 20 both
-    // owned, one of them keeps its shore, and the rule never applies.
-    MapBuilder whole;
-    whole.chain(10, north, "", "N").chain(20, south, "S", "");
-    ToleranceStats sw;
-    const ChainStore out_w = run(whole.s, 16, plain(), &sw);
-    EXPECT_EQ(sw.banned_border, 0U);
-    EXPECT_EQ(out_w.chains[0].count + out_w.chains[1].count, 6U);
 }

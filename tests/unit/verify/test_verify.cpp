@@ -361,6 +361,27 @@ TEST_F(Verify, ChainsThatOverlap)
     expect(r, {{"overlaps", 1}, {"not_subsequence", 1}});
 }
 
+TEST_F(Verify, ChainsThatMeetOnlyAcrossLods)
+{
+    // At LOD 1 both lines are straight and only share their end; but a's
+    // shortcut crosses b's original, which a view drawing a at LOD 1 beside
+    // b at LOD 0 would show. (b's unchanged segments at LOD 1 are not
+    // reported twice: a meeting that is one of a single LOD is that LOD's.)
+    Map m = lines({{1, {{0, 0}, {500, -3}, {1000, 0}}}, {2, {{0, 0}, {300, -1}, {600, 50}, {900, 200}}}}, 100);
+    m.simplified[1] = {{0, 0}, {1000, 0}};
+    m.simplified[2] = {{0, 0}, {900, 200}};
+    const auto r = run(m);
+    expect(r, {{"lod_crossings", 1}});
+    ASSERT_EQ(r.items.size(), 1U);
+    EXPECT_EQ(r.items[0].lod, 1U);
+    EXPECT_EQ(r.items[0].chains, (std::vector<uint64_t>{1, 2}));
+    EXPECT_NEAR(r.items[0].x, 306.0, 1.0);
+    EXPECT_EQ(r.items[0].y, 0.0);
+    // b kept as it was: a at LOD 1 meets b at LOD 1 as well, which the LOD's own check reports.
+    m.simplified.erase(2);
+    expect(run(m), {{"crossings", 1}});
+}
+
 TEST_F(Verify, ChainThatCrossesItself)
 {
     // Dropping (920, 300), 67.6 m from the shortcut (800, 0)-(920, 700), is
