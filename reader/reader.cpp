@@ -10,6 +10,8 @@
 #include <fcntl.h>
 #include <set>
 #include <sys/stat.h>
+#include <thread>
+#include <unordered_map>
 #include <unistd.h>
 
 namespace tigerlod::reader {
@@ -79,7 +81,53 @@ std::shared_ptr<Tree> Tree::open(const std::filesystem::path& dir, std::string& 
     }
     t->m_dir = dir;
     t->m_skeleton_bytes = bytes.size();
+    const auto& nodes = t->m_skeleton.nodes;
+    for (uint32_t n = 1; n < nodes.size(); ++n) {
+        // A unit's node shows the level below the map that has the unit (a
+        // line layer's tiles are of their root's level, and units of none).
+        if (nodes[n].level > nodes[nodes[n].parent].level) {
+            t->m_unit_node.emplace(std::pair{nodes[n].level - 1, t->m_skeleton.strings[nodes[n].code]}, n);
+        }
+    }
     return t;
+}
+
+uint32_t Tree::unit_node(uint32_t map_level, const std::string& code) const
+{
+    const auto it = m_unit_node.find({map_level, code});
+    return it == m_unit_node.end() ? datatree::no_node : it->second;
+}
+
+uint64_t Tree::skeleton_memory() const noexcept
+{
+    const auto& s = m_skeleton;
+    auto string_heap = [](const std::string& str) { return str.capacity() > 15 ? str.capacity() + 1 : 0; };
+    uint64_t n = sizeof(Tree) + s.nodes.capacity() * sizeof(datatree::Node) +
+                 s.tiles.capacity() * sizeof(datatree::Tile) + s.strings.capacity() * sizeof(std::string) +
+                 s.level_names.capacity() * sizeof(std::string) + s.lod_eps_m.capacity() * sizeof(double);
+    for (const auto& node : s.nodes) {
+        n += node.lods.capacity() * sizeof(datatree::LodInfo);
+    }
+    for (const auto& str : s.strings) {
+        n += string_heap(str);
+    }
+    for (const auto& str : s.level_names) {
+        n += string_heap(str);
+    }
+    for (const auto& t : s.tiles) {
+        n += string_heap(t.file);
+    }
+    // A std::map node: three pointers and a colour, then the key and value.
+    for (const auto& [key, node] : m_unit_node) {
+        n += 4 * sizeof(void*) + sizeof(key) + sizeof(node) + string_heap(key.second);
+    }
+    return n;
+}
+
+void Tree::simulate_disk(std::chrono::microseconds latency, double bytes_per_second)
+{
+    m_latency = latency;
+    m_bytes_per_second = bytes_per_second;
 }
 
 uint64_t Tree::tree_bytes() const noexcept
@@ -132,6 +180,11 @@ Status Tree::read_payload(uint32_t node, int lod, std::string& bytes) const
     }
     if (crc32(std::as_bytes(std::span(bytes.data(), bytes.size()))) != ref.crc) {
         return {where + "checksum mismatch"};
+    }
+    if (m_latency.count() > 0 || m_bytes_per_second > 0) {
+        const double transfer = m_bytes_per_second > 0 ? double(ref.size) / m_bytes_per_second : 0.0;
+        std::this_thread::sleep_for(
+            m_latency + std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::duration<double>(transfer)));
     }
     return {};
 }
@@ -237,6 +290,99 @@ std::vector<FrontItem> select_front(const datatree::Skeleton& s, const View& vie
     return out;
 }
 
+// --- what to draw -----------------------------------------------------------------------------------
+
+NodeChains node_chains(const Tree& tree, uint32_t node, const datatree::ChainTable& table)
+{
+    const auto& s = tree.skeleton();
+    const auto& n = s.nodes[node];
+    NodeChains out;
+    out.ids.reserve(table.chains.size());
+    out.flags.reserve(table.chains.size());
+    out.across.reserve(table.chains.size());
+    for (const auto& c : table.chains) {
+        out.ids.push_back(c.id);
+        out.flags.push_back(c.flags);
+        uint32_t across = datatree::no_node;
+        for (const uint32_t side : {c.left, c.right}) {
+            const std::string& code = table.strings[side];
+            if (code.empty()) {
+                continue;
+            }
+            // A unit of this map with a node: a child of this node's, or a neighbour's across the outline.
+            const uint32_t u = tree.unit_node(n.level, code);
+            if (u != datatree::no_node && s.nodes[u].parent != node) {
+                across = u;
+            }
+        }
+        out.across.push_back(across);
+    }
+    return out;
+}
+
+std::vector<DrawChain> draw_list(const datatree::Skeleton& s, const std::vector<Drawable>& front)
+{
+    auto ready = [&](const Drawable& d) { return d.geometry && d.chains; };
+    // Each front node and every node above one: whether all front nodes at or below it are ready.
+    std::unordered_map<uint32_t, bool> covered;
+    for (const auto& d : front) {
+        for (uint32_t n = d.wanted.node; n != datatree::no_node; n = s.nodes[n].parent) {
+            auto [it, fresh] = covered.try_emplace(n, ready(d));
+            it->second = it->second && ready(d);
+        }
+    }
+    auto left_to_finer = [&](uint32_t across) {
+        if (across == datatree::no_node) {
+            return false;
+        }
+        const auto it = covered.find(across);
+        return it != covered.end() && it->second;
+    };
+    // (level, chain id) -> the item that draws it: the finer LOD, then the earlier item.
+    struct Key {
+        uint32_t level;
+        uint64_t id;
+        bool operator==(const Key&) const = default;
+    };
+    struct KeyHash {
+        size_t operator()(const Key& k) const noexcept { return std::hash<uint64_t>()(k.id * 31 + k.level); }
+    };
+    std::unordered_map<Key, uint32_t, KeyHash> drawer;
+    for (uint32_t i = 0; i < front.size(); ++i) {
+        const auto& d = front[i];
+        if (!ready(d)) {
+            continue;
+        }
+        const uint32_t level = s.nodes[d.wanted.node].level;
+        for (size_t k = 0; k < d.chains->ids.size(); ++k) {
+            if (left_to_finer(d.chains->across[k])) {
+                continue;
+            }
+            auto [it, fresh] = drawer.try_emplace(Key{level, d.chains->ids[k]}, i);
+            if (!fresh && d.lod < front[it->second].lod) {
+                it->second = i;
+            }
+        }
+    }
+    std::vector<DrawChain> out;
+    for (uint32_t i = 0; i < front.size(); ++i) {
+        const auto& d = front[i];
+        if (!ready(d)) {
+            continue;
+        }
+        const uint32_t level = s.nodes[d.wanted.node].level;
+        for (uint32_t k = 0; k < d.chains->ids.size(); ++k) {
+            if (left_to_finer(d.chains->across[k])) {
+                continue;
+            }
+            if (drawer.at(Key{level, d.chains->ids[k]}) == i) {
+                out.push_back({i, k});
+            }
+        }
+    }
+    return out;
+}
+
 // --- streamer -------------------------------------------------------------------------------------
 
 Streamer::Streamer(std::shared_ptr<const Tree> tree, StreamOptions options)
@@ -257,14 +403,26 @@ Streamer::~Streamer()
 size_t Streamer::charge(FrontItem item) const
 {
     const auto& n = m_tree->skeleton().nodes[item.node];
+    if (item.lod == table_lod) {
+        return NodeChains::bytes(n.chains);
+    }
     return datatree::geometry_bytes(n.chains, n.lods[item.lod].vertices);
 }
 
 size_t Streamer::in_flight_cost(FrontItem item) const
 {
+    const auto& n = m_tree->skeleton().nodes[item.node];
+    if (item.lod == table_lod) {
+        // While decoding: the payload bytes, the decoded table (its entries,
+        // and at most one string per payload byte: a string object and its
+        // characters), and the result.
+        const uint64_t payload = n.table.size;
+        return charge(item) + payload + n.chains * sizeof(datatree::ChainTable::Entry) +
+               payload * (sizeof(std::string) + 1) + payload;
+    }
     // While decoding: the payload bytes, Draco's attribute buffer and our copy
     // of the new points (each at most 8 bytes a vertex), and the result.
-    const auto& lod = m_tree->skeleton().nodes[item.node].lods[item.lod];
+    const auto& lod = n.lods[item.lod];
     return charge(item) + lod.payload.size + 2 * lod.vertices * sizeof(GridPoint);
 }
 
@@ -308,10 +466,26 @@ std::vector<FrontItem> Streamer::set_view(const View& view)
             }
         }
     }
+    // Each node's chain table before its first payload: a payload without it
+    // cannot be drawn (tables are small: a few bytes a chain).
+    std::vector<FrontItem> with_tables;
+    with_tables.reserve(2 * wanted.size());
+    std::set<uint32_t> tabled;
+    size_t front_ranks = 0; // the front's items and tables come first
+    for (size_t i = 0; i < wanted.size(); ++i) {
+        if (tabled.insert(wanted[i].node).second) {
+            with_tables.push_back({wanted[i].node, table_lod});
+        }
+        with_tables.push_back(wanted[i]);
+        if (i + 1 == front.size()) {
+            front_ranks = with_tables.size();
+        }
+    }
     {
         std::lock_guard lock(m_mutex);
         m_front = front;
-        m_wanted = std::move(wanted);
+        m_front_ranks = front_ranks;
+        m_wanted = std::move(with_tables);
         m_rank.clear();
         for (size_t i = 0; i < m_wanted.size(); ++i) {
             m_rank.emplace(m_wanted[i], i);
@@ -329,8 +503,12 @@ std::vector<Drawable> Streamer::resident_front()
     std::vector<Drawable> out;
     out.reserve(m_front.size());
     for (const auto& f : m_front) {
-        Drawable d{f, f.lod, nullptr};
+        Drawable d{f, f.lod, nullptr, nullptr};
         ++m_tick;
+        if (auto it = m_cache.find({f.node, table_lod}); it != m_cache.end()) {
+            it->second.last_used = m_tick;
+            d.chains = it->second.chains;
+        }
         if (auto it = m_cache.find(f); it != m_cache.end()) {
             ++m_stats.hits;
             it->second.last_used = m_tick;
@@ -358,14 +536,20 @@ std::vector<Drawable> Streamer::resident_front()
     return out;
 }
 
+bool Streamer::settled_locked(FrontItem item) const
+{
+    if (m_cache.contains(item) || m_failed.contains(item)) {
+        return true;
+    }
+    const auto it = m_skipped.find(item);
+    return it != m_skipped.end() && it->second == m_generation;
+}
+
 bool Streamer::front_done_locked() const
 {
     for (const auto& f : m_front) {
-        if (!m_cache.contains(f) && !m_failed.contains(f)) {
-            auto it = m_skipped.find(f);
-            if (it == m_skipped.end() || it->second != m_generation) {
-                return false;
-            }
+        if (!settled_locked(f) || !settled_locked({f.node, table_lod})) {
+            return false;
         }
     }
     return true;
@@ -378,7 +562,7 @@ bool Streamer::wait_front(std::chrono::milliseconds timeout)
     m_changed.wait_for(lock, timeout, [&] { return front_done_locked(); });
     bool all = true;
     for (const auto& f : m_front) {
-        all = all && m_cache.contains(f);
+        all = all && m_cache.contains(f) && m_cache.contains({f.node, table_lod});
     }
     m_stats.seconds_waiting += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return all;
@@ -411,7 +595,7 @@ std::vector<Streamer::Resident> Streamer::resident() const
     std::lock_guard lock(m_mutex);
     std::vector<Resident> out;
     for (const auto& [item, e] : m_cache) {
-        out.push_back({item, e.bytes, e.geometry});
+        out.push_back({item, e.bytes, e.geometry, e.chains});
     }
     return out;
 }
@@ -440,7 +624,7 @@ void Streamer::run()
         }
         const FrontItem item = *next;
         const size_t rank = m_rank.at(item);
-        const bool in_front = rank < m_front.size();
+        const bool in_front = rank < m_front_ranks;
         const size_t cost = in_flight_cost(item);
         // Make room: first what is no longer wanted (least recently used
         // first), then wanted payloads of lower priority (lowest first).
@@ -452,7 +636,7 @@ void Streamer::run()
             size_t victim_rank = 0;
             uint64_t victim_used = 0;
             for (auto it = m_cache.begin(); it != m_cache.end(); ++it) {
-                if (it->second.geometry.use_count() > 1) {
+                if (it->second.held()) {
                     continue;
                 }
                 const auto r = m_rank.find(it->first);
@@ -483,9 +667,23 @@ void Streamer::run()
         m_in_flight += cost;
         m_stats.peak_bytes = std::max(m_stats.peak_bytes, m_stats.resident_bytes + m_in_flight);
         lock.unlock();
-        auto geometry = std::make_shared<datatree::Geometry>();
-        const Status st = m_tree->read_geometry(item.node, item.lod, *geometry);
-        const uint64_t size = m_tree->skeleton().nodes[item.node].lods[item.lod].payload.size;
+        std::shared_ptr<datatree::Geometry> geometry;
+        std::shared_ptr<NodeChains> chains;
+        Status st;
+        const auto& node = m_tree->skeleton().nodes[item.node];
+        uint64_t size = 0;
+        if (item.lod == table_lod) {
+            datatree::ChainTable table;
+            st = m_tree->read_table(item.node, table);
+            if (st.ok()) {
+                chains = std::make_shared<NodeChains>(node_chains(*m_tree, item.node, table));
+            }
+            size = node.table.size;
+        } else {
+            geometry = std::make_shared<datatree::Geometry>();
+            st = m_tree->read_geometry(item.node, item.lod, *geometry);
+            size = node.lods[item.lod].payload.size;
+        }
         lock.lock();
         m_in_flight -= cost;
         if (!st.ok()) {
@@ -493,7 +691,7 @@ void Streamer::run()
             ++m_stats.errors;
         } else {
             const size_t bytes = charge(item);
-            m_cache[item] = Entry{std::move(geometry), bytes, ++m_tick};
+            m_cache[item] = Entry{std::move(geometry), std::move(chains), bytes, ++m_tick};
             m_stats.resident_bytes += bytes;
             ++m_stats.loads;
             m_stats.bytes_read += size;

@@ -51,11 +51,28 @@ class Tree {
     Status read_geometry(uint32_t node, uint32_t lod, datatree::Geometry& out) const;
     Status read_table(uint32_t node, datatree::ChainTable& out) const;
 
+    /// The node of unit `code` of the map of level `map_level` (a unit that
+    /// has units below it is a node of level map_level + 1), or no_node.
+    uint32_t unit_node(uint32_t map_level, const std::string& code) const;
+
+    /// Bytes the skeleton takes in memory once decoded (an upper estimate:
+    /// every vector's and string's heap block, and this object).
+    uint64_t skeleton_memory() const noexcept;
+
+    /// A simulated disk, for machines whose page cache hides the real one:
+    /// every payload read then takes `latency` plus its size at
+    /// `bytes_per_second` (0: no limit), as a sleep before it returns. Set
+    /// before the tree is shared with a streamer.
+    void simulate_disk(std::chrono::microseconds latency, double bytes_per_second);
+
   private:
     Tree() = default;
     std::filesystem::path m_dir;
     datatree::Skeleton m_skeleton;
     uint64_t m_skeleton_bytes = 0;
+    std::map<std::pair<uint32_t, std::string>, uint32_t> m_unit_node; ///< (level, code) -> node
+    std::chrono::microseconds m_latency{0};
+    double m_bytes_per_second = 0;
 }; // class Tree
 
 /// A 2D camera over the projected grid.
@@ -75,9 +92,12 @@ struct FrontOptions {
     double node_fraction = 0.25;
 };
 
+/// A FrontItem's `lod` for a node's chain table (ids, border levels).
+inline constexpr uint32_t table_lod = 0xFFFFFFFFU;
+
 struct FrontItem {
     uint32_t node = 0;
-    uint32_t lod = 0;
+    uint32_t lod = 0; ///< or table_lod: the node's chain table
     friend bool operator==(const FrontItem&, const FrontItem&) = default;
     friend auto operator<=>(const FrontItem&, const FrontItem&) = default;
 };
@@ -114,12 +134,56 @@ struct Stats {
     double seconds_waiting = 0.0; ///< time callers spent in wait_front()
 };
 
+/// What a renderer needs of a node's chain table: per chain, in the
+/// geometry's order, its id, its flags (border level in bits 8-15), and the
+/// node across it when it lies on the node's outline and the unit on the
+/// other side has a node (no_node otherwise).
+struct NodeChains {
+    std::vector<uint64_t> ids;
+    std::vector<uint32_t> flags;
+    std::vector<uint32_t> across;
+    /// The bytes a table of `chains` chains is charged (exact: the three arrays).
+    static constexpr size_t bytes(size_t chains) noexcept { return chains * (sizeof(uint64_t) + 2 * sizeof(uint32_t)); }
+    /// The bytes its arrays hold.
+    size_t memory_bytes() const noexcept
+    {
+        return ids.capacity() * sizeof(uint64_t) + (flags.capacity() + across.capacity()) * sizeof(uint32_t);
+    }
+};
+
+/// A node's table as NodeChains: the outline's units looked up in `tree`.
+NodeChains node_chains(const Tree& tree, uint32_t node, const datatree::ChainTable& table);
+
 /// A decoded payload the caller may draw; it stays valid while held.
 struct Drawable {
     FrontItem wanted;
     uint32_t lod = 0; ///< the LOD drawn: `wanted.lod` on a hit, else the nearest resident one
     std::shared_ptr<const datatree::Geometry> geometry;
+    std::shared_ptr<const NodeChains> chains; ///< the node's table, once resident
 };
+
+/// One chain of a front to draw: `item` indexes the front, `chain` the node's chains.
+struct DrawChain {
+    uint32_t item = 0;
+    uint32_t chain = 0;
+    friend bool operator==(const DrawChain&, const DrawChain&) = default;
+};
+
+/// The chains to draw for a front (resident_front's), each once:
+/// - a chain that several front nodes show (a border between two nodes of
+///   one level, the same id) is drawn by the one drawn at the finer LOD (the
+///   smaller LOD index; on a tie, the earlier in the front). Any two LODs of
+///   a level meet only at shared ends (formats/chains/SPEC.md), so it meets
+///   the neighbours' chains at their LODs without a crossing;
+/// - a border between front nodes of different levels is drawn by the finer
+///   node: a chain of a node's outline whose other side is a unit with a
+///   node that is in the front, or has front nodes below it, is left to
+///   them, as long as all of those are resident (else the coarser node
+///   draws it, so that no border goes missing while they load). The finer
+///   map has every junction of the coarser one on that border, so the
+///   coarser node's chains end on it.
+/// Items without geometry or chains draw nothing.
+std::vector<DrawChain> draw_list(const datatree::Skeleton& s, const std::vector<Drawable>& front);
 
 /// The out-of-core streamer: a payload cache with a byte budget and an I/O
 /// thread that loads the front's missing payloads first, then prefetches.
@@ -149,18 +213,22 @@ class Streamer {
     struct Resident {
         FrontItem item;
         size_t bytes = 0;
-        std::shared_ptr<const datatree::Geometry> geometry;
+        std::shared_ptr<const datatree::Geometry> geometry; ///< null for a table
+        std::shared_ptr<const NodeChains> chains;           ///< a table's (item.lod == table_lod)
     };
     std::vector<Resident> resident() const;
 
   private:
     struct Entry {
         std::shared_ptr<const datatree::Geometry> geometry;
+        std::shared_ptr<const NodeChains> chains;
         size_t bytes = 0;
         uint64_t last_used = 0;
+        bool held() const noexcept { return geometry.use_count() > 1 || chains.use_count() > 1; }
     };
     void run();
     bool front_done_locked() const;
+    bool settled_locked(FrontItem item) const;
     size_t charge(FrontItem item) const;
     size_t in_flight_cost(FrontItem item) const;
 
@@ -174,6 +242,7 @@ class Streamer {
     uint64_t m_generation = 0;
     uint64_t m_tick = 0;
     std::vector<FrontItem> m_front;
+    size_t m_front_ranks = 0;        ///< m_wanted's first entries: the front and its tables
     std::vector<FrontItem> m_wanted; ///< front, then prefetch list, by priority
     std::map<FrontItem, size_t> m_rank;
     std::map<FrontItem, Entry> m_cache;

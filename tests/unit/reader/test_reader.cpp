@@ -156,8 +156,9 @@ TEST(Streamer, BudgetNeverExceededOnARandomWalk)
         }
         size_t held = 0;
         for (const auto& r : st.resident()) {
-            EXPECT_EQ(r.bytes, r.geometry->memory_bytes());
-            held += r.geometry->memory_bytes();
+            const size_t bytes = r.item.lod == table_lod ? r.chains->memory_bytes() : r.geometry->memory_bytes();
+            EXPECT_EQ(r.bytes, bytes);
+            held += bytes;
         }
         ASSERT_LE(held, o.budget_bytes) << "step " << step;
     }
@@ -292,4 +293,49 @@ TEST(Damage, BadSkeletonIsAnErrorNotACrash)
     EXPECT_NE(error.find("skeleton.tls: not a Data Tree skeleton"), std::string::npos) << error;
     EXPECT_FALSE(Tree::open(d.dir / "nowhere", error));
     EXPECT_NE(error.find("cannot open"), std::string::npos);
+}
+
+// The draw list on a hand-made front: root > A, B > A1, A2 (under A), B1
+// (under B). A's map shows A1|A2 (chain 10) and its outline toward B
+// (chain 50, whose other side is unit B1, a node); B's map shows chain 60 and
+// the same chain 50 (other side A1). B1's map, one level finer, shows 70
+// and its outline 80 along the same border (tract-level units: no nodes).
+TEST(DrawList, EachChainOnceSharedBordersAtTheFinerLodAndLevel)
+{
+    datatree::Skeleton s;
+    const uint32_t none = datatree::no_node;
+    auto node = [&](uint32_t parent, uint32_t level) {
+        datatree::Node n;
+        n.parent = parent;
+        n.level = level;
+        s.nodes.push_back(n);
+    };
+    node(none, 0); // 0 root
+    node(0, 1);    // 1 A
+    node(0, 1);    // 2 B
+    node(1, 2);    // 3 A1
+    node(1, 2);    // 4 A2
+    node(2, 2);    // 5 B1
+    auto chains = [](std::vector<uint64_t> ids, std::vector<uint32_t> across) {
+        auto c = std::make_shared<NodeChains>();
+        c->ids = std::move(ids);
+        c->flags.assign(c->ids.size(), 0);
+        c->across = std::move(across);
+        return std::shared_ptr<const NodeChains>(c);
+    };
+    const auto geometry = std::make_shared<const datatree::Geometry>();
+    const auto a = chains({10, 50}, {none, 5}), b = chains({50, 60}, {3, none}), b1 = chains({70, 80}, {none, none});
+    auto item = [&](uint32_t n, uint32_t lod, std::shared_ptr<const NodeChains> c, bool ready = true) {
+        return Drawable{{n, lod}, lod, ready ? geometry : nullptr, std::move(c)};
+    };
+    // One level: 50 once, by B, drawn at the finer LOD (1).
+    EXPECT_EQ(draw_list(s, {item(1, 2, a), item(2, 1, b)}), (std::vector<DrawChain>{{0, 0}, {1, 0}, {1, 1}}));
+    // The same LOD: by the earlier item.
+    EXPECT_EQ(draw_list(s, {item(1, 1, a), item(2, 1, b)}), (std::vector<DrawChain>{{0, 0}, {0, 1}, {1, 1}}));
+    // B opened into B1: the border is B1's (its chain 80, finer); A leaves its 50 to it.
+    EXPECT_EQ(draw_list(s, {item(1, 1, a), item(5, 0, b1)}), (std::vector<DrawChain>{{0, 0}, {1, 0}, {1, 1}}));
+    // Until B1 is resident, A draws 50, so that the border never goes missing.
+    EXPECT_EQ(draw_list(s, {item(1, 1, a), item(5, 0, b1, false)}), (std::vector<DrawChain>{{0, 0}, {0, 1}}));
+    // A node without its table draws nothing.
+    EXPECT_EQ(draw_list(s, {item(1, 1, nullptr), item(2, 3, b)}), (std::vector<DrawChain>{{1, 0}, {1, 1}}));
 }
