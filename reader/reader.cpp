@@ -568,6 +568,20 @@ bool Streamer::wait_front(std::chrono::milliseconds timeout)
     return all;
 }
 
+size_t Streamer::missing() const
+{
+    std::lock_guard lock(m_mutex);
+    size_t n = 0;
+    std::set<uint32_t> nodes;
+    for (const auto& f : m_front) {
+        n += m_cache.contains(f) ? 0 : 1;
+        if (nodes.insert(f.node).second) {
+            n += m_cache.contains({f.node, table_lod}) ? 0 : 1;
+        }
+    }
+    return n;
+}
+
 void Streamer::wait_idle()
 {
     std::unique_lock lock(m_mutex);

@@ -205,6 +205,8 @@ class Streamer {
     bool wait_front(std::chrono::milliseconds timeout);
     /// Wait until the I/O thread has nothing left to do.
     void wait_idle();
+    /// The front's payloads and tables not resident now. Never waits.
+    size_t missing() const;
 
     Stats stats() const;
     /// Each distinct error so far, naming file and node.

@@ -1,0 +1,501 @@
+#include "stages/render/render_stage.hpp"
+
+#include "core/errors.hpp"
+#include "core/fs.hpp"
+#include "stages/render/camera.hpp"
+#include "stages/render/line_renderer.hpp"
+
+#include <gdal.h>
+#include <GL/osmesa.h>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+#include <thread>
+
+namespace fs = std::filesystem;
+using json = nlohmann::ordered_json;
+
+namespace tigerlod::render {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0)
+{
+    return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+const std::vector<std::string> all_modes = {"incore", "ooc-noprefetch", "ooc-prefetch"};
+
+/// One frame's row of the CSV.
+struct Row {
+    double ms = 0;
+    size_t front_nodes = 0;
+    std::string lods; ///< "lod:count ..." of the front
+    uint64_t chains = 0, vertices = 0, segments = 0;
+    uint64_t resident_bytes = 0, misses = 0, bytes_read = 0;
+    bool complete = false; ///< every front item drawn at its own LOD
+};
+
+/// A mode's run over the path.
+struct ModeRun {
+    std::string mode;
+    std::vector<Row> rows;
+    double first_complete_s = -1; ///< from the mode's start to the end of its first complete frame
+    double load_s = 0;            ///< incore: loading everything first
+    uint64_t peak_bytes = 0;      ///< every byte the reader held, at most (skeleton included)
+    uint64_t duplicate_chains = 0;
+    uint64_t loads = 0, evictions = 0, errors = 0;
+    std::vector<std::string> error_messages;
+};
+
+/// "0:3 2:10": how many front items are at each LOD (drawn LOD).
+std::string lod_histogram(const std::vector<reader::Drawable>& front)
+{
+    std::map<uint32_t, size_t> n;
+    for (const auto& d : front) {
+        ++n[d.lod];
+    }
+    std::string s;
+    for (const auto& [lod, count] : n) {
+        s += (s.empty() ? "" : " ") + std::to_string(lod) + ":" + std::to_string(count);
+    }
+    return s;
+}
+
+/// Chains a draw list holds twice (the same level and id): must be none.
+uint64_t duplicates(const datatree::Skeleton& s, const std::vector<reader::Drawable>& front,
+                    const std::vector<reader::DrawChain>& list)
+{
+    std::set<std::pair<uint32_t, uint64_t>> seen;
+    uint64_t dup = 0;
+    for (const auto& dc : list) {
+        const auto& d = front[dc.item];
+        dup += seen.insert({s.nodes[d.wanted.node].level, d.chains->ids[dc.chain]}).second ? 0 : 1;
+    }
+    return dup;
+}
+
+/// Write RGB pixels as a PNG through GDAL (a MEM dataset copied to the PNG driver).
+void write_png(const fs::path& path, const std::vector<uint8_t>& rgb, uint32_t width, uint32_t height)
+{
+    GDALAllRegister();
+    GDALDriverH mem = GDALGetDriverByName("MEM"), png = GDALGetDriverByName("PNG");
+    if (mem == nullptr || png == nullptr) {
+        throw environment_error("render: GDAL has no MEM or PNG driver");
+    }
+    GDALDatasetH ds = GDALCreate(mem, "", int(width), int(height), 3, GDT_Byte, nullptr);
+    for (int b = 0; b < 3; ++b) {
+        std::vector<uint8_t> band(size_t(width) * height);
+        for (size_t i = 0; i < band.size(); ++i) {
+            band[i] = rgb[3 * i + size_t(b)];
+        }
+        if (GDALRasterIO(GDALGetRasterBand(ds, b + 1), GF_Write, 0, 0, int(width), int(height), band.data(), int(width),
+                         int(height), GDT_Byte, 0, 0) != CE_None) {
+            GDALClose(ds);
+            throw environment_error("render: GDAL cannot fill an image for " + path.string());
+        }
+    }
+    GDALDatasetH out = GDALCreateCopy(png, path.c_str(), ds, FALSE, nullptr, nullptr, nullptr);
+    GDALClose(ds);
+    if (out == nullptr) {
+        throw environment_error("render: cannot write " + path.string());
+    }
+    GDALClose(out);
+    std::error_code ec;
+    fs::remove(path.string() + ".aux.xml", ec);
+}
+
+/// Everything a mode shares.
+struct Run {
+    std::shared_ptr<reader::Tree> tree;
+    const std::vector<reader::View>& views;
+    LineRenderer& renderer;
+    reader::FrontOptions front_options;
+    uint64_t budget = 0; ///< bytes, the skeleton included
+    fs::path out;
+    int png_every = 0;
+    double fps = 0;
+
+    /// Wait for frame f's slot from `start` (frames at `fps` a second).
+    void pace(Clock::time_point start, size_t f) const
+    {
+        if (fps > 0) {
+            std::this_thread::sleep_until(
+                start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(double(f) / fps)));
+        }
+    }
+
+    const datatree::Skeleton& sk() const { return tree->skeleton(); }
+    uint32_t levels() const { return static_cast<uint32_t>(sk().level_names.size()); }
+
+    void draw(ModeRun& m, Row& row, size_t frame, const std::vector<reader::Drawable>& front)
+    {
+        const auto list = reader::draw_list(sk(), front);
+        m.duplicate_chains += duplicates(sk(), front, list);
+        const DrawStats ds = renderer.draw(views[frame], front, list, levels());
+        row.front_nodes = front.size();
+        row.lods = lod_histogram(front);
+        row.chains = ds.chains;
+        row.vertices = ds.vertices;
+        row.segments = ds.segments;
+    }
+
+    void maybe_png(const ModeRun& m, size_t frame)
+    {
+        if (png_every > 0 && frame % size_t(png_every) == 0) {
+            char name[64];
+            std::snprintf(name, sizeof name, "%s-%05zu.png", m.mode.c_str(), frame);
+            write_png(out / "frames" / name, renderer.read_rgb(), renderer.width(), renderer.height());
+        }
+    }
+
+    /// One view drawn out of core under the budget, once its front is resident: RGB rows.
+    std::vector<uint8_t> still(const reader::View& view)
+    {
+        reader::StreamOptions so;
+        so.budget_bytes = budget - tree->skeleton_memory();
+        so.prefetch = false;
+        so.front = front_options;
+        reader::Streamer streamer(tree, so);
+        streamer.set_view(view);
+        streamer.wait_front(std::chrono::seconds(60));
+        const auto items = streamer.resident_front();
+        renderer.draw(view, items, reader::draw_list(sk(), items), levels());
+        return renderer.read_rgb();
+    }
+
+    /// In core: every payload and table loaded first, then each frame's front drawn from memory.
+    ModeRun incore()
+    {
+        ModeRun m;
+        m.mode = "incore";
+        const auto t_start = Clock::now();
+        const auto& s = sk();
+        std::vector<std::shared_ptr<const reader::NodeChains>> tables(s.nodes.size());
+        std::vector<std::vector<std::shared_ptr<const datatree::Geometry>>> geometry(s.nodes.size());
+        uint64_t bytes = tree->skeleton_memory();
+        for (uint32_t n = 0; n < s.nodes.size(); ++n) {
+            datatree::ChainTable table;
+            if (const auto st = tree->read_table(n, table); !st.ok()) {
+                m.error_messages.push_back(st.error);
+                continue;
+            }
+            auto c = std::make_shared<reader::NodeChains>(reader::node_chains(*tree, n, table));
+            bytes += c->memory_bytes();
+            tables[n] = std::move(c);
+            for (uint32_t k = 0; k < s.lod_eps_m.size(); ++k) {
+                auto g = std::make_shared<datatree::Geometry>();
+                if (const auto st = tree->read_geometry(n, k, *g); !st.ok()) {
+                    m.error_messages.push_back(st.error);
+                    geometry[n].push_back(nullptr);
+                    continue;
+                }
+                bytes += g->memory_bytes();
+                geometry[n].push_back(std::move(g));
+                ++m.loads;
+            }
+        }
+        m.errors = m.error_messages.size();
+        m.load_s = since(t_start);
+        m.peak_bytes = bytes;
+        const auto t_path = Clock::now();
+        for (size_t f = 0; f < views.size(); ++f) {
+            pace(t_path, f);
+            const auto t0 = Clock::now();
+            Row row;
+            std::vector<reader::Drawable> front;
+            bool complete = true;
+            for (const auto& item : reader::select_front(s, views[f], front_options)) {
+                reader::Drawable d{item, item.lod,
+                                   geometry[item.node].empty() ? nullptr : geometry[item.node][item.lod],
+                                   tables[item.node]};
+                complete = complete && d.geometry && d.chains;
+                front.push_back(std::move(d));
+            }
+            draw(m, row, f, front);
+            row.ms = 1000 * since(t0);
+            row.resident_bytes = bytes;
+            row.complete = complete;
+            if (complete && m.first_complete_s < 0) {
+                m.first_complete_s = since(t_start);
+            }
+            m.rows.push_back(std::move(row));
+            maybe_png(m, f);
+        }
+        return m;
+    }
+
+    /// Out of core: the streamer under the budget (less the skeleton); each
+    /// frame sets the view, waits for its front (as the paper's renderer
+    /// waits for the maps it lacks), and draws it.
+    ModeRun out_of_core(bool prefetch)
+    {
+        ModeRun m;
+        m.mode = prefetch ? "ooc-prefetch" : "ooc-noprefetch";
+        const auto t_start = Clock::now();
+        const uint64_t skeleton = tree->skeleton_memory();
+        reader::StreamOptions so;
+        so.budget_bytes = budget - skeleton;
+        so.prefetch = prefetch;
+        so.front = front_options;
+        reader::Streamer streamer(tree, so);
+        uint64_t last_read = 0;
+        for (size_t f = 0; f < views.size(); ++f) {
+            pace(t_start, f);
+            const auto t0 = Clock::now();
+            Row row;
+            streamer.set_view(views[f]);
+            row.misses = streamer.missing();
+            row.complete = streamer.wait_front(std::chrono::seconds(60));
+            const auto front = streamer.resident_front();
+            draw(m, row, f, front);
+            row.ms = 1000 * since(t0);
+            const reader::Stats st = streamer.stats();
+            row.resident_bytes = skeleton + st.resident_bytes;
+            row.bytes_read = st.bytes_read - last_read;
+            last_read = st.bytes_read;
+            if (row.complete && m.first_complete_s < 0) {
+                m.first_complete_s = since(t_start);
+            }
+            m.rows.push_back(std::move(row));
+            maybe_png(m, f);
+        }
+        streamer.wait_idle();
+        const reader::Stats st = streamer.stats();
+        m.peak_bytes = skeleton + st.peak_bytes;
+        m.loads = st.loads;
+        m.evictions = st.evictions;
+        m.errors = st.errors;
+        m.error_messages = streamer.errors();
+        return m;
+    }
+};
+
+double percentile(std::vector<double> v, double p)
+{
+    if (v.empty()) {
+        return 0;
+    }
+    std::sort(v.begin(), v.end());
+    const size_t i = std::min(v.size() - 1, static_cast<size_t>(std::ceil(p * double(v.size())) - 1));
+    return v[i];
+}
+
+json summary_of(const ModeRun& m, uint64_t budget)
+{
+    std::vector<double> ms;
+    uint64_t read = 0, misses = 0, incomplete = 0;
+    for (const auto& r : m.rows) {
+        ms.push_back(r.ms);
+        read += r.bytes_read;
+        misses += r.misses;
+        incomplete += r.complete ? 0 : 1;
+    }
+    const double median = percentile(ms, 0.5);
+    const auto over = std::count_if(ms.begin(), ms.end(), [&](double v) { return v > 2 * median; });
+    json j;
+    j["mode"] = m.mode;
+    j["frames"] = m.rows.size();
+    j["median_ms"] = median;
+    j["p95_ms"] = percentile(ms, 0.95);
+    j["max_ms"] = ms.empty() ? 0.0 : *std::max_element(ms.begin(), ms.end());
+    j["frames_over_2x_median"] = over;
+    j["first_complete_frame_s"] = m.first_complete_s;
+    j["incomplete_frames"] = incomplete;
+    j["load_s"] = m.load_s;
+    j["peak_bytes"] = m.peak_bytes;
+    j["budget_bytes"] = m.mode == "incore" ? json(nullptr) : json(budget);
+    j["within_budget"] = m.mode == "incore" ? json(nullptr) : json(m.peak_bytes <= budget);
+    j["misses"] = misses;
+    j["bytes_read"] = read;
+    j["loads"] = m.loads;
+    j["evictions"] = m.evictions;
+    j["duplicate_chains"] = m.duplicate_chains;
+    j["errors"] = m.errors;
+    return j;
+}
+
+std::string csv_of(const ModeRun& m)
+{
+    std::ostringstream out;
+    out << "frame,ms,front_nodes,lods,chains,vertices,segments,resident_bytes,misses,bytes_read,complete\n";
+    for (size_t f = 0; f < m.rows.size(); ++f) {
+        const auto& r = m.rows[f];
+        char ms[32];
+        std::snprintf(ms, sizeof ms, "%.3f", r.ms);
+        out << f << "," << ms << "," << r.front_nodes << "," << r.lods << "," << r.chains << "," << r.vertices << ","
+            << r.segments << "," << r.resident_bytes << "," << r.misses << "," << r.bytes_read << ","
+            << (r.complete ? 1 : 0) << "\n";
+    }
+    return out.str();
+}
+
+} // namespace
+
+void RenderStage::add_args(ArgSet& args)
+{
+    args.positional("TREE", &m_tree, "a Data Tree folder (tigerlod-pack's output)");
+    args.positional("OUTPUT", &m_output, "the folder to write, under a temporary name renamed when done");
+    args.group("Camera");
+    args.add("path", &m_path, "the camera path: zoom, pan, jumpy (built in), or a keyframe file", "PATH");
+    args.add("frames", &m_frames, "frames of a built-in path", "N", {2, 100000, false, false, true});
+    args.add("seed", &m_seed, "the jumpy path's seed", "N", {0, 2147483647, false, false, true});
+    args.add("size", &m_size, "the viewport, WIDTHxHEIGHT pixels", "WxH");
+    args.add("fps", &m_fps,
+             "frames a second the camera moves at: each frame starts on its slot, as a user moving at a steady\n"
+             "pace would see them, and the I/O thread has the rest of the slot (0: back to back)",
+             "N", {0, 1000});
+    args.add("pixel-error", &m_pixel_error, "a LOD is drawn when its error is below this many pixels", "PX",
+             {0, 1e6, true, false, false});
+    args.group("Memory and disk");
+    args.add("mode", &m_mode, "incore, ooc-noprefetch, ooc-prefetch, or all three one after the other", "MODE", {},
+             {"all", "incore", "ooc-noprefetch", "ooc-prefetch"});
+    args.add("budget-mb", &m_budget_mb,
+             "out of core: a hard limit on every byte the reader holds, the skeleton included (MiB)", "MB",
+             {0, 1e6, true, false, false});
+    args.add("disk-latency-ms", &m_disk_latency_ms, "simulated disk: milliseconds a payload read waits (0: none)", "MS",
+             {0, 1e4});
+    args.add("disk-mbps", &m_disk_mbps, "simulated disk: MB/s a payload is read at (0: no limit)", "MBPS", {0, 1e6});
+    args.group("Output");
+    args.add("png-every", &m_png_every, "also write every N-th frame as OUTPUT/frames/MODE-NNNNN.png (0: none)", "N",
+             {0, 1000000, false, false, true});
+    args.add("gl", &m_gl, "OpenGL backend", "NAME", {}, {"osmesa", "egl"});
+    args.add("overwrite", &m_overwrite, "replace OUTPUT if it exists");
+}
+
+void RenderStage::initialize()
+{
+    unsigned w = 0, h = 0;
+    char x = 0, extra = 0;
+    if (std::sscanf(m_size.c_str(), "%u%c%u%c", &w, &x, &h, &extra) != 3 || x != 'x' || w < 16 || h < 16 || w > 16384 ||
+        h > 16384) {
+        throw usage_error("render: option '--size' must be WIDTHxHEIGHT, each in 16..16384 (got '" + m_size + "')");
+    }
+    m_width = w;
+    m_height = h;
+    refuse_to_replace_inputs(m_output, {m_tree});
+}
+
+std::vector<std::string> RenderStage::versions() const
+{
+    return {std::string("OSMesa API ") + std::to_string(OSMESA_MAJOR_VERSION) + "." +
+                std::to_string(OSMESA_MINOR_VERSION) + " (EGL with --gl egl)",
+            std::string("GDAL ") + GDALVersionInfo("RELEASE_NAME"), datatree::format_version_text()};
+}
+
+std::string RenderStage::help_notes() const
+{
+    return "Outputs:\n"
+           "  OUTPUT/frames-<mode>.csv   per frame: frame, ms, front_nodes, lods (LOD:count), chains, vertices,\n"
+           "                             segments (drawn in view), resident_bytes (skeleton included), misses\n"
+           "                             (front payloads and tables not resident when the view was set),\n"
+           "                             bytes_read, complete (the whole front at its own LODs)\n"
+           "  OUTPUT/summary.json        per mode: median, p95 and max frame time, frames over 2x the median,\n"
+           "                             time to the first complete frame, peak bytes against the budget,\n"
+           "                             misses, bytes read, chains drawn twice (none)\n"
+           "  OUTPUT/overview.png, OUTPUT/zoom.png  the whole tree, and the path's closest view\n"
+           "Each chain is drawn once a frame: a border two nodes of one level show, at the finer of their\n"
+           "LODs; a border between nodes of two levels, by the finer node (reader.hpp, draw_list).\n"
+           "Path file: one keyframe a line, 'LON LAT METRES_PER_PIXEL [FRAMES]' (# comments).\n"
+           "Exit codes: 0 done; 1 bad data (a missing or damaged tree, a malformed path file); 2 usage error\n"
+           "  (a budget below what the skeleton needs); 3 environment (no OpenGL context, cannot write).\n";
+}
+
+int RenderStage::run(const StageContext& ctx)
+{
+    std::string error;
+    auto tree = reader::Tree::open(m_tree, error);
+    if (!tree) {
+        throw input_error(error);
+    }
+    const auto& sk = tree->skeleton();
+    const uint64_t budget = static_cast<uint64_t>(m_budget_mb * 1024 * 1024);
+    const uint64_t skeleton = tree->skeleton_memory();
+    if (m_mode != "incore" && budget <= skeleton) {
+        throw usage_error("render: --budget-mb " + std::to_string(m_budget_mb) + " (" + std::to_string(budget) +
+                          " bytes) does not hold the skeleton of " + m_tree + " in memory (" +
+                          std::to_string(skeleton) + " bytes), let alone a payload");
+    }
+    const bool builtin = std::find(builtin_paths.begin(), builtin_paths.end(), m_path) != builtin_paths.end();
+    const auto views = builtin ? builtin_path(m_path, sk, m_width, m_height, uint32_t(m_frames), uint32_t(m_seed))
+                               : keyframe_views(read_path_file(m_path), sk, m_width, m_height);
+    tree->simulate_disk(std::chrono::microseconds(std::llround(m_disk_latency_ms * 1000)), m_disk_mbps * 1e6);
+    OutputDir out(m_output, m_overwrite, {m_tree});
+    log_removed_leftovers(ctx.log, out.removed_leftovers());
+    if (m_png_every > 0) {
+        fs::create_directories(out.path() / "frames");
+    }
+    auto context = gl::Context::create(*gl::parse_backend(m_gl));
+    LineRenderer renderer(*context, m_width, m_height);
+    reader::FrontOptions fo;
+    fo.pixel_error = m_pixel_error;
+    Run run{tree, views, renderer, fo, budget, out.path(), m_png_every, m_fps};
+    ctx.log.info("render: " + m_tree + ", " + std::to_string(views.size()) + " frames of " + m_path + " at " +
+                 std::to_string(m_width) + "x" + std::to_string(m_height) + " on " + context->describe());
+
+    std::vector<ModeRun> runs;
+    for (const auto& mode : all_modes) {
+        if (m_mode != "all" && m_mode != mode) {
+            continue;
+        }
+        runs.push_back(mode == "incore" ? run.incore() : run.out_of_core(mode == "ooc-prefetch"));
+        if (!runs.back().error_messages.empty()) {
+            std::string msg = m_tree + ": the tree has damaged or missing payloads (" +
+                              std::to_string(runs.back().error_messages.size()) + "):";
+            for (size_t i = 0; i < std::min<size_t>(5, runs.back().error_messages.size()); ++i) {
+                msg += "\n  " + runs.back().error_messages[i];
+            }
+            throw input_error(msg);
+        }
+        write_file(out.path() / ("frames-" + mode + ".csv"), csv_of(runs.back()));
+    }
+
+    // The previews: the whole tree, and the path's closest view.
+    const auto closest = *std::min_element(
+        views.begin(), views.end(), [](const auto& a, const auto& b) { return a.units_per_pixel < b.units_per_pixel; });
+    write_png(out.path() / "overview.png", run.still(fit(sk.nodes[0].box, m_width, m_height)), m_width, m_height);
+    write_png(out.path() / "zoom.png", run.still(closest), m_width, m_height);
+
+    json summary;
+    summary["schema"] = "tigerlod.render-summary/1";
+    summary["tree"] = m_tree;
+    summary["path"] = m_path;
+    summary["frames"] = views.size();
+    summary["viewport"] = {m_width, m_height};
+    summary["gl"] = context->describe();
+    summary["skeleton_bytes"] = skeleton;
+    summary["disk"] = {{"latency_ms", m_disk_latency_ms}, {"mbps", m_disk_mbps}};
+    summary["fps"] = m_fps;
+    json modes = json::array();
+    for (const auto& m : runs) {
+        modes.push_back(summary_of(m, budget));
+    }
+    summary["modes"] = modes;
+    write_file(out.path() / "summary.json", summary.dump(2) + "\n");
+    out.commit();
+
+    std::printf("render: %zu frames of %s at %ux%u, budget %.1f MiB (skeleton %.2f MiB), %s\n", views.size(),
+                m_path.c_str(), m_width, m_height, m_budget_mb, double(skeleton) / (1 << 20),
+                context->describe().c_str());
+    std::printf("  %-15s %9s %9s %9s %8s %11s %11s %9s\n", "mode", "median ms", "p95 ms", "max ms", ">2x med",
+                "first s", "peak MiB", "misses");
+    for (const auto& j : modes) {
+        std::printf("  %-15s %9.2f %9.2f %9.2f %8lld %11.2f %11.2f %9llu\n", j["mode"].get<std::string>().c_str(),
+                    j["median_ms"].get<double>(), j["p95_ms"].get<double>(), j["max_ms"].get<double>(),
+                    static_cast<long long>(j["frames_over_2x_median"].get<int64_t>()),
+                    j["first_complete_frame_s"].get<double>(), double(j["peak_bytes"].get<uint64_t>()) / (1 << 20),
+                    static_cast<unsigned long long>(j["misses"].get<uint64_t>()));
+    }
+    std::printf("outputs in %s\n", m_output.c_str());
+    return exit_ok;
+}
+
+} // namespace tigerlod::render
