@@ -147,6 +147,27 @@ std::vector<Key> make_keys()
               integer(0), {}, "max-items", "verify"),
         entry("verify.threads", Type::integer, "worker threads, 0 for all cores; the report does not depend on it", "0",
               thread_limits, {}, "threads", "verify"),
+        section("render", "tigerlod-render: the preview and the frame-time experiment at the end of the pipeline"),
+        entry("render.path", Type::text,
+              "the camera path: `zoom`, `pan`, `jumpy` (built in) or a keyframe file (`LON LAT METRES_PER_PIXEL "
+              "[FRAMES]` a line)",
+              "`zoom`", {}, {}, "path", "render"),
+        entry("render.frames", Type::integer, "frames of a built-in path", "240", integer(2, 100000), {}, "frames",
+              "render"),
+        entry("render.mode", Type::choice, "which renderers run the path, one after the other", "`all`", {},
+              {"all", "incore", "ooc-noprefetch", "ooc-prefetch"}, "mode", "render"),
+        entry("render.budget_mb", Type::number,
+              "out of core: a hard limit on every byte the reader holds, the skeleton included (MiB)", "25",
+              {0, 1e6, true}, {}, "budget-mb", "render"),
+        entry("render.size", Type::text, "the viewport, `WIDTHxHEIGHT` pixels", "`1280x720`", {}, {}, "size",
+              "render"),
+        entry("render.fps", Type::number,
+              "frames a second the camera moves at (each frame starts on its slot; 0: back to back)", "30", {0, 1000},
+              {}, "fps", "render"),
+        entry("render.disk_latency_ms", Type::number, "simulated disk: milliseconds a payload read waits (0: none)",
+              "0", {0, 1e4}, {}, "disk-latency-ms", "render"),
+        entry("render.disk_mbps", Type::number, "simulated disk: MB/s a payload is read at (0: no limit)", "0",
+              {0, 1e6}, {}, "disk-mbps", "render"),
     };
 }
 
@@ -256,7 +277,8 @@ std::string reference_markdown()
            "`--config FILE`: an unknown key, a value of the wrong type or out of range is\n"
            "an error (exit 2) naming the file, line and key.\n\n"
            "The stages take their section with `--config FILE` (tigerlod-color and\n"
-           "tigerlod-simplify `simplify`, tigerlod-pack `pack`, tigerlod-verify `verify`;\n"
+           "tigerlod-simplify `simplify`, tigerlod-pack `pack`, tigerlod-verify `verify`,\n"
+           "tigerlod-render `render`;\n"
            "tigerlod-ingest reads the whole file, its CONFIG argument); an option given on\n"
            "the command line wins over the config's (a `false` that became a flag, like\n"
            "`projection_scale: false` as `--no-projection-scale`, stays). The pipeline\n"

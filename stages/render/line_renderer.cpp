@@ -70,7 +70,8 @@ Style style_of(uint32_t level, uint32_t levels) noexcept
     if (levels <= 1) {
         return {1.0F, 60, 60, 60};
     }
-    static constexpr Style styles[] = {{3.0F, 0, 0, 0}, {2.2F, 45, 45, 45}, {1.6F, 95, 95, 95}, {1.2F, 140, 140, 140}};
+    static constexpr Style styles[] = {
+        {3.0F, 0, 0, 0}, {2.4F, 30, 30, 30}, {1.4F, 110, 110, 110}, {1.0F, 150, 150, 150}, {1.0F, 185, 185, 185}};
     constexpr uint32_t n = sizeof styles / sizeof styles[0];
     return styles[std::min(level, n - 1)];
 }

@@ -22,8 +22,9 @@ struct Style {
 };
 
 /// The style of border level `level` of a tree of `levels` levels: the top
-/// level 3 px black, then lighter and thinner, the finest 1 px; a tree of
-/// one level (a line layer) 1 px dark grey.
+/// level 3 px black, the next 2.4 px, then lighter and thinner down to 1 px
+/// light grey from the fifth on; a tree of one level (a line layer) 1 px
+/// dark grey.
 Style style_of(uint32_t level, uint32_t levels) noexcept;
 
 struct DrawStats {

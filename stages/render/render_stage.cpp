@@ -1,5 +1,7 @@
 #include "stages/render/render_stage.hpp"
 
+#include "config/config_file.hpp"
+#include "config/schema.hpp"
 #include "core/errors.hpp"
 #include "core/fs.hpp"
 #include "stages/render/camera.hpp"
@@ -345,25 +347,18 @@ void RenderStage::add_args(ArgSet& args)
     args.positional("TREE", &m_tree, "a Data Tree folder (tigerlod-pack's output)");
     args.positional("OUTPUT", &m_output, "the folder to write, under a temporary name renamed when done");
     args.group("Camera");
-    args.add("path", &m_path, "the camera path: zoom, pan, jumpy (built in), or a keyframe file", "PATH");
-    args.add("frames", &m_frames, "frames of a built-in path", "N", {2, 100000, false, false, true});
+    config::add_option(args, "render.path", &m_path);
+    config::add_option(args, "render.frames", &m_frames);
     args.add("seed", &m_seed, "the jumpy path's seed", "N", {0, 2147483647, false, false, true});
-    args.add("size", &m_size, "the viewport, WIDTHxHEIGHT pixels", "WxH");
-    args.add("fps", &m_fps,
-             "frames a second the camera moves at: each frame starts on its slot, as a user moving at a steady\n"
-             "pace would see them, and the I/O thread has the rest of the slot (0: back to back)",
-             "N", {0, 1000});
+    config::add_option(args, "render.size", &m_size);
+    config::add_option(args, "render.fps", &m_fps);
     args.add("pixel-error", &m_pixel_error, "a LOD is drawn when its error is below this many pixels", "PX",
              {0, 1e6, true, false, false});
     args.group("Memory and disk");
-    args.add("mode", &m_mode, "incore, ooc-noprefetch, ooc-prefetch, or all three one after the other", "MODE", {},
-             {"all", "incore", "ooc-noprefetch", "ooc-prefetch"});
-    args.add("budget-mb", &m_budget_mb,
-             "out of core: a hard limit on every byte the reader holds, the skeleton included (MiB)", "MB",
-             {0, 1e6, true, false, false});
-    args.add("disk-latency-ms", &m_disk_latency_ms, "simulated disk: milliseconds a payload read waits (0: none)", "MS",
-             {0, 1e4});
-    args.add("disk-mbps", &m_disk_mbps, "simulated disk: MB/s a payload is read at (0: no limit)", "MBPS", {0, 1e6});
+    config::add_option(args, "render.mode", &m_mode);
+    config::add_option(args, "render.budget_mb", &m_budget_mb);
+    config::add_option(args, "render.disk_latency_ms", &m_disk_latency_ms);
+    config::add_option(args, "render.disk_mbps", &m_disk_mbps);
     args.group("Output");
     args.add("png-every", &m_png_every, "also write every N-th frame as OUTPUT/frames/MODE-NNNNN.png (0: none)", "N",
              {0, 1000000, false, false, true});
@@ -382,6 +377,11 @@ void RenderStage::initialize()
     m_width = w;
     m_height = h;
     refuse_to_replace_inputs(m_output, {m_tree});
+}
+
+std::vector<std::string> RenderStage::config_args(const fs::path& file) const
+{
+    return config::stage_args(file, name);
 }
 
 std::vector<std::string> RenderStage::versions() const
@@ -475,8 +475,25 @@ int RenderStage::run(const StageContext& ctx)
     summary["disk"] = {{"latency_ms", m_disk_latency_ms}, {"mbps", m_disk_mbps}};
     summary["fps"] = m_fps;
     json modes = json::array();
+    const ModeRun* incore = nullptr;
     for (const auto& m : runs) {
-        modes.push_back(summary_of(m, budget));
+        incore = m.mode == "incore" ? &m : incore;
+    }
+    for (const auto& m : runs) {
+        json j = summary_of(m, budget);
+        if (incore != nullptr && &m != incore) {
+            // Against the in-core renderer on the same frames: what the disk costs.
+            int64_t over = 0;
+            std::vector<double> a, b;
+            for (size_t f = 0; f < m.rows.size() && f < incore->rows.size(); ++f) {
+                over += m.rows[f].ms > 2 * incore->rows[f].ms ? 1 : 0;
+                a.push_back(m.rows[f].ms);
+                b.push_back(incore->rows[f].ms);
+            }
+            j["frames_over_2x_incore"] = over;
+            j["p95_vs_incore"] = percentile(b, 0.95) > 0 ? percentile(a, 0.95) / percentile(b, 0.95) : 0.0;
+        }
+        modes.push_back(std::move(j));
     }
     summary["modes"] = modes;
     write_file(out.path() / "summary.json", summary.dump(2) + "\n");
@@ -485,12 +502,15 @@ int RenderStage::run(const StageContext& ctx)
     std::printf("render: %zu frames of %s at %ux%u, budget %.1f MiB (skeleton %.2f MiB), %s\n", views.size(),
                 m_path.c_str(), m_width, m_height, m_budget_mb, double(skeleton) / (1 << 20),
                 context->describe().c_str());
-    std::printf("  %-15s %9s %9s %9s %8s %11s %11s %9s\n", "mode", "median ms", "p95 ms", "max ms", ">2x med",
-                "first s", "peak MiB", "misses");
+    std::printf("  %-15s %9s %9s %9s %8s %9s %9s %9s %9s %7s\n", "mode", "median ms", "p95 ms", "max ms", ">2x med",
+                "p95/inc", ">2x inc", "first s", "peak MiB", "misses");
     for (const auto& j : modes) {
-        std::printf("  %-15s %9.2f %9.2f %9.2f %8lld %11.2f %11.2f %9llu\n", j["mode"].get<std::string>().c_str(),
+        const bool vs = j.contains("p95_vs_incore");
+        std::printf("  %-15s %9.2f %9.2f %9.2f %8lld %9s %9s %9.2f %9.2f %7llu\n", j["mode"].get<std::string>().c_str(),
                     j["median_ms"].get<double>(), j["p95_ms"].get<double>(), j["max_ms"].get<double>(),
                     static_cast<long long>(j["frames_over_2x_median"].get<int64_t>()),
+                    vs ? std::to_string(j["p95_vs_incore"].get<double>()).substr(0, 4).c_str() : "-",
+                    vs ? std::to_string(j["frames_over_2x_incore"].get<int64_t>()).c_str() : "-",
                     j["first_complete_frame_s"].get<double>(), double(j["peak_bytes"].get<uint64_t>()) / (1 << 20),
                     static_cast<unsigned long long>(j["misses"].get<uint64_t>()));
     }

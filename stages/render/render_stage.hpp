@@ -24,6 +24,8 @@ class RenderStage final : public Stage {
     int run(const StageContext& ctx) override;
     std::string help_notes() const override;
     std::vector<std::string> versions() const override;
+    std::string config_section() const override { return "render"; }
+    std::vector<std::string> config_args(const std::filesystem::path& file) const override;
 
   private:
     std::string m_tree, m_output, m_path = "zoom", m_mode = "all", m_size = "1280x720", m_gl = "osmesa";
