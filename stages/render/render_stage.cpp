@@ -65,11 +65,11 @@ std::string lod_histogram(const std::vector<reader::Drawable>& front)
     for (const auto& d : front) {
         ++n[d.lod];
     }
-    std::string s;
+    std::ostringstream s;
     for (const auto& [lod, count] : n) {
-        s += (s.empty() ? "" : " ") + std::to_string(lod) + ":" + std::to_string(count);
+        s << (s.tellp() > 0 ? " " : "") << lod << ':' << count;
     }
-    return s;
+    return s.str();
 }
 
 /// Chains a draw list holds twice (the same level and id): must be none.
