@@ -245,6 +245,9 @@ void add_option(ArgSet& args, std::string_view name, ArgSet::Target target)
     case Type::choice:
         value_name = "NAME";
         break;
+    case Type::text:
+        value_name = "TEXT";
+        break;
     default:
         break;
     }

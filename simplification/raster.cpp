@@ -1,6 +1,7 @@
 #include "simplification/raster.hpp"
 
 #include "core/errors.hpp"
+#include "gl/program.hpp"
 #include "simplification/cell_cover.hpp"
 
 #include <algorithm>
@@ -334,48 +335,7 @@ struct Raster::Impl {
     std::vector<uint32_t> zeros;
     explicit Impl(const gl::Api& api) : gl(api) {}
 
-    /// The info log of a shader or program (glGetShaderInfoLog / glGetProgramInfoLog).
-    template <class Get> static std::string info_log(Get get, GLuint object)
-    {
-        std::string log(4096, '\0');
-        GLsizei n = 0;
-        get(object, GLsizei(log.size()), &n, log.data());
-        log.resize(size_t(n));
-        return log;
-    }
-
-    GLuint compile(GLenum type, const std::string& src)
-    {
-        GLuint s = gl.CreateShader(type);
-        const char* p = src.c_str();
-        gl.ShaderSource(s, 1, &p, nullptr);
-        gl.CompileShader(s);
-        GLint ok = 0;
-        gl.GetShaderiv(s, GL_COMPILE_STATUS, &ok);
-        if (!ok) {
-            const std::string log = info_log(gl.GetShaderInfoLog, s);
-            gl.DeleteShader(s);
-            throw environment_error("OpenGL shader does not compile on this driver: " + log);
-        }
-        return s;
-    }
-    GLuint link(const std::string& vs, const std::string& fs)
-    {
-        GLuint v = compile(GL_VERTEX_SHADER, vs), f = compile(GL_FRAGMENT_SHADER, fs);
-        GLuint p = gl.CreateProgram();
-        gl.AttachShader(p, v);
-        gl.AttachShader(p, f);
-        gl.LinkProgram(p);
-        gl.DeleteShader(v);
-        gl.DeleteShader(f);
-        GLint ok = 0;
-        gl.GetProgramiv(p, GL_LINK_STATUS, &ok);
-        if (!ok) {
-            throw environment_error("OpenGL program does not link on this driver: " +
-                                    info_log(gl.GetProgramInfoLog, p));
-        }
-        return p;
-    }
+    GLuint link(const std::string& vs, const std::string& fs) const { return gl::link_program(gl, vs, fs); }
     GLint loc(GLuint prog, const char* name) const { return gl.GetUniformLocation(prog, name); }
 };
 

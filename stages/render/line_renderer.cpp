@@ -1,6 +1,7 @@
 #include "stages/render/line_renderer.hpp"
 
 #include "core/errors.hpp"
+#include "gl/program.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -35,34 +36,6 @@ void main()
 }
 )";
 
-std::string info_log(const gl::Api& gl, GLuint object, bool program)
-{
-    std::string log(4096, '\0');
-    GLsizei n = 0;
-    if (program) {
-        gl.GetProgramInfoLog(object, GLsizei(log.size()), &n, log.data());
-    } else {
-        gl.GetShaderInfoLog(object, GLsizei(log.size()), &n, log.data());
-    }
-    log.resize(size_t(n));
-    return log;
-}
-
-GLuint compile(const gl::Api& gl, GLenum type, const char* src)
-{
-    const GLuint s = gl.CreateShader(type);
-    gl.ShaderSource(s, 1, &src, nullptr);
-    gl.CompileShader(s);
-    GLint ok = 0;
-    gl.GetShaderiv(s, GL_COMPILE_STATUS, &ok);
-    if (!ok) {
-        const std::string log = info_log(gl, s, false);
-        gl.DeleteShader(s);
-        throw environment_error("render: OpenGL shader does not compile on this driver: " + log);
-    }
-    return s;
-}
-
 } // namespace
 
 Style style_of(uint32_t level, uint32_t levels) noexcept
@@ -94,19 +67,7 @@ LineRenderer::LineRenderer(gl::Context& context, uint32_t width, uint32_t height
         throw environment_error("render: the driver refuses a " + std::to_string(width) + "x" + std::to_string(height) +
                                 " RGBA framebuffer");
     }
-    const GLuint v = compile(gl, GL_VERTEX_SHADER, vertex_shader), f = compile(gl, GL_FRAGMENT_SHADER, fragment_shader);
-    m_program = gl.CreateProgram();
-    gl.AttachShader(m_program, v);
-    gl.AttachShader(m_program, f);
-    gl.LinkProgram(m_program);
-    gl.DeleteShader(v);
-    gl.DeleteShader(f);
-    GLint ok = 0;
-    gl.GetProgramiv(m_program, GL_LINK_STATUS, &ok);
-    if (!ok) {
-        throw environment_error("render: OpenGL program does not link on this driver: " +
-                                info_log(gl, m_program, true));
-    }
+    m_program = gl::link_program(gl, vertex_shader, fragment_shader);
     m_size_loc = gl.GetUniformLocation(m_program, "size");
     gl.GenVertexArrays(1, &m_vao);
     gl.BindVertexArray(m_vao);

@@ -173,6 +173,29 @@ void expect_budget_and_once(const fs::path& out, uint64_t budget)
     }
 }
 
+/// D/tree from a config: ingest, simplify (`simplify_args`), pack. Fails the test on any error.
+void build_tree(const fs::path& d, const std::string& config, const std::string& simplify_args)
+{
+    const std::string s = d.string();
+    ASSERT_EQ(run("ingest", config + " " + s + "/ingest", d / "log"), 0) << slurp(d / "log");
+    ASSERT_EQ(run("simplify", simplify_args + " " + s + "/ingest " + s + "/simp", d / "log"), 0) << slurp(d / "log");
+    ASSERT_EQ(run("pack", s + "/ingest " + s + "/simp " + s + "/tree", d / "log"), 0) << slurp(d / "log");
+}
+
+/// The views of a keyframe file (`keyframes`, one frame each after the first) drawn in core
+/// at 640x360 into D/views: frames/incore-00000.png, -00001.png, ..., and overview.png.
+void render_views(const fs::path& d, const std::string& keyframes)
+{
+    const std::string s = d.string();
+    std::ofstream(d / "views.path") << keyframes;
+    ASSERT_EQ(
+        run("render",
+            "--path " + s + "/views.path --mode incore --png-every 1 --size 640x360 " + s + "/tree " + s + "/views",
+            d / "log"),
+        0)
+        << slurp(d / "log");
+}
+
 } // namespace
 
 TEST(Render, BadInputsGetTheirMessageAndExitCodeAndLeaveNothing)
@@ -249,11 +272,7 @@ TEST(Render, FloydTreeMatchesItsReferencesWithinTheBudget)
     }
     const fs::path d = temp_dir("floyd");
     const std::string s = d.string();
-    ASSERT_EQ(run("ingest", (source_dir / "configs" / "floyd.yaml").string() + " " + s + "/ingest", d / "log"), 0)
-        << slurp(d / "log");
-    ASSERT_EQ(run("simplify", "--tolerances 1,4,16,64 " + s + "/ingest " + s + "/simp", d / "log"), 0)
-        << slurp(d / "log");
-    ASSERT_EQ(run("pack", s + "/ingest " + s + "/simp " + s + "/tree", d / "log"), 0) << slurp(d / "log");
+    ASSERT_NO_FATAL_FAILURE(build_tree(d, (source_dir / "configs" / "floyd.yaml").string(), "--tolerances 1,4,16,64"));
     // Whole paths in every mode, under a budget that holds a third of the tree.
     for (const std::string path : {"zoom", "jumpy"}) {
         ASSERT_EQ(run("render",
@@ -265,13 +284,7 @@ TEST(Render, FloydTreeMatchesItsReferencesWithinTheBudget)
         expect_budget_and_once(d / path, uint64_t(0.6 * 1024 * 1024));
     }
     // Two keyframes: the county, and a close view of blocks along the river.
-    std::ofstream(d / "views.path") << "-80.36 36.93 60\n-80.355 36.955 4 1\n";
-    ASSERT_EQ(
-        run("render",
-            "--path " + s + "/views.path --mode incore --png-every 1 --size 640x360 " + s + "/tree " + s + "/views",
-            d / "log"),
-        0)
-        << slurp(d / "log");
+    ASSERT_NO_FATAL_FAILURE(render_views(d, "-80.36 36.93 60\n-80.355 36.955 4 1\n"));
     expect_like_reference(d / "views" / "frames" / "incore-00000.png", "floyd-county.png");
     expect_like_reference(d / "views" / "frames" / "incore-00001.png", "floyd-blocks.png");
     expect_like_reference(d / "views" / "overview.png", "floyd-overview.png");
@@ -284,19 +297,10 @@ TEST(Render, DemoTreeMatchesItsReferences)
         GTEST_SKIP() << "needs " << us_atlas << " (scripts/test fetches it: scripts/fetch-npm us-atlas@3.0.1)";
     }
     const fs::path d = temp_dir("demo");
-    const std::string s = d.string(), config = (source_dir / "configs" / "demo.yaml").string();
-    ASSERT_EQ(run("ingest", config + " " + s + "/ingest", d / "log"), 0) << slurp(d / "log");
-    ASSERT_EQ(run("simplify", "--config " + config + " " + s + "/ingest " + s + "/simp", d / "log"), 0)
-        << slurp(d / "log");
-    ASSERT_EQ(run("pack", s + "/ingest " + s + "/simp " + s + "/tree", d / "log"), 0) << slurp(d / "log");
+    const std::string config = (source_dir / "configs" / "demo.yaml").string();
+    ASSERT_NO_FATAL_FAILURE(build_tree(d, config, "--config " + config));
     // The lower 48, and Virginia's counties.
-    std::ofstream(d / "views.path") << "-97 38.5 4500\n-79 37.8 700 1\n";
-    ASSERT_EQ(
-        run("render",
-            "--path " + s + "/views.path --mode incore --png-every 1 --size 640x360 " + s + "/tree " + s + "/views",
-            d / "log"),
-        0)
-        << slurp(d / "log");
+    ASSERT_NO_FATAL_FAILURE(render_views(d, "-97 38.5 4500\n-79 37.8 700 1\n"));
     expect_like_reference(d / "views" / "frames" / "incore-00000.png", "demo-conus.png");
     expect_like_reference(d / "views" / "frames" / "incore-00001.png", "demo-virginia.png");
     fs::remove_all(d);
