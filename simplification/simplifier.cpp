@@ -709,7 +709,13 @@ class StoreSimplifier {
             // shortcut it refuses finds its path again before anything is
             // drawn (Floyd's blocks at 2000 m: 22,936 raster rounds when it
             // ran after the raster, in the exact check).
-            for (auto redo = ban_by_region(); !redo.empty(); redo = ban_by_region()) {
+            std::vector<uint32_t> changed;
+            for (uint32_t wi = 0; wi < m_work.size(); ++wi) {
+                if (m_work[wi].dirty) {
+                    changed.push_back(wi);
+                }
+            }
+            for (auto redo = ban_by_region(changed); !redo.empty(); redo = ban_by_region(redo)) {
                 shortest_paths(&redo);
             }
             const auto tests = lazy_tests();
@@ -823,17 +829,14 @@ class StoreSimplifier {
         return tests;
     }
 
-    /// The exact rules: first the region rule, on the shortcuts the paths
-    /// newly take; once it bans none, no two chains' paths can meet (README.md
-    /// beside this file, step 7), and the simplified owned chains go through
-    /// the exact check against each other and the halo, which is left to find
-    /// a chain meeting itself (and input problems). Bans each shortcut in a
-    /// meeting and returns whether it banned any.
+    /// The exact check: settle_paths has left every path's shortcuts clear
+    /// under the region rule, so no two chains' paths can meet (README.md
+    /// beside this file, step 7); the simplified owned chains go through the
+    /// exact check against each other and the halo all the same, which is
+    /// left to find a chain meeting itself (and input problems). Bans each
+    /// shortcut in a meeting and returns whether it banned any.
     bool exact_check()
     {
-        if (!ban_by_region().empty()) {
-            return true;
-        }
         const auto t0 = Clock::now();
         std::vector<Segment> segs;
         std::vector<Tag> tags;
@@ -872,13 +875,15 @@ class StoreSimplifier {
     /// The region rule (README.md beside this file, step 7): every shortcut
     /// of a path whose region, between it and the subchain it replaces, holds
     /// part of another chain's original is banned. Each shortcut is looked at
-    /// once, when a path first takes it. Returns the chains it banned one of.
-    std::vector<uint32_t> ban_by_region()
+    /// once, when a path first takes it. Looks at the paths of `chains` (work
+    /// indices); returns those it banned a shortcut of.
+    std::vector<uint32_t> ban_by_region(const std::vector<uint32_t>& chains)
     {
         const auto t0 = Clock::now();
-        std::vector<std::vector<uint32_t>> banned(m_work.size());
-        parallel_each(m_work.size(), m_opt.threads, [&](size_t wi) {
-            Work& w = m_work[wi];
+        std::vector<std::vector<uint32_t>> banned(chains.size());
+        parallel_each(chains.size(), m_opt.threads, [&](size_t k) {
+            Work& w = m_work[chains[k]];
+            auto& ban = banned[k];
             for (size_t e = 0; e < w.path_cand.size(); ++e) {
                 const uint32_t ci = w.path_cand[e];
                 if (ci == UINT32_MAX) {
@@ -891,19 +896,20 @@ class StoreSimplifier {
                 if (region_clear(w, w.path[e], w.path[e + 1])) {
                     w.region_clear.insert(at, ci);
                 } else {
-                    banned[wi].push_back(ci);
+                    ban.push_back(ci);
                 }
             }
         });
         std::vector<uint32_t> redo;
-        for (uint32_t wi = 0; wi < m_work.size(); ++wi) {
-            for (const uint32_t ci : banned[wi]) {
-                m_work[wi].state[ci] = bad_exact;
-                m_work[wi].dirty = true;
+        for (size_t k = 0; k < chains.size(); ++k) {
+            Work& w = m_work[chains[k]];
+            for (const uint32_t ci : banned[k]) {
+                w.state[ci] = bad_exact;
+                w.dirty = true;
                 ++m_st.banned_region;
             }
-            if (!banned[wi].empty()) {
-                redo.push_back(wi);
+            if (!banned[k].empty()) {
+                redo.push_back(chains[k]);
             }
         }
         m_st.seconds_exact += since(t0);
@@ -925,26 +931,43 @@ class StoreSimplifier {
         for (uint32_t k = from; k <= to; ++k) {
             box.extend(pts[k]);
         }
-        std::vector<GridSeg> near;
+        // Every segment of another chain in the cells over the box (a segment
+        // in several of them is seen several times: no harm), first for the
+        // cheap test, then for the points: most shortcuts that fail cross a
+        // neighbour, and stop at the first.
         const int64_t x0 = floor_int(double(box.min_x) / m_cell), x1 = floor_int(double(box.max_x) / m_cell);
         const int64_t y0 = floor_int(double(box.min_y) / m_cell), y1 = floor_int(double(box.max_y) / m_cell);
-        for (int64_t x = x0; x <= x1; ++x) {
-            for (int64_t y = y0; y <= y1; ++y) {
-                if (!m_cells.contains(x, y)) {
-                    continue;
-                }
-                for (const GridSeg gs : m_grid_cells->find(m_cells.key(x, y))) {
-                    if (gs.chain != w.chain) {
-                        near.push_back(gs);
+        auto each_near = [&](auto&& f) {
+            for (int64_t x = x0; x <= x1; ++x) {
+                for (int64_t y = y0; y <= y1; ++y) {
+                    if (!m_cells.contains(x, y)) {
+                        continue;
+                    }
+                    for (const GridSeg gs : m_grid_cells->find(m_cells.key(x, y))) {
+                        if (gs.chain == w.chain) {
+                            continue;
+                        }
+                        const auto other = m_store.chain_points(m_store.chains[gs.chain]);
+                        const GridPoint c = other[gs.index], d = other[gs.index + 1];
+                        if (std::max(c.x, d.x) < box.min_x || std::min(c.x, d.x) > box.max_x ||
+                            std::max(c.y, d.y) < box.min_y || std::min(c.y, d.y) > box.max_y) {
+                            continue;
+                        }
+                        if (!f(c, d)) {
+                            return false;
+                        }
                     }
                 }
             }
+            return true;
+        };
+        const bool clear_of_segments = each_near([&](GridPoint c, GridPoint d) {
+            const SegmentRelation rel = segment_relation(a, b, c, d);
+            return rel == SegmentRelation::disjoint || rel == SegmentRelation::shared_endpoint;
+        });
+        if (!clear_of_segments) {
+            return false;
         }
-        std::sort(near.begin(), near.end(),
-                  [](GridSeg p, GridSeg q) { return std::tie(p.chain, p.index) < std::tie(q.chain, q.index); });
-        near.erase(std::unique(near.begin(), near.end(),
-                               [](GridSeg p, GridSeg q) { return p.chain == q.chain && p.index == q.index; }),
-                   near.end());
         auto inside = [&](GridPoint p) {
             if (p.x < box.min_x || p.x > box.max_x || p.y < box.min_y || p.y > box.max_y) {
                 return false;
@@ -956,20 +979,7 @@ class StoreSimplifier {
             pip.add_segment(b, a);
             return pip.location() == PointLocation::inside;
         };
-        for (const GridSeg gs : near) {
-            const auto other = m_store.chain_points(m_store.chains[gs.chain]);
-            const GridPoint c = other[gs.index], d = other[gs.index + 1];
-            if (std::max(c.x, d.x) < box.min_x || std::min(c.x, d.x) > box.max_x || std::max(c.y, d.y) < box.min_y ||
-                std::min(c.y, d.y) > box.max_y) {
-                continue;
-            }
-            const SegmentRelation rel = segment_relation(a, b, c, d);
-            if ((rel != SegmentRelation::disjoint && rel != SegmentRelation::shared_endpoint) || inside(c) ||
-                inside(d)) {
-                return false;
-            }
-        }
-        return true;
+        return each_near([&](GridPoint c, GridPoint d) { return !inside(c) && !inside(d); });
     }
 
     /// What a segment of the exact check is.
