@@ -419,7 +419,7 @@ int RenderStage::run(const StageContext& ctx)
     const auto& sk = tree->skeleton();
     const uint64_t budget = static_cast<uint64_t>(m_budget_mb * 1024 * 1024);
     const uint64_t skeleton = tree->skeleton_memory();
-    if (m_mode != "incore" && budget <= skeleton) {
+    if (budget <= skeleton) { // the previews are drawn out of core in every mode
         throw usage_error("render: --budget-mb " + std::to_string(m_budget_mb) + " (" + std::to_string(budget) +
                           " bytes) does not hold the skeleton of " + m_tree + " in memory (" +
                           std::to_string(skeleton) + " bytes), let alone a payload");
