@@ -6,6 +6,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <glob.h>
 #include <cmath>
 #include <map>
 #include <type_traits>
@@ -40,6 +41,20 @@ class Reader {
             n.IsSequence() ? n.as<std::vector<std::string>>() : std::vector<std::string>{n.as<std::string>()};
         for (size_t i = 0; i < list.size(); ++i) {
             const fs::path p = m_cfg.resolve(list[i]);
+            if (list[i].find_first_of("*?[") != std::string::npos) {
+                // A pattern: its matches in name order (a nation's 3,000 counties).
+                glob_t g{};
+                const int rc = ::glob(p.c_str(), 0, nullptr, &g);
+                for (size_t k = 0; rc == 0 && k < g.gl_pathc; ++k) {
+                    out.emplace_back(g.gl_pathv[k]);
+                }
+                globfree(&g);
+                if (rc != 0) {
+                    fail(n.IsSequence() ? n[i] : n,
+                         key + "[" + std::to_string(i) + "]: " + p.string() + ": the pattern matches no file");
+                }
+                continue;
+            }
             if (!fs::exists(p)) {
                 fail(n.IsSequence() ? n[i] : n, key + "[" + std::to_string(i) + "]: " + p.string() + ": no such file");
             }

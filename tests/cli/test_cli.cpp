@@ -211,7 +211,8 @@ TEST_F(Cli, HelpAndVersion)
         {"simplify", {"OSMesa API ", "GeographicLib ", "chain store format "}},
         {"pack", {"Draco ", "chain store format ", "Data Tree format "}},
         {"export", {"GDAL ", "Data Tree format "}},
-        {"verify", {"GDAL ", "GeographicLib ", "chain store format ", "Data Tree format "}}};
+        {"verify", {"GDAL ", "GeographicLib ", "chain store format ", "Data Tree format "}},
+        {"synth", {"GDAL ", "zlib "}}};
     for (const auto& [tool, libs] : versions) {
         SCOPED_TRACE(tool);
         const Result h = run(tool, "--help");

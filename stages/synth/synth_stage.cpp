@@ -1,0 +1,272 @@
+#include "stages/synth/synth_stage.hpp"
+
+#include "config/config_file.hpp"
+#include "config/schema.hpp"
+#include "core/fs.hpp"
+#include "core/manifest.hpp"
+#include "core/parallel.hpp"
+#include "stages/synth/nation.hpp"
+#include "stages/synth/tiger_files.hpp"
+
+#include <gdal.h>
+#include <nlohmann/json.hpp>
+#include <sys/resource.h>
+#include <unistd.h>
+#include <zlib.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <mutex>
+#include <thread>
+
+namespace tigerlod::synth {
+
+namespace fs = std::filesystem;
+using json = nlohmann::ordered_json;
+
+namespace {
+
+double peak_rss_mb()
+{
+    rusage ru{};
+    getrusage(RUSAGE_SELF, &ru);
+    return static_cast<double>(ru.ru_maxrss) / 1024.0;
+}
+
+/// What one county's files hold.
+struct CountyCounts {
+    uint64_t edge_features = 0, vertex_records = 0; ///< as written, border edges in both files
+    uint64_t edges = 0, vertices = 0;               ///< the edges this county owns (each edge once over the nation)
+    uint64_t faces = 0, water_faces = 0, bytes = 0;
+    std::vector<uint32_t> vertices_per_edge; ///< owned edges
+    std::vector<float> edge_m;               ///< owned edges' lengths
+    std::vector<uint32_t> face_blocks;       ///< each face's block
+};
+
+double length_m(const std::vector<Pt>& pts)
+{
+    double m = 0;
+    for (size_t k = 0; k + 1 < pts.size(); ++k) {
+        const double dx = double(pts[k + 1].x - pts[k].x) * 0.111319 * cos_turns(double(pts[k].y) / 1e6 / 360);
+        const double dy = double(pts[k + 1].y - pts[k].y) * 0.110574;
+        m += std::sqrt(dx * dx + dy * dy);
+    }
+    return m;
+}
+
+/// Quantiles 0, 10, 25, 50, 75, 90, 99, 100 % and the mean.
+template <class T> json quantiles(std::vector<T> v)
+{
+    json q = json::object();
+    if (v.empty()) {
+        return q;
+    }
+    std::sort(v.begin(), v.end());
+    double sum = 0;
+    for (const T x : v) {
+        sum += double(x);
+    }
+    for (const int p : {0, 10, 25, 50, 75, 90, 99, 100}) {
+        const size_t k = size_t(double(p) / 100 * double(v.size() - 1));
+        q["p" + std::to_string(p)] = std::round(double(v[k]) * 10) / 10;
+    }
+    q["mean"] = std::round(sum / double(v.size()) * 10) / 10;
+    return q;
+}
+
+/// A progress line on stderr: percent, rate, ETA; rewritten in place.
+class Progress {
+  public:
+    Progress(bool on, size_t total) : m_on(on), m_total(total), m_t0(std::chrono::steady_clock::now()) {}
+    void advance(uint64_t vertices)
+    {
+        const size_t done = ++m_done;
+        m_vertices += vertices;
+        if (!m_on) {
+            return;
+        }
+        std::lock_guard lock(m_mutex);
+        const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - m_t0).count();
+        if (done != m_total && s - m_last < 0.25) {
+            return;
+        }
+        m_last = s;
+        const double rate = double(m_vertices.load()) / std::max(s, 1e-9);
+        const double eta = done > 0 ? s * double(m_total - done) / double(done) : 0;
+        std::fprintf(stderr, "\rsynth: %5.1f%% %zu/%zu counties, %.2f M vertices/s, ETA %.0f s ",
+                     100.0 * double(done) / double(m_total), done, m_total, rate / 1e6, eta);
+        if (done == m_total) {
+            std::fputc('\n', stderr);
+        }
+    }
+
+  private:
+    bool m_on;
+    size_t m_total;
+    std::atomic<size_t> m_done{0};
+    std::atomic<uint64_t> m_vertices{0};
+    std::chrono::steady_clock::time_point m_t0;
+    std::mutex m_mutex;
+    double m_last = -1;
+};
+
+} // namespace
+
+void SynthStage::add_args(ArgSet& args)
+{
+    args.positional("OUTPUT", &m_output, "the folder to write, under a temporary name renamed when done");
+    config::add_option(args, "synth.seed", &m_seed);
+    config::add_option(args, "synth.states", &m_states);
+    config::add_option(args, "synth.counties_per_state", &m_counties);
+    config::add_option(args, "synth.target_vertices", &m_target);
+    config::add_option(args, "synth.cell_m", &m_cell_m);
+    config::add_option(args, "synth.threads", &m_threads);
+    args.add("progress", &m_progress, "show progress on stderr even when it is not a terminal");
+    args.add("overwrite", &m_overwrite, "replace OUTPUT if it exists");
+}
+
+void SynthStage::initialize()
+{
+    if (m_output.empty()) {
+        throw usage_error("synth: OUTPUT must not be empty");
+    }
+}
+
+std::vector<std::string> SynthStage::config_args(const fs::path& file) const
+{
+    return config::stage_args(file, name);
+}
+
+std::vector<std::string> SynthStage::versions() const
+{
+    return {std::string("GDAL ") + GDALVersionInfo("RELEASE_NAME"), std::string("zlib ") + zlibVersion()};
+}
+
+std::string SynthStage::help_notes() const
+{
+    return "Outputs:\n"
+           "  OUTPUT/tl_2020_SSCCC_edges.zip  per county (SS state, CCC county): TLID, TFIDL, TFIDR, TNIDF, TNIDT,\n"
+           "                                  MTFCC, STATEFP, COUNTYFP; an edge on a county border is in both files\n"
+           "  OUTPUT/tl_2020_SSCCC_faces.zip  TFID, STATEFP20, COUNTYFP20, TRACTCE20, BLKGRPCE20, BLOCKCE20, LWFLAG,\n"
+           "                                  ATOTAL, INTPTLAT, INTPTLON\n"
+           "  OUTPUT/manifest.json            options, units per level, edges, vertices and faces written, and the\n"
+           "                                  distributions of vertices per edge, edge length and faces per block\n"
+           "  OUTPUT/synth-timings.json       seconds, vertices per second, peak memory (varies by run)\n"
+           "The same options give the same bytes, whatever the thread count. A config's `synth` section gives\n"
+           "the options (--config); `tigerlod-ingest` reads the files as a `tiger` dataset.\n"
+           "Exit codes: 0 done; 2 usage or config error; 3 environment (cannot write).\n";
+}
+
+int SynthStage::run(const StageContext& ctx)
+{
+    const auto t0 = std::chrono::steady_clock::now();
+    auto seconds = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
+    GDALAllRegister();
+    SynthOptions opt;
+    opt.seed = uint64_t(m_seed);
+    opt.states = m_states;
+    opt.counties_per_state = m_counties;
+    opt.target_vertices = m_target;
+    opt.cell_m = m_cell_m;
+    const Nation nation(opt);
+    const double t_plan = seconds();
+    ctx.log.info("synth: a lattice of " + std::to_string(nation.width()) + " x " + std::to_string(nation.height()) +
+                 " cells, " + std::to_string(nation.units(county).size()) + " counties, planned in " +
+                 std::to_string(t_plan) + " s");
+
+    OutputDir out(m_output, m_overwrite);
+    log_removed_leftovers(ctx.log, out.removed_leftovers());
+    const unsigned threads = m_threads > 0 ? unsigned(m_threads) : std::max(1U, std::thread::hardware_concurrency());
+    const size_t counties = nation.units(county).size();
+    std::vector<CountyCounts> counts(counties);
+    Progress progress(m_progress || ::isatty(STDERR_FILENO) != 0, counties);
+    parallel_each(counties, threads, [&](size_t c) {
+        const auto& cty = nation.units(county)[c];
+        const auto& st = nation.units(state)[cty.parent];
+        const std::string ssccc = st.code + cty.code;
+        auto& k = counts[c];
+        const auto parts = nation.county_parts(uint32_t(c));
+        const auto& edges = parts.edges;
+        for (const auto& e : edges) {
+            ++k.edge_features;
+            k.vertex_records += e.points.size();
+            const int64_t side = e.tfidl != 0 ? e.tfidl : e.tfidr;
+            if (nation.county_of_face(side) == c) {
+                ++k.edges;
+                k.vertices += e.points.size();
+                k.vertices_per_edge.push_back(uint32_t(e.points.size()));
+                k.edge_m.push_back(float(length_m(e.points)));
+            }
+        }
+        const std::string ez = edges_zip(ssccc, st.code, cty.code, edges);
+        write_file(out.path() / ("tl_2020_" + ssccc + "_edges.zip"), ez);
+        const auto& faces = parts.faces;
+        for (const auto& f : faces) {
+            ++k.faces;
+            k.water_faces += f.water ? 1 : 0;
+            k.face_blocks.push_back(f.block);
+        }
+        const std::string fz = faces_zip(ssccc, nation, faces);
+        write_file(out.path() / ("tl_2020_" + ssccc + "_faces.zip"), fz);
+        k.bytes = ez.size() + fz.size();
+        progress.advance(k.vertex_records);
+    });
+
+    CountyCounts all;
+    std::vector<uint32_t> faces_per_block(nation.units(block).size(), 0);
+    for (auto& k : counts) {
+        for (const uint32_t b : k.face_blocks) {
+            ++faces_per_block[b];
+        }
+        all.edge_features += k.edge_features;
+        all.vertex_records += k.vertex_records;
+        all.edges += k.edges;
+        all.vertices += k.vertices;
+        all.faces += k.faces;
+        all.water_faces += k.water_faces;
+        all.bytes += k.bytes;
+        all.vertices_per_edge.insert(all.vertices_per_edge.end(), k.vertices_per_edge.begin(),
+                                     k.vertices_per_edge.end());
+        all.edge_m.insert(all.edge_m.end(), k.edge_m.begin(), k.edge_m.end());
+    }
+    json manifest = new_manifest(name, versions());
+    manifest["options"] = {{"seed", m_seed},
+                           {"states", m_states},
+                           {"counties_per_state", m_counties},
+                           {"target_vertices", m_target},
+                           {"cell_m", m_cell_m}};
+    json levels = json::object();
+    for (int l = 0; l < level_count; ++l) {
+        levels[level_names[l]] = nation.units(Level(l)).size();
+    }
+    manifest["counts"] = {{"units", levels},
+                          {"files", 2 * counties},
+                          {"edges", all.edges},
+                          {"vertices", all.vertices},
+                          {"edge_features", all.edge_features},
+                          {"vertex_records", all.vertex_records},
+                          {"faces", all.faces},
+                          {"water_faces", all.water_faces},
+                          {"lattice_cells", {nation.width(), nation.height()}}};
+    manifest["distributions"] = {{"vertices_per_edge", quantiles(all.vertices_per_edge)},
+                                 {"edge_length_m", quantiles(all.edge_m)},
+                                 {"faces_per_block", quantiles(faces_per_block)}};
+    write_file(out.path() / "manifest.json", manifest_text(manifest));
+    const double total = seconds();
+    json timings = {{"plan_s", t_plan},   {"total_s", total},
+                    {"threads", threads}, {"vertices_per_s", total > 0 ? double(all.vertex_records) / total : 0.0},
+                    {"bytes", all.bytes}, {"peak_rss_mb", peak_rss_mb()}};
+    write_file(out.path() / "synth-timings.json", timings.dump(2) + "\n");
+    out.commit();
+    std::printf("synth: %zu states, %zu counties, %zu tracts, %zu block groups, %zu blocks; %llu faces; %llu edges, "
+                "%llu vertices (each edge once) in %.1f s, %.2f M vertices/s written\n",
+                nation.units(state).size(), counties, nation.units(tract).size(), nation.units(block_group).size(),
+                nation.units(block).size(), (unsigned long long)all.faces, (unsigned long long)all.edges,
+                (unsigned long long)all.vertices, total, double(all.vertex_records) / total / 1e6);
+    return exit_ok;
+}
+
+} // namespace tigerlod::synth

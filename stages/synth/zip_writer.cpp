@@ -1,0 +1,112 @@
+#include "stages/synth/zip_writer.hpp"
+
+#include <zlib.h>
+
+#include <limits>
+#include <stdexcept>
+
+namespace tigerlod::synth {
+
+namespace {
+
+// 2020-12-18 00:00, in MS-DOS form, on every member.
+constexpr uint16_t dos_date = ((2020 - 1980) << 9) | (12 << 5) | 18;
+constexpr uint16_t dos_time = 0;
+
+void put16(std::string& out, uint32_t v)
+{
+    out += char(v & 0xff);
+    out += char((v >> 8) & 0xff);
+}
+
+void put32(std::string& out, uint32_t v)
+{
+    put16(out, v & 0xffff);
+    put16(out, v >> 16);
+}
+
+uint32_t checked(size_t n, const std::string& what)
+{
+    if (n > std::numeric_limits<uint32_t>::max()) {
+        throw std::runtime_error("zip: " + what + " passes 4 GiB, which needs Zip64");
+    }
+    return uint32_t(n);
+}
+
+} // namespace
+
+void ZipWriter::add(const std::string& name, std::string_view data)
+{
+    Member m;
+    m.name = name;
+    m.size = checked(data.size(), name);
+    m.crc = uint32_t(crc32(0L, reinterpret_cast<const Bytef*>(data.data()), uInt(data.size())));
+    z_stream z{};
+    if (deflateInit2(&z, m_level, Z_DEFLATED, -15, 8, Z_DEFAULT_STRATEGY) != Z_OK) {
+        throw std::runtime_error("zip: deflateInit2 failed for " + name);
+    }
+    std::string packed(deflateBound(&z, uLong(data.size())), '\0');
+    z.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(data.data()));
+    z.avail_in = uInt(data.size());
+    z.next_out = reinterpret_cast<Bytef*>(packed.data());
+    z.avail_out = uInt(packed.size());
+    const int rc = deflate(&z, Z_FINISH);
+    packed.resize(z.total_out);
+    deflateEnd(&z);
+    if (rc != Z_STREAM_END) {
+        throw std::runtime_error("zip: deflate failed for " + name);
+    }
+    m.compressed = checked(packed.size(), name);
+    m.offset = checked(m_out.size(), "the archive");
+    put32(m_out, 0x04034b50);
+    put16(m_out, 20); // version needed: deflate
+    put16(m_out, 0);  // flags
+    put16(m_out, 8);  // deflate
+    put16(m_out, dos_time);
+    put16(m_out, dos_date);
+    put32(m_out, m.crc);
+    put32(m_out, m.compressed);
+    put32(m_out, m.size);
+    put16(m_out, uint32_t(name.size()));
+    put16(m_out, 0);
+    m_out += name;
+    m_out += packed;
+    m_members.push_back(std::move(m));
+}
+
+std::string ZipWriter::finish()
+{
+    const uint32_t directory = checked(m_out.size(), "the archive");
+    for (const auto& m : m_members) {
+        put32(m_out, 0x02014b50);
+        put16(m_out, 20); // made by: MS-DOS, 2.0
+        put16(m_out, 20);
+        put16(m_out, 0);
+        put16(m_out, 8);
+        put16(m_out, dos_time);
+        put16(m_out, dos_date);
+        put32(m_out, m.crc);
+        put32(m_out, m.compressed);
+        put32(m_out, m.size);
+        put16(m_out, uint32_t(m.name.size()));
+        put16(m_out, 0); // extra
+        put16(m_out, 0); // comment
+        put16(m_out, 0); // disk
+        put16(m_out, 0); // internal attributes
+        put32(m_out, 0); // external attributes
+        put32(m_out, m.offset);
+        m_out += m.name;
+    }
+    const uint32_t size = checked(m_out.size() - directory, "the archive");
+    put32(m_out, 0x06054b50);
+    put16(m_out, 0);
+    put16(m_out, 0);
+    put16(m_out, uint32_t(m_members.size()));
+    put16(m_out, uint32_t(m_members.size()));
+    put32(m_out, size);
+    put32(m_out, directory);
+    put16(m_out, 0);
+    return std::move(m_out);
+}
+
+} // namespace tigerlod::synth
