@@ -1,8 +1,9 @@
 #include "stages/synth/zip_writer.hpp"
 
-#include <zlib.h>
+#include <libdeflate.h>
 
 #include <limits>
+#include <string>
 #include <stdexcept>
 
 namespace tigerlod::synth {
@@ -40,22 +41,18 @@ void ZipWriter::add(const std::string& name, std::string_view data)
     Member m;
     m.name = name;
     m.size = checked(data.size(), name);
-    m.crc = uint32_t(crc32(0L, reinterpret_cast<const Bytef*>(data.data()), uInt(data.size())));
-    z_stream z{};
-    if (deflateInit2(&z, m_level, Z_DEFLATED, -15, 8, Z_DEFAULT_STRATEGY) != Z_OK) {
-        throw std::runtime_error("zip: deflateInit2 failed for " + name);
+    m.crc = libdeflate_crc32(0, data.data(), data.size());
+    libdeflate_compressor* c = libdeflate_alloc_compressor(m_level);
+    if (c == nullptr) {
+        throw std::runtime_error("zip: no deflate compressor at level " + std::to_string(m_level));
     }
-    std::string packed(deflateBound(&z, uLong(data.size())), '\0');
-    z.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(data.data()));
-    z.avail_in = uInt(data.size());
-    z.next_out = reinterpret_cast<Bytef*>(packed.data());
-    z.avail_out = uInt(packed.size());
-    const int rc = deflate(&z, Z_FINISH);
-    packed.resize(z.total_out);
-    deflateEnd(&z);
-    if (rc != Z_STREAM_END) {
+    std::string packed(libdeflate_deflate_compress_bound(c, data.size()), '\0');
+    const size_t n = libdeflate_deflate_compress(c, data.data(), data.size(), packed.data(), packed.size());
+    libdeflate_free_compressor(c);
+    if (n == 0 && !data.empty()) {
         throw std::runtime_error("zip: deflate failed for " + name);
     }
+    packed.resize(n);
     m.compressed = checked(packed.size(), name);
     m.offset = checked(m_out.size(), "the archive");
     put32(m_out, 0x04034b50);

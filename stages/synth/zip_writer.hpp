@@ -1,7 +1,7 @@
 #pragma once
 /// @file zip_writer.hpp
 /// A zip archive written in one pass (PKWARE APPNOTE 6.3: local headers,
-/// raw deflate through zlib, a central directory; no Zip64, so each member
+/// raw deflate through libdeflate, a central directory; no Zip64, so each member
 /// and the archive stay under 4 GiB). Every member carries one fixed date,
 /// so the same members give the same bytes: GDAL's own zip writer stamps
 /// the time of writing.
@@ -16,9 +16,9 @@ namespace tigerlod::synth {
 
 class ZipWriter {
   public:
-    /// Members are deflated at `level` (zlib's 0..9).
+    /// Members are deflated at `level` (libdeflate's 0..12; 0 stores).
     explicit ZipWriter(int level = 6) : m_level(level) {}
-    /// Add a member. Throws std::runtime_error when zlib fails or a size passes 4 GiB.
+    /// Add a member. Throws std::runtime_error when deflate fails or a size passes 4 GiB.
     void add(const std::string& name, std::string_view data);
     /// The archive's bytes.
     std::string finish();
