@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The workflow as a user meets it after a bad night: a run killed with
 # SIGKILL resumes with scripts/workflow alone, a failing stage shows its
-# last log lines on the terminal, and a config the pipeline cannot expand
-# says so in one line. Needs Floyd from ../shared/data (skips, exit 77).
+# last log lines on the terminal, a config the pipeline cannot expand
+# says so in one line, and a synthetic nation runs from its config alone.
+# Needs Floyd from ../shared/data (skips, exit 77).
 #
 #   tests/workflow/test_workflow.sh REPO BIN_DIR
 set -uo pipefail
@@ -98,6 +99,28 @@ grep -q "'simplify.tolerances_m' must be a list of numbers" str.out || fail "no 
 rc=$?
 [ "$rc" = 2 ] || fail "a config that does not exist exited $rc, not 2"
 grep -q "workflow: nothere.yaml: no such config file" missing.out || fail "no message for a missing config: $(cat missing.out)"
+
+# 5. A synthetic nation (a config with a synth section): tigerlod-synth
+# runs first, ingest reads its files by pattern, and the tree verifies
+# clean; a new seed reruns synth and what follows.
+cat >sy.yaml <<'EOF'
+name: sy
+synth: {seed: 1, states: 1, counties_per_state: 2, target_vertices: 20000}
+dataset:
+  kind: tiger
+  edges: [out/sy/synth/tl_2020_*_edges.zip]
+  faces: [out/sy/synth/tl_2020_*_faces.zip]
+simplify: {tolerances_m: [4, 16]}
+render: {frames: 6}
+EOF
+"$repo/scripts/workflow" sy.yaml >sy1.out 2>&1 || fail "the synthetic nation's run failed: $(tail -20 sy1.out)"
+grep -q '"clean": true' out/sy/reports/verify-report.json || fail "the synthetic nation's tree is not clean"
+[ -f out/sy/synth/tl_2020_01001_edges.zip ] || fail "no EDGES file of the synthetic nation"
+first=$(sha256sum <out/sy/synth/manifest.json)
+sed -i 's/seed: 1,/seed: 2,/' sy.yaml
+"$repo/scripts/workflow" sy.yaml >sy2.out 2>&1 || fail "a new seed's run failed: $(tail -20 sy2.out)"
+[ "$(sha256sum <out/sy/synth/manifest.json)" != "$first" ] || fail "a new seed did not rerun synth"
+grep -q '"clean": true' out/sy/reports/verify-report.json || fail "the new seed's tree is not clean"
 
 if [ "$failures" -gt 0 ]; then
   echo "$failures failure(s)"
