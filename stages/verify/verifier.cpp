@@ -27,6 +27,106 @@ int sign(int128 v)
     return (v > 0) - (v < 0);
 }
 
+/// A chain's segments for meetings_by_window: its points, and the layer
+/// and group find_intersections_between tells apart.
+struct ChainSegments {
+    std::span<const GridPoint> pts;
+    uint32_t layer = 0, group = 0;
+};
+
+/// What find_intersections (or, with `between`, find_intersections_between
+/// by layer and group) finds over the segments of all `chains`, segment s
+/// of chain c numbered base[c] + s (base: each chain's first segment,
+/// counting every segment; zero-length ones take no part), sorted, each
+/// pair once: the same pairs, relations and points as one call over them
+/// all, since a pair that meets has its point in one window and both its
+/// chains in that window. The level's box is cut into windows of about
+/// `window_segments`, each chain in every window its box touches, so memory
+/// follows a window, not the level (the whole level at once held 40 bytes a
+/// segment and the grid over them: 10 GB for the block level of a 100 M
+/// vertex nation).
+std::vector<Intersection> meetings_by_window(const std::vector<ChainSegments>& chains, std::vector<uint64_t>& base,
+                                             bool between, size_t window_segments, unsigned threads)
+{
+    base.assign(chains.size() + 1, 0);
+    GridBox box;
+    for (size_t c = 0; c < chains.size(); ++c) {
+        base[c + 1] = base[c] + (chains[c].pts.empty() ? 0 : chains[c].pts.size() - 1);
+        for (const GridPoint p : chains[c].pts) {
+            box.extend(p);
+        }
+    }
+    if (base.back() > UINT32_MAX) {
+        throw std::length_error("verify: a level of more than 2^32 segments");
+    }
+    if (box.empty()) {
+        return {};
+    }
+    const int64_t side = std::max<int64_t>(
+        1, std::llround(std::ceil(std::sqrt(double(base.back()) / double(std::max<size_t>(window_segments, 1))))));
+    const int64_t wx = std::max<int64_t>(1, (box.max_x - box.min_x) / side + 1);
+    const int64_t wy = std::max<int64_t>(1, (box.max_y - box.min_y) / side + 1);
+    std::vector<std::vector<uint32_t>> in_window(size_t(side * side));
+    for (size_t c = 0; c < chains.size(); ++c) {
+        GridBox cb;
+        for (const GridPoint p : chains[c].pts) {
+            cb.extend(p);
+        }
+        if (cb.empty()) {
+            continue;
+        }
+        for (int64_t y = (cb.min_y - box.min_y) / wy; y <= (cb.max_y - box.min_y) / wy; ++y) {
+            for (int64_t x = (cb.min_x - box.min_x) / wx; x <= (cb.max_x - box.min_x) / wx; ++x) {
+                in_window[size_t(y * side + x)].push_back(uint32_t(c));
+            }
+        }
+    }
+    std::vector<Intersection> all;
+    std::vector<Segment> segs;
+    std::vector<uint32_t> layer, group, global;
+    for (const auto& window : in_window) {
+        segs.clear();
+        layer.clear();
+        group.clear();
+        global.clear();
+        for (const uint32_t c : window) { // in chain order: local order is global order
+            const auto pts = chains[c].pts;
+            for (size_t i = 0; i + 1 < pts.size(); ++i) {
+                if (pts[i] == pts[i + 1]) {
+                    continue; // a zero-length segment is the subsequence check's to report
+                }
+                segs.push_back({pts[i], pts[i + 1], uint32_t(segs.size())});
+                layer.push_back(chains[c].layer);
+                group.push_back(chains[c].group);
+                global.push_back(uint32_t(base[c] + i));
+            }
+        }
+        auto found =
+            between ? find_intersections_between(segs, layer, group, threads) : find_intersections(segs, threads);
+        for (auto& x : found) {
+            x.first = global[x.first];
+            x.second = global[x.second];
+            all.push_back(x);
+        }
+    }
+    std::sort(all.begin(), all.end(), [](const Intersection& a, const Intersection& b) {
+        return std::tie(a.first, a.second) < std::tie(b.first, b.second);
+    });
+    all.erase(std::unique(all.begin(), all.end(),
+                          [](const Intersection& a, const Intersection& b) {
+                              return a.first == b.first && a.second == b.second;
+                          }),
+              all.end());
+    return all;
+}
+
+/// The chain and segment of a segment numbered by meetings_by_window.
+std::pair<size_t, uint32_t> chain_segment(const std::vector<uint64_t>& base, uint32_t global)
+{
+    const size_t c = size_t(std::upper_bound(base.begin(), base.end(), uint64_t{global}) - base.begin()) - 1;
+    return {c, uint32_t(global - base[c])};
+}
+
 /// Which units of a node's map hold a point, in one pass over the segments
 /// that cross the point's row: each segment of a chain with different units
 /// on its two sides flips both units' even-odd state where it crosses the
@@ -313,7 +413,7 @@ class Verifier {
     /// A level's chains at one LOD, each once, for the check across LODs.
     struct LodChains {
         std::vector<uint64_t> ids;
-        std::vector<std::string> nodes; ///< the node each was taken from (unit code)
+        std::vector<uint32_t> nodes; ///< the node each was taken from (a string each held 0.3 GB at 100 M vertices)
         datatree::Geometry geometry;
     };
 
@@ -322,7 +422,7 @@ class Verifier {
     {
         for (const auto& [slot, c] : unique) {
             out.ids.push_back(results[slot].table.chains[c].id);
-            out.nodes.push_back(node_code(nodes[slot]));
+            out.nodes.push_back(nodes[slot]);
             out.geometry.add_chain(results[slot].geometry.chain(c));
         }
     }
@@ -344,12 +444,11 @@ class Verifier {
         }
         std::unordered_map<uint64_t, uint32_t> group_of; // chain id -> group
         std::vector<std::vector<uint32_t>> index_of;     // per group, the chain's index at each LOD
-        std::vector<Segment> segs;
-        std::vector<uint32_t> layer, group;
+        std::vector<ChainSegments> chains;
         struct Where {
             uint32_t lod, chain, segment;
         };
-        std::vector<Where> where;
+        std::vector<std::pair<uint32_t, uint32_t>> chain_at; // (LOD, chain) of each of `chains`
         for (uint32_t k = 0; k < lods.size(); ++k) {
             const auto& lc = lods[k];
             for (uint32_t c = 0; c < lc.ids.size(); ++c) {
@@ -358,27 +457,29 @@ class Verifier {
                     index_of.emplace_back(lods.size(), UINT32_MAX);
                 }
                 index_of[it->second][k] = c;
-                const auto pts = lc.geometry.chain(c);
-                for (uint32_t s = 0; s + 1 < pts.size(); ++s) {
-                    if (pts[s] == pts[s + 1]) {
-                        continue; // the subsequence check's to report
-                    }
-                    segs.push_back({pts[s], pts[s + 1], static_cast<uint32_t>(segs.size())});
-                    layer.push_back(k);
-                    group.push_back(it->second);
-                    where.push_back({k, c, s});
-                }
+                chains.push_back({lc.geometry.chain(c), k, it->second});
+                chain_at.emplace_back(k, c);
             }
         }
+        std::vector<uint64_t> base;
+        const auto found = meetings_by_window(chains, base, true, m_options.window_segments, m_options.threads);
+        auto where_of = [&](uint32_t global) {
+            const auto [c, s] = chain_segment(base, global);
+            return Where{chain_at[c].first, chain_at[c].second, s};
+        };
+        auto segment_of = [&](const Where& w) {
+            const auto pts = lods[w.lod].geometry.chain(w.chain);
+            return Segment{pts[w.segment], pts[w.segment + 1], 0};
+        };
         // Whether segment s of chain `g` is also one of its segments at LOD k.
-        auto has_segment = [&](uint32_t g, uint32_t k, const Segment& s) {
+        auto has_segment = [&](uint32_t g, uint32_t k, const Segment& seg) {
             const uint32_t c = index_of[g][k];
             if (c == UINT32_MAX) {
                 return false;
             }
             const auto pts = lods[k].geometry.chain(c);
             for (size_t i = 0; i + 1 < pts.size(); ++i) {
-                if (pts[i] == s.a && pts[i + 1] == s.b) {
+                if (pts[i] == seg.a && pts[i + 1] == seg.b) {
                     return true;
                 }
             }
@@ -388,10 +489,10 @@ class Verifier {
             return r == SegmentRelation::overlap ? 3 : r == SegmentRelation::cross ? 2 : 1;
         };
         std::map<std::pair<uint64_t, uint64_t>, std::pair<Intersection, int>> meetings; // by chain ids
-        for (const auto& x : find_intersections_between(segs, layer, group, m_options.threads)) {
-            const Where a = where[x.first], b = where[x.second];
-            if (has_segment(group[x.second], a.lod, segs[x.second]) ||
-                has_segment(group[x.first], b.lod, segs[x.first])) {
+        for (const auto& x : found) {
+            const Where a = where_of(x.first), b = where_of(x.second);
+            const uint32_t ga = group_of.at(lods[a.lod].ids[a.chain]), gb = group_of.at(lods[b.lod].ids[b.chain]);
+            if (has_segment(gb, a.lod, segment_of(b)) || has_segment(ga, b.lod, segment_of(a))) {
                 continue; // the same meeting at one LOD
             }
             const uint64_t ida = lods[a.lod].ids[a.chain], idb = lods[b.lod].ids[b.chain];
@@ -404,7 +505,7 @@ class Verifier {
         }
         for (const auto& [ids, m] : meetings) {
             const auto& x = m.first;
-            Where a = where[x.first], b = where[x.second];
+            Where a = where_of(x.first), b = where_of(x.second);
             if (a.lod > b.lod) {
                 std::swap(a, b);
             }
@@ -414,12 +515,13 @@ class Verifier {
                                                                        : "meet";
             auto ll = std::find_if(m_report.by_level_lod.begin(), m_report.by_level_lod.end(),
                                    [&](const LevelLod& l) { return l.level == level && l.lod == b.lod; });
-            add(*ll, {input_meetings.contains(ids) ? "input_problem" : "lod_crossings", level, b.lod,
-                      lods[b.lod].nodes[b.chain], std::vector<uint64_t>{ids.first, ids.second}, x.x, x.y, 0, 0,
-                      "chain " + std::to_string(lods[a.lod].ids[a.chain]) + " at LOD " + std::to_string(a.lod) +
-                          " segment " + std::to_string(a.segment) + " and chain " +
-                          std::to_string(lods[b.lod].ids[b.chain]) + " at LOD " + std::to_string(b.lod) + " segment " +
-                          std::to_string(b.segment) + " " + rel});
+            add(*ll,
+                {input_meetings.contains(ids) ? "input_problem" : "lod_crossings", level, b.lod,
+                 node_code(lods[b.lod].nodes[b.chain]), std::vector<uint64_t>{ids.first, ids.second}, x.x, x.y, 0, 0,
+                 "chain " + std::to_string(lods[a.lod].ids[a.chain]) + " at LOD " + std::to_string(a.lod) +
+                     " segment " + std::to_string(a.segment) + " and chain " +
+                     std::to_string(lods[b.lod].ids[b.chain]) + " at LOD " + std::to_string(b.lod) + " segment " +
+                     std::to_string(b.segment) + " " + rel});
         }
     }
 
@@ -483,21 +585,18 @@ class Verifier {
     {
         const std::string& level = ll.level;
         const uint32_t k = ll.lod;
-        std::vector<Segment> segs;
-        std::vector<std::pair<size_t, size_t>> seg_chain; // unique index of each segment's chain, segment index
+        std::vector<ChainSegments> chains; // the unique chains, in order
         for (size_t u = 0; u < unique.size(); ++u) {
             const auto pts = results[unique[u].first].geometry.chain(unique[u].second);
             ll.chains += 1;
             ll.vertices += pts.size();
             for (size_t s = 0; s + 1 < pts.size(); ++s) {
-                if (pts[s] == pts[s + 1]) {
-                    continue; // a zero-length segment is the subsequence check's to report
-                }
-                segs.push_back({pts[s], pts[s + 1], static_cast<uint32_t>(segs.size())});
-                seg_chain.emplace_back(u, s);
+                ll.segments += pts[s] == pts[s + 1] ? 0 : 1; // a zero-length one is the subsequence check's
             }
+            chains.push_back({pts, 0, 0});
         }
-        ll.segments = segs.size();
+        std::vector<uint64_t> base;
+        const auto found = meetings_by_window(chains, base, false, m_options.window_segments, m_options.threads);
         // One violation per pair of chains (or per chain, meeting itself):
         // the worst way they meet (overlap, then cross, then touch), at the
         // first place found.
@@ -510,8 +609,8 @@ class Verifier {
             return r == SegmentRelation::overlap ? 3 : r == SegmentRelation::cross ? 2 : 1;
         };
         std::map<std::pair<uint64_t, uint64_t>, Meeting> meetings;
-        for (const auto& x : find_intersections(segs, m_options.threads)) {
-            const size_t ua = seg_chain[x.first].first, ub = seg_chain[x.second].first;
+        for (const auto& x : found) {
+            const size_t ua = chain_segment(base, x.first).first, ub = chain_segment(base, x.second).first;
             const uint64_t ida = results[unique[ua].first].table.chains[unique[ua].second].id;
             const uint64_t idb = results[unique[ub].first].table.chains[unique[ub].second].id;
             const auto key = std::make_pair(std::min(ida, idb), std::max(ida, idb));
@@ -542,8 +641,8 @@ class Verifier {
                 chain_ids.push_back(ids.second);
             }
             add(ll, {kind, level, k, node_code(nodes[unique[m.ua].first]), chain_ids, m.x.x, m.x.y, 0, 0,
-                     std::string("segments ") + std::to_string(seg_chain[m.x.first].second) + " and " +
-                         std::to_string(seg_chain[m.x.second].second) + " " + rel});
+                     std::string("segments ") + std::to_string(chain_segment(base, m.x.first).second) + " and " +
+                         std::to_string(chain_segment(base, m.x.second).second) + " " + rel});
         }
     }
 

@@ -60,6 +60,10 @@ struct Options {
     std::vector<simplify::LonLat> user_points;
     unsigned threads = 1;
     size_t max_items = 10000; ///< violations listed one by one at most; all are counted
+    /// The meeting checks (crossings within a LOD, and across LODs) look at
+    /// the level window by window, each of about this many segments: their
+    /// memory follows a window, not the level. The report does not depend on it.
+    size_t window_segments = size_t{1} << 22;
 };
 
 struct Report {

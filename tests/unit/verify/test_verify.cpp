@@ -444,3 +444,41 @@ TEST_F(Verify, CrossingsAlreadyInTheInputAreInputProblemsNotViolations)
     EXPECT_EQ(r.items[0].kind, "input_problem");
     EXPECT_EQ(r.items[0].x, 50.0);
 }
+
+TEST_F(Verify, MeetingsAreTheSameFoundWindowByWindow)
+{
+    // The meeting checks cut a level into windows so that their memory
+    // follows a window (Options::window_segments): windows of one segment
+    // (each chain in several) report what one window over the level does,
+    // within a LOD, across LODs, in the input, and a chain meeting itself.
+    Map across = lines({{1, {{0, 0}, {500, -3}, {1000, 0}}}, {2, {{0, 0}, {300, -1}, {600, 50}, {900, 200}}}}, 100);
+    across.simplified[1] = {{0, 0}, {1000, 0}};
+    across.simplified[2] = {{0, 0}, {900, 200}};
+    Map within = across;
+    within.simplified.erase(2);
+    auto self = lines({{3, {{900, 400}, {200, 0}, {800, 0}, {920, 300}, {920, 700}, {200, 900}}}}, 70);
+    self.simplified[3] = {{900, 400}, {200, 0}, {800, 0}, {920, 700}, {200, 900}};
+    const auto input = lines({{1, {{0, 0}, {100, 100}}}, {2, {{0, 100}, {100, 0}}}}, 60);
+    // Two chains whose boxes start in different windows and meet far from both corners.
+    const auto apart = lines({{1, {{0, 500}, {400, 510}, {1000, 500}}}, {2, {{800, 0}, {810, 400}, {800, 1000}}}}, 60);
+    for (const Map* m : std::initializer_list<const Map*>{&across, &within, &self, &input, &apart}) {
+        fs::remove_all(dir); // another map's stores
+        const auto whole = run(*m);
+        verify::Options small;
+        small.window_segments = 1;
+        const auto windows = run(*m, {}, small);
+        EXPECT_GT(whole.items.size(), 0U);
+        EXPECT_EQ(windows.violations, whole.violations);
+        EXPECT_EQ(windows.input_problems, whole.input_problems);
+        EXPECT_EQ(windows.segments, whole.segments);
+        ASSERT_EQ(windows.items.size(), whole.items.size());
+        for (size_t i = 0; i < whole.items.size(); ++i) {
+            EXPECT_EQ(windows.items[i].kind, whole.items[i].kind);
+            EXPECT_EQ(windows.items[i].lod, whole.items[i].lod);
+            EXPECT_EQ(windows.items[i].chains, whole.items[i].chains);
+            EXPECT_EQ(windows.items[i].x, whole.items[i].x);
+            EXPECT_EQ(windows.items[i].y, whole.items[i].y);
+            EXPECT_EQ(windows.items[i].detail, whole.items[i].detail);
+        }
+    }
+}
