@@ -311,6 +311,11 @@ TEST_F(SynthCli, IngestFindsItPlanarAndCountsWhatTheManifestSays)
         EXPECT_EQ(count, 0) << kind;
     }
     EXPECT_EQ(manifest["counts"]["files"], 18);
+    // A pattern that matches nothing is a config error naming it, and nothing is written.
+    const Result none = run("ingest", config(m_dir / "nowhere").string() + " " + (m_dir / "ingest2").string());
+    EXPECT_EQ(none.code, 2);
+    EXPECT_NE(none.err.find("tl_2020_*_edges.zip: the pattern matches no file"), std::string::npos) << none.err;
+    EXPECT_FALSE(fs::exists(m_dir / "ingest2"));
 }
 
 namespace {
