@@ -373,36 +373,45 @@ struct Ids {
 
 } // namespace
 
+Nation::EdgeSides Nation::edge_sides(bool vertical, int i, int j) const
+{
+    // Walking from node (i, j): a horizontal edge has cell (i, j) on its left
+    // and (i, j - 1) on its right, a vertical one (i - 1, j) and (i, j).
+    EdgeSides e;
+    e.li = vertical ? i - 1 : i;
+    e.lj = j;
+    e.ri = i;
+    e.rj = vertical ? j : j - 1;
+    e.has_l = e.li >= 0 && e.lj < m_h && e.li < m_w;
+    e.has_r = e.ri < m_w && e.rj >= 0 && e.rj < m_h;
+    return e;
+}
+
 Nation::Polyline Nation::lattice_polyline(bool vertical, int i, int j) const
 {
     const Pt a = node(i, j), b = vertical ? node(i, j + 1) : node(i + 1, j);
-    // The cells on each side (walking a -> b): horizontal edges have (i, j)
-    // on the left and (i, j - 1) on the right; vertical ones (i - 1, j) and (i, j).
-    const int li = vertical ? i - 1 : i, lj = j, ri = i, rj = vertical ? j : j - 1;
-    const bool has_l = li >= 0 && lj < m_h && li < m_w, has_r = ri < m_w && rj >= 0 && rj < m_h;
+    const EdgeSides e_sides = edge_sides(vertical, i, j);
     std::optional<Pt> hl, hr;
     float rugged = 0;
     int sides = 0;
     uint32_t county_l = UINT32_MAX, county_r = UINT32_MAX;
-    if (has_l) {
-        const auto s = cell_shape(li, lj);
+    // A side cell's apex h (when the cell is convex and h strictly inside its
+    // fan triangle: (p, q, centre) counter-clockwise), its ruggedness, its county.
+    auto side = [&](int ci, int cj, Pt p, Pt q, std::optional<Pt>& h_out, uint32_t& county_out) {
+        const auto s = cell_shape(ci, cj);
         const Pt h = towards(a, b, s.centre);
-        if (s.convex && strictly_inside(a, b, s.centre, h)) {
-            hl = h;
+        if (s.convex && strictly_inside(p, q, s.centre, h)) {
+            h_out = h;
         }
-        rugged += m_rugged[size_t(lj) * size_t(m_w) + size_t(li)];
-        county_l = unit_of(li, lj, county);
+        rugged += m_rugged[size_t(cj) * size_t(m_w) + size_t(ci)];
+        county_out = unit_of(ci, cj, county);
         ++sides;
+    };
+    if (e_sides.has_l) {
+        side(e_sides.li, e_sides.lj, a, b, hl, county_l);
     }
-    if (has_r) {
-        const auto s = cell_shape(ri, rj);
-        const Pt h = towards(a, b, s.centre);
-        if (s.convex && strictly_inside(b, a, s.centre, h)) {
-            hr = h;
-        }
-        rugged += m_rugged[size_t(rj) * size_t(m_w) + size_t(ri)];
-        county_r = unit_of(ri, rj, county);
-        ++sides;
+    if (e_sides.has_r) {
+        side(e_sides.ri, e_sides.rj, b, a, hr, county_r);
     }
     rugged /= float(std::max(sides, 1));
     std::vector<Pt> out{a};
@@ -487,8 +496,7 @@ Nation::Polyline Nation::lattice_polyline(bool vertical, int i, int j) const
 void Nation::lattice_edge(bool vertical, int i, int j, Polyline pts, std::vector<Edge>& out) const
 {
     const Ids ids(*this);
-    const int li = vertical ? i - 1 : i, lj = j, ri = i, rj = vertical ? j : j - 1;
-    const bool has_l = li >= 0 && lj < m_h && li < m_w, has_r = ri < m_w && rj >= 0 && rj < m_h;
+    const auto [li, lj, ri, rj, has_l, has_r] = edge_sides(vertical, i, j);
     Edge edge;
     edge.tfidl = has_l ? ids.face(li, lj, 0) : 0;
     edge.tfidr = has_r ? ids.face(ri, rj, 0) : 0;

@@ -133,6 +133,12 @@ class Nation {
     struct CellShape;
     CellShape cell_shape(int i, int j) const;
     using Polyline = std::vector<Pt>;
+    /// The cells on the left and right of a lattice edge, and whether they exist.
+    struct EdgeSides {
+        int li = 0, lj = 0, ri = 0, rj = 0;
+        bool has_l = false, has_r = false;
+    };
+    EdgeSides edge_sides(bool vertical, int i, int j) const;
     void lattice_edge(bool vertical, int i, int j, Polyline pts, std::vector<Edge>& out) const;
     Polyline lattice_polyline(bool vertical, int i, int j) const;
     /// The dangles and rings of cell (i, j) into `edges`, its faces into

@@ -44,6 +44,23 @@ struct CountyCounts {
     std::vector<uint32_t> vertices_per_edge; ///< owned edges
     std::vector<float> edge_m;               ///< owned edges' lengths
     std::vector<uint32_t> face_blocks;       ///< each face's block
+
+    /// Another county's counts and values added to these (not its blocks).
+    void add(const CountyCounts& k)
+    {
+        for (auto [to, from] : {std::pair{&edge_features, k.edge_features},
+                                {&vertex_records, k.vertex_records},
+                                {&edges, k.edges},
+                                {&vertices, k.vertices},
+                                {&faces, k.faces},
+                                {&water_faces, k.water_faces},
+                                {&face_vertex_records, k.face_vertex_records},
+                                {&bytes, k.bytes}}) {
+            *to += from;
+        }
+        vertices_per_edge.insert(vertices_per_edge.end(), k.vertices_per_edge.begin(), k.vertices_per_edge.end());
+        edge_m.insert(edge_m.end(), k.edge_m.begin(), k.edge_m.end());
+    }
 };
 
 double length_m(const std::vector<Pt>& pts)
@@ -224,17 +241,7 @@ int SynthStage::run(const StageContext& ctx)
         for (const uint32_t b : k.face_blocks) {
             ++faces_per_block[b];
         }
-        all.edge_features += k.edge_features;
-        all.vertex_records += k.vertex_records;
-        all.edges += k.edges;
-        all.vertices += k.vertices;
-        all.faces += k.faces;
-        all.water_faces += k.water_faces;
-        all.face_vertex_records += k.face_vertex_records;
-        all.bytes += k.bytes;
-        all.vertices_per_edge.insert(all.vertices_per_edge.end(), k.vertices_per_edge.begin(),
-                                     k.vertices_per_edge.end());
-        all.edge_m.insert(all.edge_m.end(), k.edge_m.begin(), k.edge_m.end());
+        all.add(k);
     }
     json manifest = new_manifest(name, versions());
     manifest["options"] = {{"seed", m_seed},
