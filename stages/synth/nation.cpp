@@ -639,24 +639,21 @@ void Nation::cell_inner(int i, int j, const Polyline* sides[4], std::vector<Edge
             island_ring = ring(0.12 * radius, 0.38 * radius, 3);
         }
     }
-    if (!lake_ring.empty()) {
+    // A ring edge (its node at both ends), its left face inside.
+    auto ring_edge = [&](int k, int64_t inside, int64_t outside, const std::vector<Pt>& pts) {
         Edge e;
-        e.tlid = ids.inner_tlid(i, j, 4);
-        e.tfidl = lake;
-        e.tfidr = land;
-        e.tnidf = e.tnidt = ids.inner_node(i, j, 4);
+        e.tlid = ids.inner_tlid(i, j, k);
+        e.tfidl = inside;
+        e.tfidr = outside;
+        e.tnidf = e.tnidt = ids.inner_node(i, j, k);
         e.mtfcc = "H2030";
-        e.points = lake_ring;
+        e.points = pts;
         edges_out.push_back(std::move(e));
+    };
+    if (!lake_ring.empty()) {
+        ring_edge(4, lake, land, lake_ring);
         if (!island_ring.empty()) {
-            Edge is;
-            is.tlid = ids.inner_tlid(i, j, 5);
-            is.tfidl = island;
-            is.tfidr = lake;
-            is.tnidf = is.tnidt = ids.inner_node(i, j, 5);
-            is.mtfcc = "H2030";
-            is.points = island_ring;
-            edges_out.push_back(std::move(is));
+            ring_edge(5, island, lake, island_ring);
         }
     }
     const uint32_t blk = unit_of(i, j, block);
