@@ -182,6 +182,8 @@ int SynthStage::run(const StageContext& ctx)
     const auto t0 = std::chrono::steady_clock::now();
     auto seconds = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
     GDALAllRegister();
+    OutputDir out(m_output, m_overwrite); // an existing OUTPUT is refused before the plan's seconds
+    log_removed_leftovers(ctx.log, out.removed_leftovers());
     SynthOptions opt;
     opt.seed = uint64_t(m_seed);
     opt.states = m_states;
@@ -194,8 +196,6 @@ int SynthStage::run(const StageContext& ctx)
                  " cells, " + std::to_string(nation.units(county).size()) + " counties, planned in " +
                  std::to_string(t_plan) + " s");
 
-    OutputDir out(m_output, m_overwrite);
-    log_removed_leftovers(ctx.log, out.removed_leftovers());
     const unsigned threads = m_threads > 0 ? unsigned(m_threads) : std::max(1U, std::thread::hardware_concurrency());
     const size_t counties = nation.units(county).size();
     std::vector<CountyCounts> counts(counties);
