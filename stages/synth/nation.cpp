@@ -528,45 +528,54 @@ void Nation::lattice_edge(bool vertical, int i, int j, Polyline pts, std::vector
     out.push_back(std::move(edge));
 }
 
-void Nation::cell_inner(int i, int j, const Polyline* sides[4], std::vector<Edge>& edges_out,
-                        std::vector<Face>& faces_out) const
-{
-    const Ids ids(*this);
-    const auto s = cell_shape(i, j);
-    const Pt c = s.centre;
-    const uint64_t cell = uint64_t(ids.cell(i, j));
-    Pt h[4]; // the apex on this cell's side of each edge (corner k -> k + 1)
-    bool h_ok[4];
-    for (int k = 0; k < 4; ++k) {
-        h[k] = towards(s.corner[k], s.corner[(k + 1) % 4], c);
-        h_ok[k] = s.convex && strictly_inside(s.corner[k], s.corner[(k + 1) % 4], c, h[k]);
-    }
-    const int64_t land = ids.face(i, j, 0), lake = ids.face(i, j, 1), island = ids.face(i, j, 2);
-    const int64_t corner_node[4] = {ids.node(i, j), ids.node(i + 1, j), ids.node(i + 1, j + 1), ids.node(i, j + 1)};
+/// A cell's shape, and the apex h on its side of each of its edges (corner
+/// k -> k + 1) with whether it lies strictly inside its fan triangle: what
+/// the dangles, the lake and the internal point keep away from.
+struct Nation::CellFrame {
+    CellShape shape;
+    Pt h[4];
+    bool h_ok[4] = {false, false, false, false};
+    uint64_t cell = 0;
+};
 
-    // Dangles: a road from corner k toward the centre, strictly inside the
-    // wedge between the apexes of the two edges at k and inside the cell's
-    // fan triangles at k (README.md says why nothing else can meet it).
-    std::vector<std::vector<Pt>> dangles;
-    double min_corner = std::numeric_limits<double>::infinity();
-    for (const Pt p : s.corner) {
-        min_corner = std::min(min_corner, dist(p, c));
+Nation::CellFrame Nation::cell_frame(int i, int j) const
+{
+    CellFrame f;
+    f.shape = cell_shape(i, j);
+    f.cell = uint64_t(Ids(*this).cell(i, j));
+    const auto& s = f.shape;
+    for (int k = 0; k < 4; ++k) {
+        f.h[k] = towards(s.corner[k], s.corner[(k + 1) % 4], s.centre);
+        f.h_ok[k] = s.convex && strictly_inside(s.corner[k], s.corner[(k + 1) % 4], s.centre, f.h[k]);
     }
+    return f;
+}
+
+std::vector<std::vector<Pt>> Nation::cell_dangles(int i, int j, const CellFrame& f, std::vector<Edge>& edges_out) const
+{
+    // A road from corner k toward the centre, strictly inside the wedge
+    // between the apexes of the two edges at k and inside the cell's fan
+    // triangles at k (README.md says why nothing else can meet it).
+    const Ids ids(*this);
+    const auto& s = f.shape;
+    const Pt c = s.centre;
+    const int64_t corner_node[4] = {ids.node(i, j), ids.node(i + 1, j), ids.node(i + 1, j + 1), ids.node(i, j + 1)};
+    std::vector<std::vector<Pt>> dangles;
     for (int k = 0; k < 4 && s.convex; ++k) {
         const int prev = (k + 3) % 4;
         const Pt u = s.corner[k];
-        if (!h_ok[k] || !h_ok[prev] || unit(hash(m_opt.seed, use_dangle, cell, uint64_t(k))) >= dangle_p ||
+        if (!f.h_ok[k] || !f.h_ok[prev] || unit(hash(m_opt.seed, use_dangle, f.cell, uint64_t(k))) >= dangle_p ||
             dist(u, c) < 100) {
             continue;
         }
-        const double f = 0.05 + 0.35 * unit(hash(m_opt.seed, use_dangle, cell, 4 + uint64_t(k)));
-        const Pt p{std::llround(double(u.x) + f * double(c.x - u.x)),
-                   std::llround(double(u.y) + f * double(c.y - u.y))};
+        const double t_end = 0.05 + 0.35 * unit(hash(m_opt.seed, use_dangle, f.cell, 4 + uint64_t(k)));
+        const Pt p{std::llround(double(u.x) + t_end * double(c.x - u.x)),
+                   std::llround(double(u.y) + t_end * double(c.y - u.y))};
         const Pt next = s.corner[(k + 1) % 4], before = s.corner[prev];
         auto fits = [&](Pt q) { // strictly inside the wedge, and in the fan triangles at u
             const int64_t on = orient(u, c, q);
             const int64_t along = (q.x - u.x) * (c.x - u.x) + (q.y - u.y) * (c.y - u.y);
-            return orient(u, h[k], q) > 0 && orient(u, q, h[prev]) > 0 &&
+            return orient(u, f.h[k], q) > 0 && orient(u, q, f.h[prev]) > 0 &&
                    (strictly_inside(u, next, c, q) || strictly_inside(before, u, c, q) ||
                     (on == 0 && along > 0 && along < (c.x - u.x) * (c.x - u.x) + (c.y - u.y) * (c.y - u.y)));
         };
@@ -576,13 +585,13 @@ void Nation::cell_inner(int i, int j, const Polyline* sides[4], std::vector<Edge
         // Up to three vertices between, near the segment, each fitting and
         // each farther along: a road of 2 to 5 vertices.
         std::vector<Pt> road{u};
-        const int between = int(unit(hash(m_opt.seed, use_dangle, cell, 8 + uint64_t(k))) * 4);
+        const int between = int(unit(hash(m_opt.seed, use_dangle, f.cell, 8 + uint64_t(k))) * 4);
         int64_t last = 0;
         const int64_t end = (p.x - u.x) * (p.x - u.x) + (p.y - u.y) * (p.y - u.y);
         for (int m = 1; m <= between; ++m) {
             const double t = double(m) / (between + 1);
             const double wobble =
-                0.08 * (unit(hash(m_opt.seed, use_dangle, cell, 16 + 4 * uint64_t(k) + uint64_t(m))) - 0.5);
+                0.08 * (unit(hash(m_opt.seed, use_dangle, f.cell, 16 + 4 * uint64_t(k) + uint64_t(m))) - 0.5);
             const Pt q{std::llround(double(u.x) + t * double(p.x - u.x) - wobble * double(p.y - u.y)),
                        std::llround(double(u.y) + t * double(p.y - u.y) + wobble * double(p.x - u.x))};
             const int64_t along = (q.x - u.x) * (p.x - u.x) + (q.y - u.y) * (p.y - u.y);
@@ -595,34 +604,46 @@ void Nation::cell_inner(int i, int j, const Polyline* sides[4], std::vector<Edge
         dangles.push_back(road);
         Edge d;
         d.tlid = ids.inner_tlid(i, j, k);
-        d.tfidl = d.tfidr = land;
+        d.tfidl = d.tfidr = ids.face(i, j, 0);
         d.tnidf = corner_node[k];
         d.tnidt = ids.inner_node(i, j, k);
         d.mtfcc = "S1400";
         d.points = std::move(road);
         edges_out.push_back(std::move(d));
     }
+    return dangles;
+}
 
+Nation::Lake Nation::cell_lake(const CellFrame& f) const
+{
     // A lake around the centre, an island inside it: star-shaped rings in
-    // disjoint ranges of radius, inside a disc no edge's triangle reaches.
+    // disjoint ranges of radius, inside a disc no edge's triangle reaches
+    // and no dangle (which stops 0.6 of the way from the centre to its corner).
+    const auto& s = f.shape;
+    const Pt c = s.centre;
+    Lake lake;
+    double min_corner = std::numeric_limits<double>::infinity();
+    for (const Pt p : s.corner) {
+        min_corner = std::min(min_corner, dist(p, c));
+    }
     double radius = 0.45 * min_corner;
     for (int k = 0; k < 4; ++k) {
         const Pt a = s.corner[k], b = s.corner[(k + 1) % 4];
-        radius = std::min(radius, 0.8 * std::min({seg_dist(c, a, b), seg_dist(c, a, h[k]), seg_dist(c, h[k], b)}));
+        radius = std::min(radius, 0.8 * std::min({seg_dist(c, a, b), seg_dist(c, a, f.h[k]), seg_dist(c, f.h[k], b)}));
     }
-    radius -= 3;
-    std::vector<Pt> lake_ring, island_ring;
+    lake.radius = radius - 3;
     auto ring = [&](double r_min, double r_max, uint64_t which) {
-        const int n = 12 + int(unit(hash(m_opt.seed, use_lake, cell, which, 1)) * 36);
-        const double turn = unit(hash(m_opt.seed, use_lake, cell, which, 2));
+        const int n = 12 + int(unit(hash(m_opt.seed, use_lake, f.cell, which, 1)) * 36);
+        const double turn = unit(hash(m_opt.seed, use_lake, f.cell, which, 2));
         std::vector<Pt> pts;
         for (int q = 0; q < n; ++q) {
             const double ang =
-                (q + 0.3 * (unit(hash(m_opt.seed, use_lake, cell, which, 3 + uint64_t(q))) - 0.5) + turn) /
+                (q + 0.3 * (unit(hash(m_opt.seed, use_lake, f.cell, which, 3 + uint64_t(q))) - 0.5) + turn) /
                 n; // in turns
             const double r =
-                r_min + (r_max - r_min) * (0.5 + 0.5 * sin_turns(3 * ang + turn) *
-                                                     unit(hash(m_opt.seed, use_lake, cell, which, 1000 + uint64_t(q))));
+                r_min +
+                (r_max - r_min) * (0.5 + 0.5 * sin_turns(3 * ang + turn) *
+                                             unit(hash(m_opt.seed, use_lake, f.cell, which, 1000 + uint64_t(q))));
             pts.push_back({c.x + std::llround(r * cos_turns(ang)), c.y + std::llround(r * sin_turns(ang))});
         }
         for (int q = 0; q < n; ++q) {
@@ -633,34 +654,32 @@ void Nation::cell_inner(int i, int j, const Polyline* sides[4], std::vector<Edge
         pts.push_back(pts.front());
         return pts;
     };
-    if (s.convex && radius >= 40 && unit(hash(m_opt.seed, use_lake, cell, 0)) < lake_p) {
-        lake_ring = ring(0.6 * radius, 0.9 * radius, 1);
-        if (!lake_ring.empty() && unit(hash(m_opt.seed, use_lake, cell, 2)) < island_p) {
-            island_ring = ring(0.12 * radius, 0.38 * radius, 3);
+    if (s.convex && lake.radius >= 40 && unit(hash(m_opt.seed, use_lake, f.cell, 0)) < lake_p) {
+        lake.lake = ring(0.6 * lake.radius, 0.9 * lake.radius, 1);
+        if (!lake.lake.empty() && unit(hash(m_opt.seed, use_lake, f.cell, 2)) < island_p) {
+            lake.island = ring(0.12 * lake.radius, 0.38 * lake.radius, 3);
         }
     }
-    // A ring edge (its node at both ends), its left face inside.
-    auto ring_edge = [&](int k, int64_t inside, int64_t outside, const std::vector<Pt>& pts) {
-        Edge e;
-        e.tlid = ids.inner_tlid(i, j, k);
-        e.tfidl = inside;
-        e.tfidr = outside;
-        e.tnidf = e.tnidt = ids.inner_node(i, j, k);
-        e.mtfcc = "H2030";
-        e.points = pts;
-        edges_out.push_back(std::move(e));
-    };
-    if (!lake_ring.empty()) {
-        ring_edge(4, lake, land, lake_ring);
-        if (!island_ring.empty()) {
-            ring_edge(5, island, lake, island_ring);
-        }
-    }
+    return lake;
+}
+
+void Nation::cell_faces(int i, int j, const CellFrame& f, const Polyline* sides[4],
+                        const std::vector<std::vector<Pt>>& dangles, const Lake& lake,
+                        std::vector<Face>& faces_out) const
+{
+    const Ids ids(*this);
+    const Pt c = f.shape.centre;
     const uint32_t blk = unit_of(i, j, block);
-    Face f;
-    f.tfid = land;
-    f.block = blk;
-    // The outer ring: the four lattice edges counter-clockwise.
+    auto face = [&](int k, bool water, Pt intpt, std::vector<std::vector<Pt>> rings) {
+        Face out;
+        out.tfid = ids.face(i, j, k);
+        out.block = blk;
+        out.water = water;
+        out.intpt = intpt;
+        out.rings = std::move(rings);
+        faces_out.push_back(std::move(out));
+    };
+    // The land: the four lattice edges counter-clockwise, the lake a hole.
     std::vector<Pt> outer;
     auto append = [&](const Polyline& pts, bool reverse) {
         const size_t skip = outer.empty() ? 0 : 1; // the node the last side ended at
@@ -674,54 +693,70 @@ void Nation::cell_inner(int i, int j, const Polyline* sides[4], std::vector<Edge
     append(*sides[1], false);
     append(*sides[2], true);
     append(*sides[3], true);
-    f.rings.push_back(std::move(outer));
-    if (!lake_ring.empty()) {
-        f.rings.push_back(lake_ring);
+    std::vector<std::vector<Pt>> rings{std::move(outer)};
+    if (!lake.lake.empty()) {
+        rings.push_back(lake.lake);
     }
     // Its internal point: 0.85 of the way from the centre to an edge's apex
     // (outside that edge's triangle and the lake's disc), on no dangle.
-    f.intpt = c;
+    Pt intpt = c;
     for (int k = 0; k < 4; ++k) {
-        const Pt p{std::llround(double(c.x) + 0.85 * double(h[k].x - c.x)),
-                   std::llround(double(c.y) + 0.85 * double(h[k].y - c.y))};
+        const Pt p{std::llround(double(c.x) + 0.85 * double(f.h[k].x - c.x)),
+                   std::llround(double(c.y) + 0.85 * double(f.h[k].y - c.y))};
         bool on_dangle = false;
         for (const auto& road : dangles) {
             for (size_t m = 0; m + 1 < road.size(); ++m) {
                 on_dangle = on_dangle || orient(road[m], road[m + 1], p) == 0;
             }
         }
-        if (h_ok[k] && !on_dangle && p != c) {
-            f.intpt = p;
+        if (f.h_ok[k] && !on_dangle && p != c) {
+            intpt = p;
             break;
         }
     }
-    faces_out.push_back(std::move(f));
-    if (!lake_ring.empty()) {
-        Face w;
-        w.tfid = lake;
-        w.block = blk;
-        w.water = true;
-        w.rings.push_back(lake_ring);
-        if (!island_ring.empty()) {
-            w.rings.push_back(island_ring);
-            // Between the island's largest radius and the lake's chords.
-            const Pt v = lake_ring.front();
-            const double r = dist(v, c);
-            w.intpt = {c.x + std::llround(double(v.x - c.x) * 0.5 * radius / r),
-                       c.y + std::llround(double(v.y - c.y) * 0.5 * radius / r)};
-        } else {
-            w.intpt = c;
-        }
-        faces_out.push_back(std::move(w));
-        if (!island_ring.empty()) {
-            Face is;
-            is.tfid = island;
-            is.block = blk;
-            is.intpt = c;
-            is.rings.push_back(island_ring);
-            faces_out.push_back(std::move(is));
+    face(0, false, intpt, std::move(rings));
+    if (lake.lake.empty()) {
+        return;
+    }
+    if (lake.island.empty()) {
+        face(1, true, c, {lake.lake});
+        return;
+    }
+    // The lake's point lies between the island's largest radius and the lake's chords.
+    const Pt v = lake.lake.front();
+    const double r = dist(v, c);
+    face(1, true,
+         {c.x + std::llround(double(v.x - c.x) * 0.5 * lake.radius / r),
+          c.y + std::llround(double(v.y - c.y) * 0.5 * lake.radius / r)},
+         {lake.lake, lake.island});
+    face(2, false, c, {lake.island});
+}
+
+void Nation::cell_inner(int i, int j, const Polyline* sides[4], std::vector<Edge>& edges_out,
+                        std::vector<Face>& faces_out) const
+{
+    const Ids ids(*this);
+    const CellFrame f = cell_frame(i, j);
+    const auto dangles = cell_dangles(i, j, f, edges_out);
+    const Lake lake = cell_lake(f);
+    // A ring edge (its node at both ends), its left face inside.
+    auto ring_edge = [&](int k, int64_t inside, int64_t outside, const std::vector<Pt>& pts) {
+        Edge e;
+        e.tlid = ids.inner_tlid(i, j, k);
+        e.tfidl = inside;
+        e.tfidr = outside;
+        e.tnidf = e.tnidt = ids.inner_node(i, j, k);
+        e.mtfcc = "H2030";
+        e.points = pts;
+        edges_out.push_back(std::move(e));
+    };
+    if (!lake.lake.empty()) {
+        ring_edge(4, ids.face(i, j, 1), ids.face(i, j, 0), lake.lake);
+        if (!lake.island.empty()) {
+            ring_edge(5, ids.face(i, j, 2), ids.face(i, j, 1), lake.island);
         }
     }
+    cell_faces(i, j, f, sides, dangles, lake, faces_out);
 }
 
 Nation::CountyParts Nation::county_parts(uint32_t county_index) const

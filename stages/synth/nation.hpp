@@ -143,8 +143,20 @@ class Nation {
     Polyline lattice_polyline(bool vertical, int i, int j) const;
     /// The dangles and rings of cell (i, j) into `edges`, its faces into
     /// `faces`; `sides` its lattice polylines (bottom, right, top, left, each
-    /// from the lower node).
+    /// from the lower node). In steps: the frame, the dangles, the lake, the faces.
     void cell_inner(int i, int j, const Polyline* sides[4], std::vector<Edge>& edges, std::vector<Face>& faces) const;
+    struct CellFrame;
+    /// A cell's lake and island rings (empty where it has none), and the
+    /// radius of the disc they lie in.
+    struct Lake {
+        std::vector<Pt> lake, island;
+        double radius = 0;
+    };
+    CellFrame cell_frame(int i, int j) const;
+    std::vector<std::vector<Pt>> cell_dangles(int i, int j, const CellFrame& f, std::vector<Edge>& edges) const;
+    Lake cell_lake(const CellFrame& f) const;
+    void cell_faces(int i, int j, const CellFrame& f, const Polyline* sides[4],
+                    const std::vector<std::vector<Pt>>& dangles, const Lake& lake, std::vector<Face>& faces) const;
     void grow(Level level, int grain);
 
     SynthOptions m_opt;
