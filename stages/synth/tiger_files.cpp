@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <initializer_list>
 #include <cstdio>
 
 namespace tigerlod::synth {
@@ -20,10 +21,17 @@ namespace {
 
 std::atomic<uint64_t> next_folder{0};
 
+/// An attribute of a shapefile: its name, type and width.
+struct Field {
+    const char* name;
+    OGRFieldType type;
+    int width;
+};
+
 /// A shapefile being written into a /vsimem/ folder of its own.
 class MemShapefile {
   public:
-    MemShapefile(const std::string& base, OGRwkbGeometryType type) : m_base(base)
+    MemShapefile(const std::string& base, OGRwkbGeometryType type, std::initializer_list<Field> fields) : m_base(base)
     {
         m_folder = "/vsimem/tigerlod-synth-" + std::to_string(next_folder++);
         GDALDriverH driver = GDALGetDriverByName("ESRI Shapefile");
@@ -43,41 +51,29 @@ class MemShapefile {
             throw environment_error("synth: GDAL cannot create layer " + base + ": " +
                                     std::string(CPLGetLastErrorMsg()));
         }
+        for (const Field& field : fields) {
+            OGRFieldDefnH f = OGR_Fld_Create(field.name, field.type);
+            OGR_Fld_SetWidth(f, field.width);
+            OGR_L_CreateField(m_layer, f, TRUE);
+            OGR_Fld_Destroy(f);
+        }
     }
     MemShapefile(const MemShapefile&) = delete;
     MemShapefile& operator=(const MemShapefile&) = delete;
     ~MemShapefile()
     {
-        if (m_feature) {
-            OGR_F_Destroy(m_feature);
-        }
         if (m_ds) {
             GDALClose(m_ds);
         }
         VSIRmdirRecursive(m_folder.c_str());
     }
 
-    void field(const char* name, OGRFieldType type, int width)
-    {
-        OGRFieldDefnH f = OGR_Fld_Create(name, type);
-        OGR_Fld_SetWidth(f, width);
-        OGR_L_CreateField(m_layer, f, TRUE);
-        OGR_Fld_Destroy(f);
-    }
-    /// The one feature this file writes, again and again: its fields and
-    /// geometry are overwritten each time (a new feature a row cost a fifth
-    /// of the time in malloc and free).
-    OGRFeatureH feature()
-    {
-        if (!m_feature) {
-            m_feature = OGR_F_Create(OGR_L_GetLayerDefn(m_layer));
-        }
-        OGR_F_SetFID(m_feature, OGRNullFID);
-        return m_feature;
-    }
+    /// A new feature of the layer, for write(), which destroys it.
+    OGRFeatureH feature() { return OGR_F_Create(OGR_L_GetLayerDefn(m_layer)); }
     void write(OGRFeatureH f)
     {
         const OGRErr err = OGR_L_CreateFeature(m_layer, f);
+        OGR_F_Destroy(f);
         if (err != OGRERR_NONE) {
             throw environment_error("synth: GDAL cannot write a feature of " + m_base + ": " +
                                     std::string(CPLGetLastErrorMsg()));
@@ -109,7 +105,6 @@ class MemShapefile {
     std::string m_base, m_folder;
     GDALDatasetH m_ds = nullptr;
     OGRLayerH m_layer = nullptr;
-    OGRFeatureH m_feature = nullptr;
 };
 
 void set_points(OGRGeometryH g, const std::vector<Pt>& pts)
@@ -157,36 +152,32 @@ int64_t area_m2(const Face& f)
 std::string edges_zip(const std::string& ssccc, const std::string& state, const std::string& county,
                       const std::vector<Edge>& edges)
 {
-    MemShapefile shp("tl_2020_" + ssccc + "_edges", wkbLineString);
-    shp.field("STATEFP", OFTString, 2);
-    shp.field("COUNTYFP", OFTString, 3);
-    shp.field("TLID", OFTInteger64, 10);
-    shp.field("TFIDL", OFTInteger64, 10);
-    shp.field("TFIDR", OFTInteger64, 10);
-    shp.field("MTFCC", OFTString, 5);
-    shp.field("TNIDF", OFTInteger64, 10);
-    shp.field("TNIDT", OFTInteger64, 10);
+    MemShapefile shp("tl_2020_" + ssccc + "_edges", wkbLineString,
+                     {{"STATEFP", OFTString, 2},
+                      {"COUNTYFP", OFTString, 3},
+                      {"TLID", OFTInteger64, 10},
+                      {"TFIDL", OFTInteger64, 10},
+                      {"TFIDR", OFTInteger64, 10},
+                      {"MTFCC", OFTString, 5},
+                      {"TNIDF", OFTInteger64, 10},
+                      {"TNIDT", OFTInteger64, 10}});
     for (const auto& e : edges) {
         OGRFeatureH f = shp.feature();
         OGR_F_SetFieldString(f, 0, state.c_str());
         OGR_F_SetFieldString(f, 1, county.c_str());
         OGR_F_SetFieldInteger64(f, 2, e.tlid);
-        for (const auto& [field, face] : {std::pair{3, e.tfidl}, std::pair{4, e.tfidr}}) {
-            if (face != 0) {
-                OGR_F_SetFieldInteger64(f, field, face);
-            } else {
-                OGR_F_UnsetField(f, field); // outside the nation
-            }
+        if (e.tfidl != 0) { // else outside the nation: unset
+            OGR_F_SetFieldInteger64(f, 3, e.tfidl);
+        }
+        if (e.tfidr != 0) {
+            OGR_F_SetFieldInteger64(f, 4, e.tfidr);
         }
         OGR_F_SetFieldString(f, 5, e.mtfcc);
         OGR_F_SetFieldInteger64(f, 6, e.tnidf);
         OGR_F_SetFieldInteger64(f, 7, e.tnidt);
-        OGRGeometryH g = OGR_F_GetGeometryRef(f);
-        if (!g) {
-            OGR_F_SetGeometryDirectly(f, OGR_G_CreateGeometry(wkbLineString));
-            g = OGR_F_GetGeometryRef(f);
-        }
+        OGRGeometryH g = OGR_G_CreateGeometry(wkbLineString);
         set_points(g, e.points);
+        OGR_F_SetGeometryDirectly(f, g);
         shp.write(f);
     }
     return shp.zip();
@@ -194,17 +185,17 @@ std::string edges_zip(const std::string& ssccc, const std::string& state, const 
 
 std::string faces_zip(const std::string& ssccc, const Nation& nation, const std::vector<Face>& faces)
 {
-    MemShapefile shp("tl_2020_" + ssccc + "_faces", wkbPolygon);
-    shp.field("TFID", OFTInteger64, 10);
-    shp.field("STATEFP20", OFTString, 2);
-    shp.field("COUNTYFP20", OFTString, 3);
-    shp.field("TRACTCE20", OFTString, 6);
-    shp.field("BLKGRPCE20", OFTString, 1);
-    shp.field("BLOCKCE20", OFTString, 4);
-    shp.field("LWFLAG", OFTString, 1);
-    shp.field("ATOTAL", OFTInteger64, 14);
-    shp.field("INTPTLAT", OFTString, 11);
-    shp.field("INTPTLON", OFTString, 12);
+    MemShapefile shp("tl_2020_" + ssccc + "_faces", wkbPolygon,
+                     {{"TFID", OFTInteger64, 10},
+                      {"STATEFP20", OFTString, 2},
+                      {"COUNTYFP20", OFTString, 3},
+                      {"TRACTCE20", OFTString, 6},
+                      {"BLKGRPCE20", OFTString, 1},
+                      {"BLOCKCE20", OFTString, 4},
+                      {"LWFLAG", OFTString, 1},
+                      {"ATOTAL", OFTInteger64, 14},
+                      {"INTPTLAT", OFTString, 11},
+                      {"INTPTLON", OFTString, 12}});
     for (const auto& face : faces) {
         const auto& blk = nation.units(block)[face.block];
         const auto& grp = nation.units(block_group)[blk.parent];
