@@ -5,6 +5,7 @@
 #include "config/schema.hpp"
 #include "core/fs.hpp"
 #include "core/manifest.hpp"
+#include "core/memory.hpp"
 #include "formats/chains/chain_store.hpp"
 #include "stages/ingest/config.hpp"
 #include "stages/ingest/map_builder.hpp"
@@ -20,7 +21,6 @@
 #include <cstdio>
 #include <future>
 #include <sstream>
-#include <sys/resource.h>
 #include <thread>
 #ifdef __GLIBC__
 #include <malloc.h>
@@ -47,13 +47,6 @@ std::string file_name(const std::string& code)
         }
     }
     return out.empty() ? "%" : out;
-}
-
-double peak_rss_mb()
-{
-    rusage ru{};
-    getrusage(RUSAGE_SELF, &ru);
-    return static_cast<double>(ru.ru_maxrss) / 1024.0;
 }
 
 json level_spec_json(const LevelSpec& l)

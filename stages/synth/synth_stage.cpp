@@ -4,13 +4,13 @@
 #include "config/schema.hpp"
 #include "core/fs.hpp"
 #include "core/manifest.hpp"
+#include "core/memory.hpp"
 #include "core/parallel.hpp"
 #include "stages/synth/nation.hpp"
 #include "stages/synth/tiger_files.hpp"
 
 #include <gdal.h>
 #include <nlohmann/json.hpp>
-#include <sys/resource.h>
 #include <unistd.h>
 #include <zlib.h>
 
@@ -28,13 +28,6 @@ namespace fs = std::filesystem;
 using json = nlohmann::ordered_json;
 
 namespace {
-
-double peak_rss_mb()
-{
-    rusage ru{};
-    getrusage(RUSAGE_SELF, &ru);
-    return static_cast<double>(ru.ru_maxrss) / 1024.0;
-}
 
 /// What one county's files hold.
 struct CountyCounts {
