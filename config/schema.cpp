@@ -28,9 +28,9 @@ constexpr Limits integer(double min, double max = inf)
     return {min, max, false, false, true};
 }
 
-std::vector<Key> make_keys()
+/// The dataset, its levels, the projection and ingest's section.
+std::vector<Key> input_keys()
 {
-    const std::string both = "color simplify";
     return {
         entry("name", Type::text, "required; lowercase letters, digits, `_`, `-`; outputs go to `out/<name>/`", ""),
         entry("description", Type::text, "free text", ""),
@@ -94,6 +94,14 @@ std::vector<Key> make_keys()
               "10", {0, inf}, {}, "line-tile-km"),
         entry("ingest.threads", Type::integer, "worker threads, 0 for all cores; outputs do not depend on it", "0",
               thread_limits, {}, "threads"),
+    };
+}
+
+/// The sections of the stages after ingest, and synth's.
+std::vector<Key> stage_keys()
+{
+    const std::string both = "color simplify";
+    return {
         section("simplify", "tigerlod-color and tigerlod-simplify"),
         entry("simplify.tolerances_m", Type::numbers,
               "the ladder: increasing tolerances in ground metres; at most half of `ingest.halo_m`", "`[1, 4, 16, 64]`",
@@ -186,6 +194,15 @@ std::vector<Key> make_keys()
         entry("render.disk_mbps", Type::number, "simulated disk: MB/s a payload is read at (0: no limit)", "0",
               {0, 1e6}, {}, "disk-mbps", "render"),
     };
+}
+
+std::vector<Key> make_keys()
+{
+    auto keys = input_keys();
+    for (auto& k : stage_keys()) {
+        keys.push_back(std::move(k));
+    }
+    return keys;
 }
 
 std::string type_text(const Key& k)
