@@ -289,6 +289,17 @@ TEST_F(SynthCli, SameSeedSameBytesWhateverTheThreads)
     EXPECT_EQ(run("synth", (m_dir / "d").string() + " --states 0").code, 2);
     EXPECT_EQ(run("synth", (m_dir / "d").string() + " --target-vertices 10").code, 2);
     EXPECT_FALSE(fs::exists(m_dir / "d"));
+    // A broken synth section of a config: the file, line and key, exit 2, nothing written.
+    std::ofstream(m_dir / "bad.yaml") << "name: bad\nsynth:\n  states: many\n";
+    const Result word = run("synth", "--config " + (m_dir / "bad.yaml").string() + " " + (m_dir / "d").string());
+    EXPECT_EQ(word.code, 2);
+    EXPECT_NE(word.err.find("bad.yaml:3"), std::string::npos) << word.err;
+    EXPECT_NE(word.err.find("synth.states"), std::string::npos) << word.err;
+    std::ofstream(m_dir / "bad.yaml") << "name: bad\nsynth:\n  counties: 4\n";
+    const Result unknown = run("synth", "--config " + (m_dir / "bad.yaml").string() + " " + (m_dir / "d").string());
+    EXPECT_EQ(unknown.code, 2);
+    EXPECT_NE(unknown.err.find("unknown key 'synth.counties'"), std::string::npos) << unknown.err;
+    EXPECT_FALSE(fs::exists(m_dir / "d"));
 }
 
 TEST_F(SynthCli, IngestFindsItPlanarAndCountsWhatTheManifestSays)
