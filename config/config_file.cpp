@@ -39,6 +39,8 @@ std::string wanted(const Key& k)
         return "a mapping";
     case Type::levels:
         return "a non-empty list";
+    case Type::codes:
+        return "a code or a list of codes, e.g. [51063, 51067]";
     }
     return {};
 }
@@ -194,6 +196,7 @@ class Checker {
             }
             return;
         case Type::paths:
+        case Type::codes:
             if (v.IsScalar()) {
                 return;
             }

@@ -34,6 +34,15 @@ std::vector<Key> input_keys()
     return {
         entry("name", Type::text, "required; lowercase letters, digits, `_`, `-`; outputs go to `out/<name>/`", ""),
         entry("description", Type::text, "free text", ""),
+        entry("regions", Type::codes,
+              "regions to rebuild (`scripts/workflow` forces their jobs and what depends on them): unit codes such as "
+              "`[51063]`, each naming the stores whose partition begins with it or is part of it",
+              "none"),
+        section("workflow", "how `pipeline/Snakefile` cuts the run into jobs"),
+        entry("workflow.job_mb", Type::number,
+              "color and simplify: a job per group of a level's stores whose names share a prefix, the shortest "
+              "prefix for which no group holds more than this many MB of stores",
+              "32", {0, 1e6, true}),
         section("dataset", "what to read"),
         entry("dataset.kind", Type::choice,
               "`tiger` (EDGES + FACES), `polygons` (any polygon layer: tracts, TopoJSON) or `lines` (any line "
@@ -230,6 +239,8 @@ std::string type_text(const Key& k)
         return "section";
     case Type::levels:
         return "list of levels";
+    case Type::codes:
+        return "code or list of codes";
     }
     return {};
 }

@@ -29,6 +29,7 @@ enum class Type {
     paths,     ///< a file name or a list of them, relative to the config's folder
     mapping,   ///< a section holding further keys
     levels,    ///< the list of semantic levels (checked by ingest, which knows the data)
+    codes,     ///< a unit code or a list of them (strings or integers)
 };
 
 struct Key {

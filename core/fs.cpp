@@ -233,6 +233,51 @@ void refuse_to_replace_inputs(const fs::path& output, const std::vector<fs::path
     }
 }
 
+namespace {
+
+bool same_bytes(const fs::path& a, const fs::path& b)
+{
+    std::ifstream fa(a, std::ios::binary);
+    std::ifstream fb(b, std::ios::binary);
+    std::vector<char> ba(1 << 16);
+    std::vector<char> bb(1 << 16);
+    while (fa && fb) {
+        fa.read(ba.data(), std::streamsize(ba.size()));
+        fb.read(bb.data(), std::streamsize(bb.size()));
+        if (fa.gcount() != fb.gcount() || !std::equal(ba.begin(), ba.begin() + fa.gcount(), bb.begin())) {
+            return false;
+        }
+    }
+    return !fa.bad() && !fb.bad() && fa.eof() && fb.eof();
+}
+
+/// Each file under `fresh` whose bytes equal the file at the same place
+/// under `old_root` gets that file's modification time (nothing on error:
+/// a time is only a hint to the engine).
+void keep_times(const fs::path& fresh, const fs::path& old_root)
+{
+    std::error_code ec;
+    if (!fs::is_directory(old_root, ec)) {
+        return;
+    }
+    for (fs::recursive_directory_iterator it(fresh, ec), end; !ec && it != end; it.increment(ec)) {
+        if (!it->is_regular_file(ec)) {
+            continue;
+        }
+        const fs::path old = old_root / fs::relative(it->path(), fresh, ec);
+        std::error_code e2;
+        if (fs::is_regular_file(old, e2) && fs::file_size(old, e2) == it->file_size(e2) && !e2 &&
+            same_bytes(it->path(), old)) {
+            const auto t = fs::last_write_time(old, e2);
+            if (!e2) {
+                fs::last_write_time(it->path(), t, e2);
+            }
+        }
+    }
+}
+
+} // namespace
+
 OutputDir::OutputDir(fs::path final_path, bool overwrite, const std::vector<fs::path>& inputs)
     : m_final(std::move(final_path))
 {
@@ -277,6 +322,9 @@ void OutputDir::commit()
     }
     for (const fs::path& f : folders) {
         sync_to_disk(f);
+    }
+    if (m_keep_times) {
+        keep_times(m_tmp, m_final);
     }
     fs::path old;
     if (fs::exists(m_final)) {

@@ -37,6 +37,19 @@ void CommonOptions::add(ArgSet& args)
     args.add("level", &level, "only this level (default: all)", "NAME");
     config::add_option(args, "simplify.threads", &m_threads);
     args.add("overwrite", &overwrite, "replace OUTPUT if it exists");
+    args.group("Partitions (the workflow's jobs)");
+    args.add("partitions", &partitions,
+             "only these stores, OUTPUT updated in place (each file renamed alone, other partitions' files "
+             "untouched, the bytes a whole run writes): LEVEL/PARTITION, LEVEL/PREFIX* or LEVEL/*, separated by "
+             "commas, or @FILE with one a line",
+             "LIST");
+    args.add("report", &report,
+             "with --partitions: write this job's report to FILE (a whole run writes "
+             "OUTPUT/<stage>-report.json)",
+             "FILE");
+    args.add("finish", &finish,
+             "after the --partitions jobs: check that every store has its files in OUTPUT, remove those of "
+             "stores and tolerances this run no longer has, write OUTPUT/manifest.json");
 }
 
 void CommonOptions::initialize(const std::string& stage)
@@ -73,6 +86,13 @@ void CommonOptions::initialize(const std::string& stage)
     options.color.tile_pixels = static_cast<uint32_t>(m_tile_pixels);
     options.color.max_classes = static_cast<uint32_t>(m_max_classes);
     options.color.metric = options.metric;
+    if (finish && !partitions.empty()) {
+        throw usage_error(stage + ": options '--finish' and '--partitions' exclude each other");
+    }
+    if (!report.empty() && partitions.empty()) {
+        throw usage_error(stage + ": option '--report' goes with '--partitions' (a whole run writes OUTPUT/" + stage +
+                          "-report.json)");
+    }
     options.threads = m_threads == 0 ? std::max(1U, std::thread::hardware_concurrency()) : unsigned(m_threads);
 }
 

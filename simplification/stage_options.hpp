@@ -41,6 +41,13 @@ class CommonOptions {
     SimplifyOptions options;
     std::string input, output, level;
     bool overwrite = false;
+    /// `--partitions`: the stores to work on (select_stores), OUTPUT updated
+    /// in place; empty: every store, OUTPUT written whole.
+    std::string partitions;
+    std::string report;  ///< `--report FILE`: with --partitions, this job's report
+    bool finish = false; ///< `--finish`: after partition jobs (stage_output.hpp)
+    /// OUTPUT is updated in place (--partitions or --finish), not written whole.
+    bool in_place() const noexcept { return !partitions.empty() || finish; }
 
   private:
     std::string m_tolerances = "1,4,16,64";

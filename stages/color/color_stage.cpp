@@ -4,6 +4,7 @@
 #include "core/fs.hpp"
 #include "formats/chains/chain_store.hpp"
 #include "simplification/color_io.hpp"
+#include "simplification/stage_output.hpp"
 
 #include <GeographicLib/Config.h>
 #include <nlohmann/json.hpp>
@@ -41,10 +42,23 @@ std::string ColorStage::help_notes() const
 int ColorStage::run(const StageContext& ctx)
 {
     refuse_to_replace_inputs(m_common.output, {m_common.input});
-    const auto stores = simplify::list_stores(m_common.input, m_common.level);
+    const auto all = simplify::list_stores(m_common.input, m_common.level);
+    const auto stores =
+        m_common.partitions.empty() ? all : simplify::select_stores(all, m_common.partitions, m_common.input);
     const Manifest ingest = read_manifest(m_common.input, "ingest");
-    OutputDir out(m_common.output, m_common.overwrite, {m_common.input});
+    simplify::StageOutput out(m_common, {m_common.input}, name);
     log_removed_leftovers(ctx.log, out.removed_leftovers());
+    json manifest = new_manifest("color", versions());
+    add_input(manifest, "ingest", ingest);
+    manifest["options"] = m_common.manifest_options();
+    if (m_common.finish) {
+        for (const auto& p : simplify::finish_in_place(out.path(), all, m_common.tolerances, ".colors.json")) {
+            ctx.log.info("color: removed " + p.string() + " (a store or tolerance this run no longer has)");
+        }
+        out.commit(manifest_text(manifest));
+        std::printf("color: %s holds the colours of all %zu stores\n", m_common.output.c_str(), all.size());
+        return exit_ok;
+    }
     struct Total {
         size_t tiles = 0, splits = 0, conflict_edges = 0, stores = 0;
         uint32_t max_classes = 0;
@@ -62,12 +76,8 @@ int ColorStage::run(const StageContext& ctx)
             } catch (const input_error& e) {
                 throw input_error(sf.path.string() + " at eps " + std::to_string(eps_m) + " m: " + e.what());
             }
-            const fs::path dir = out.path() / simplify::tolerance_dir(eps_m) / sf.level;
-            fs::create_directories(dir);
-            // Inside the output folder, renamed into place whole: no rename
-            // and folder sync per file (a file per partition and tolerance).
-            write_file(dir / (sf.partition + ".colors.json"),
-                       simplify::colors_to_json(store, eps_m, m_common.options.metric, r));
+            out.write(fs::path(simplify::tolerance_dir(eps_m)) / sf.level / (sf.partition + ".colors.json"),
+                      simplify::colors_to_json(store, eps_m, m_common.options.metric, r));
             auto& t = totals[ti];
             ++t.stores;
             t.tiles += r.tiles.size();
@@ -97,12 +107,8 @@ int ColorStage::run(const StageContext& ctx)
                         {"classes_mean", t.tiles ? t.class_sum / double(t.tiles) : 0.0}});
     }
     report["tolerances"] = std::move(tols);
-    write_file_atomic(out.path() / "color-report.json", report.dump(2) + "\n");
-    json manifest = new_manifest("color", versions());
-    add_input(manifest, "ingest", ingest);
-    manifest["options"] = m_common.manifest_options();
-    write_file_atomic(out.path() / "manifest.json", manifest_text(manifest));
-    out.commit();
+    out.write_report(report.dump(2) + "\n");
+    out.commit(manifest_text(manifest));
     std::printf("color: %zu stores\n", stores.size());
     for (size_t ti = 0; ti < totals.size(); ++ti) {
         std::printf("  eps %g m: %zu tiles, %zu splits, classes max %u\n", m_common.tolerances[ti], totals[ti].tiles,

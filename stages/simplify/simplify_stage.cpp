@@ -10,6 +10,7 @@
 #include "gl/context.hpp"
 #include "simplification/color_io.hpp"
 #include "simplification/simplifier.hpp"
+#include "simplification/stage_output.hpp"
 
 #include <GeographicLib/Config.h>
 #include <GL/osmesa.h>
@@ -90,7 +91,8 @@ int SimplifyStage::run(const StageContext& ctx)
     // --points is read whole before the output is made; INPUT and --colors as the stores go.
     const std::vector<fs::path> reads{m_common.input, m_colors};
     refuse_to_replace_inputs(m_common.output, reads);
-    const auto stores = list_stores(m_common.input, m_common.level);
+    const auto all = list_stores(m_common.input, m_common.level);
+    const auto stores = m_common.partitions.empty() ? all : select_stores(all, m_common.partitions, m_common.input);
     const Manifest ingest = read_manifest(m_common.input, "ingest");
     std::optional<Manifest> colored;
     if (!m_colors.empty()) {
@@ -102,8 +104,18 @@ int SimplifyStage::run(const StageContext& ctx)
         o.user_points = read_points(m_points);
         points_sha256 = sha256_file(m_points);
     }
-    OutputDir out(m_common.output, m_common.overwrite, reads);
+    StageOutput out(m_common, reads, name);
     log_removed_leftovers(ctx.log, out.removed_leftovers());
+    const std::string manifest = manifest_text(manifest_json(ingest, colored, points_sha256));
+    if (m_common.finish) {
+        for (const auto& p : finish_in_place(out.path(), all, m_common.tolerances, ".tlc")) {
+            ctx.log.info("simplify: removed " + p.string() + " (a store or tolerance this run no longer has)");
+        }
+        out.commit(manifest);
+        std::printf("simplify: %s holds the simplified stores of all %zu stores\n", m_common.output.c_str(),
+                    all.size());
+        return exit_ok;
+    }
     // llvmpipe (Mesa's software rasterizer, behind OSMesa and EGL without a
     // GPU) starts a rasterizer thread per core. When several stores keep
     // every core busy with workers, those threads only add hand-offs: on 2
@@ -129,18 +141,16 @@ int SimplifyStage::run(const StageContext& ctx)
                  (llvmpipe_inline ? " (LP_NUM_THREADS=0: every core has a worker)" : ""));
 
     const auto t_start = std::chrono::steady_clock::now();
-    const auto totals = simplify_stores(stores, out.path(), raster, llvmpipe_inline, ctx);
+    const auto totals = simplify_stores(stores, out, raster, llvmpipe_inline, ctx);
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
-    write_file_atomic(out.path() / "simplify-report.json",
-                      report_json(stores.size(), context->describe(), totals, seconds).dump(2) + "\n");
-    write_file_atomic(out.path() / "manifest.json", manifest_text(manifest_json(ingest, colored, points_sha256)));
-    out.commit();
+    out.write_report(report_json(stores.size(), context->describe(), totals, seconds).dump(2) + "\n");
+    out.commit(manifest);
     print_summary(stores.size(), context->describe(), totals, seconds);
     return exit_ok;
 }
 
 std::vector<ToleranceStats> SimplifyStage::simplify_one(const StoreFile& sf, const SimplifyOptions& so, Raster& raster,
-                                                        const fs::path& out_dir) const
+                                                        const StageOutput& out) const
 {
     double max_scale = 1.0;
     for (const auto& [cls, f] : so.class_scale) {
@@ -179,16 +189,14 @@ std::vector<ToleranceStats> SimplifyStage::simplify_one(const StoreFile& sf, con
         } catch (const input_error& e) {
             throw input_error(sf.path.string() + " at eps " + std::to_string(eps_m) + " m: " + e.what());
         }
-        const fs::path dir = out_dir / tolerance_dir(eps_m) / sf.level;
-        fs::create_directories(dir);
-        write_file(dir / (sf.partition + ".tlc"), chains::encode(result)); // inside the output folder
+        out.write(fs::path(tolerance_dir(eps_m)) / sf.level / (sf.partition + ".tlc"), chains::encode(result));
     }
     return stats;
 }
 
-std::vector<ToleranceStats> SimplifyStage::simplify_stores(const std::vector<StoreFile>& stores,
-                                                           const fs::path& out_dir, Raster& raster,
-                                                           bool llvmpipe_inline, const StageContext& ctx) const
+std::vector<ToleranceStats> SimplifyStage::simplify_stores(const std::vector<StoreFile>& stores, const StageOutput& out,
+                                                           Raster& raster, bool llvmpipe_inline,
+                                                           const StageContext& ctx) const
 {
     const auto& o = m_common.options;
     // Several stores at once, each on one worker with its share of the
@@ -218,7 +226,7 @@ std::vector<ToleranceStats> SimplifyStage::simplify_stores(const std::vector<Sto
                     return;
                 }
                 try {
-                    per_store_stats[si] = simplify_one(stores[si], per_store, raster, out_dir);
+                    per_store_stats[si] = simplify_one(stores[si], per_store, raster, out);
                 } catch (...) {
                     for (size_t f = first_failed.load(); si < f && !first_failed.compare_exchange_weak(f, si);) {
                     }

@@ -6,6 +6,7 @@
 #include "core/stage.hpp"
 #include "simplification/simplifier.hpp"
 #include "simplification/stage_options.hpp"
+#include "simplification/stage_output.hpp"
 
 #include <optional>
 
@@ -26,16 +27,15 @@ class SimplifyStage final : public Stage {
     std::vector<std::string> config_args(const std::filesystem::path& file) const override;
 
   private:
-    /// One store at every tolerance of the ladder, written under
-    /// `out_dir`; its statistics per tolerance.
+    /// One store at every tolerance of the ladder, written to `out`; its
+    /// statistics per tolerance.
     std::vector<ToleranceStats> simplify_one(const StoreFile& sf, const SimplifyOptions& so, Raster& raster,
-                                             const std::filesystem::path& out_dir) const;
+                                             const StageOutput& out) const;
     /// Every store, several at once, each on a worker with its share of the
     /// threads, the GL work on this thread; the statistics summed per
     /// tolerance in store order (the same whatever the threads).
-    std::vector<ToleranceStats> simplify_stores(const std::vector<StoreFile>& stores,
-                                                const std::filesystem::path& out_dir, Raster& raster,
-                                                bool llvmpipe_inline, const StageContext& ctx) const;
+    std::vector<ToleranceStats> simplify_stores(const std::vector<StoreFile>& stores, const StageOutput& out,
+                                                Raster& raster, bool llvmpipe_inline, const StageContext& ctx) const;
     /// simplify-report.json.
     nlohmann::ordered_json report_json(size_t stores, const std::string& gl, const std::vector<ToleranceStats>& totals,
                                        double seconds) const;

@@ -35,7 +35,7 @@ sed "s#\.\./\.\./shared#$repo/../shared#; s/^name: floyd/name: wf/" "$repo/confi
 setsid "$repo/scripts/workflow" wf.yaml >run1.out 2>&1 &
 pid=$!
 for _ in $(seq 1 600); do
-  [ -f out/wf/logs/simplify.log ] && break
+  [ -d out/wf/logs/simplify ] && break
   kill -0 "$pid" 2>/dev/null || break
   sleep 0.05
 done
