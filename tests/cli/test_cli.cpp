@@ -715,6 +715,81 @@ TEST_F(Cli, ColorAndSimplifyRunTheLadderDeterministically)
               slurp(m_dir / "simp2" / "manifest.json").substr(0, 200));
 }
 
+TEST_F(Cli, ColorAndSimplifyByPartitionsWriteTheWholeRunsBytes)
+{
+    // The workflow's jobs: each stage on some stores, updating OUTPUT in
+    // place, then --finish; the folders are a whole run's, byte for byte.
+    make_tiger();
+    const std::string in = (m_dir / "in").string();
+    ASSERT_EQ(run("ingest", tiger_config().string() + " " + in).code, 0);
+    const std::string wc = (m_dir / "wc").string(), ws = (m_dir / "ws").string();
+    ASSERT_EQ(run("color", in + " " + wc + " --tolerances 1,8").code, 0);
+    ASSERT_EQ(run("simplify", in + " " + ws + " --tolerances 1,8 --colors " + wc).code, 0);
+    const std::string pc = (m_dir / "pc").string(), ps = (m_dir / "ps").string();
+    for (const std::string sel : {"block/*,block_group/*", "county/*,state/*,tract/5106*"}) {
+        const Result c = run("color", in + " " + pc + " --tolerances 1,8 --partitions '" + sel + "' --report " +
+                                          (m_dir / "share.json").string());
+        ASSERT_EQ(c.code, 0) << c.err;
+        EXPECT_FALSE(fs::exists(m_dir / "pc" / "color-report.json")) << "a job's share went into OUTPUT";
+        EXPECT_TRUE(fs::exists(m_dir / "share.json"));
+    }
+    // Before --finish a store without its files is named; after it, none.
+    std::ofstream(m_dir / "list") << "block/*\nblock_group/*\ncounty/*\nstate/*\n";
+    ASSERT_EQ(run("simplify",
+                  in + " " + ps + " --tolerances 1,8 --colors " + pc + " --partitions @" + (m_dir / "list").string())
+                  .code,
+              0)
+        << slurp(m_dir / "stderr");
+    Result f = run("simplify", in + " " + ps + " --tolerances 1,8 --colors " + pc + " --finish");
+    EXPECT_EQ(f.code, 2);
+    EXPECT_NE(f.err.find("eps-1m/tract/51063.tlc is missing: the job of tract/51063 has not run"), std::string::npos)
+        << f.err;
+    ASSERT_EQ(run("simplify", in + " " + ps + " --tolerances 1,8 --colors " + pc + " --partitions tract/51063").code,
+              0);
+    // A store and a tolerance the run no longer has are removed by --finish.
+    fs::copy_file(m_dir / "ps" / "eps-1m" / "tract" / "51063.tlc", m_dir / "ps" / "eps-1m" / "tract" / "51999.tlc");
+    fs::create_directories(m_dir / "ps" / "eps-2m" / "tract");
+    ASSERT_EQ(run("color", in + " " + pc + " --tolerances 1,8 --finish").code, 0) << slurp(m_dir / "stderr");
+    f = run("simplify", in + " " + ps + " --tolerances 1,8 --colors " + pc + " --finish");
+    ASSERT_EQ(f.code, 0) << f.err;
+    for (const auto& [whole, parts] : {std::pair{m_dir / "wc", m_dir / "pc"}, std::pair{m_dir / "ws", m_dir / "ps"}}) {
+        size_t files = 0;
+        for (const auto& e : fs::recursive_directory_iterator(parts)) {
+            const auto rel = fs::relative(e.path(), parts);
+            if (e.is_regular_file() && rel.filename().string().find("-report") == std::string::npos) {
+                ++files;
+                EXPECT_TRUE(fs::exists(whole / rel)) << "not in a whole run's folder: " << rel;
+                EXPECT_EQ(slurp(e.path()), slurp(whole / rel)) << rel;
+            }
+        }
+        for (const auto& e : fs::recursive_directory_iterator(whole)) {
+            const auto rel = fs::relative(e.path(), whole);
+            EXPECT_TRUE(e.is_directory() || rel.filename().string().find("-report") != std::string::npos ||
+                        fs::exists(parts / rel))
+                << "missing after the jobs: " << rel;
+        }
+        EXPECT_GT(files, 10U);
+    }
+    // Bad selections, options and folders: exit 2, nothing written.
+    const std::string o = (m_dir / "o").string();
+    auto bad = [&](const std::string& tool, const std::string& args, const std::string& fragment) {
+        const Result r = run(tool, in + " " + args);
+        EXPECT_EQ(r.code, 2) << r.err;
+        EXPECT_NE(r.err.find(fragment), std::string::npos) << r.err;
+    };
+    bad("color", o + " --partitions tract/99999", "option '--partitions' has 'tract/99999', which matches no chain");
+    bad("color", o + " --partitions tract", "has 'tract'; expected LEVEL/PARTITION, LEVEL/PREFIX* or LEVEL/*");
+    bad("color", o + " --partitions 'zone/*'", "has 'zone/*', which matches no chain store");
+    bad("color", o + " --report r.json", "option '--report' goes with '--partitions'");
+    bad("color", o + " --finish --partitions 'tract/*'", "options '--finish' and '--partitions' exclude each other");
+    bad("simplify", pc + " --tolerances 1,8 --partitions 'tract/*'",
+        "written by tigerlod-color, not tigerlod-simplify");
+    EXPECT_FALSE(fs::exists(m_dir / "o"));
+    const Result missing = run("color", in + " " + o + " --partitions @" + (m_dir / "nolist").string());
+    EXPECT_EQ(missing.code, 1) << missing.err;
+    EXPECT_NE(missing.err.find("nolist: cannot read the list of --partitions"), std::string::npos) << missing.err;
+}
+
 TEST_F(Cli, SimplifyGivesTheSameStoresOnEglAndWithASmallFramebuffer)
 {
     make_tiger();

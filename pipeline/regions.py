@@ -1,0 +1,78 @@
+"""pipeline/regions.py CONFIG CODES | --out CONFIG: for scripts/workflow.
+
+CONFIG CODES: the outputs of the jobs a region rebuild forces, one a line:
+the color job of every group of stores holding a store whose partition
+begins with one of the codes (its own stores and those below) or is part of
+one (the stores of its county and state, which hold its boundaries), and
+every level held in a single store (the nation's map); simplify, pack, verify and render follow by dependency. CODES
+is a comma-separated list; empty, the config's `regions` key. The groups
+are the last run's (out/<name>/jobs/groups.json); without one nothing is
+forced (every job runs anyway). A code that matches no store: a message
+and exit 2.
+
+--out CONFIG: out/<name>, the run's folder (empty if the config has no
+usable name; the Snakefile says why)."""
+import json
+import os
+import re
+import sys
+
+import yaml
+
+
+def config_of(path):
+    try:
+        with open(path) as f:
+            cfg = yaml.safe_load(f)
+        return cfg if isinstance(cfg, dict) else {}
+    except (OSError, yaml.YAMLError):
+        return {}
+
+
+def main():
+    if sys.argv[1] == "--out":
+        name = config_of(sys.argv[2]).get("name")
+        print(f"out/{name}" if isinstance(name, str) and re.fullmatch(r"[a-z0-9_-]+", name) else "")
+        return 0
+    cfg = config_of(sys.argv[1])
+    codes = sys.argv[2] if len(sys.argv) > 2 else ""
+    if codes:
+        regions = [c.strip() for c in codes.split(",") if c.strip()]
+    else:
+        given = cfg.get("regions") or []
+        regions = [str(c) for c in (given if isinstance(given, list) else [given])]
+    if not regions:
+        return 0
+    name = cfg.get("name")
+    groups_file = f"out/{name}/jobs/groups.json"
+    if not os.path.exists(groups_file):
+        print(f"workflow: regions {','.join(regions)}: no earlier run in out/{name}; every job runs",
+              file=sys.stderr)
+        return 0
+    with open(groups_file) as f:
+        groups = json.load(f)
+    # A level in one store (the nation's map, a state level named after the
+    # nation's code) holds every region's boundaries at that level.
+    stores_of_level = {}
+    for g in groups:
+        stores_of_level[g["level"]] = stores_of_level.get(g["level"], 0) + len(g["partitions"])
+    forced = []
+    for region in regions:
+        own = [g for g in groups if any(p.startswith(region) or region.startswith(p) for p in g["partitions"])]
+        hits = [g for g in groups if g in own or stores_of_level[g["level"]] == 1]
+        if not own:
+            print(f"workflow: region {region} matches no store of out/{name} (stores are named by the codes of "
+                  f"their units' parents, e.g. a county's tracts by its 5-digit code)", file=sys.stderr)
+            return 2
+        for g in hits:
+            target = f"out/{name}/jobs/color/{g['level']}/{g['group']}.json"
+            if target not in forced:
+                forced.append(target)
+    print(f"workflow: regions {','.join(regions)}: forcing {len(forced)} group jobs and what depends on them",
+          file=sys.stderr)
+    print("\n".join(forced))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

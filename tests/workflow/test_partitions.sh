@@ -1,0 +1,136 @@
+#!/usr/bin/env bash
+# The workflow in partition-sized jobs, as an operator meets it on a
+# nightly rebuild: color and simplify run a job per group of stores; a
+# changed county reruns only the jobs of the stores that hold it, and the
+# result is byte for byte a clean build's; a new description reruns
+# nothing and a new pack.tile_mb only pack and what reads the tree;
+# --regions forces a region's jobs; a bad store fails its own jobs with its
+# message on the terminal while the others finish, and the rerun after the
+# fix does only what is left. Needs the 2010 tracts of DC and Rhode Island
+# from ../shared/data (skips, exit 77).
+#
+#   tests/workflow/test_partitions.sh REPO BIN_DIR
+set -uo pipefail
+repo=$(cd "$1" && pwd)
+bin=$(cd "$2" && pwd)
+data=$repo/../shared/data/tiger/tracts2010
+if [ ! -f "$data/tl_2010_11_tract10.zip" ] || [ ! -f "$data/tl_2010_44_tract10.zip" ]; then
+  echo "SKIP: $data/tl_2010_{11,44}_tract10.zip are absent (../shared/data)"
+  exit 77
+fi
+for tool in snakemake ogr2ogr; do
+  if ! command -v $tool >/dev/null; then
+    echo "SKIP: $tool is not installed (scripts/setup installs it)"
+    exit 77
+  fi
+done
+work=$(mktemp -d "${TMPDIR:-/tmp}/tigerlod-partitions-XXXXXX")
+trap 'rm -rf "$work"' EXIT
+cd "$work"
+export TIGERLOD_BIN=$bin TIGERLOD_CORES=2 TIGERLOD_PROGRESS=
+failures=0
+fail() {
+  echo "FAIL: $*"
+  failures=$((failures + 1))
+}
+# The jobs a run's output says ran, `stage level/group` a line, sorted.
+ran() { sed -n 's/^\[[0-9]*\/[0-9?]*\] \(color\|simplify\) \([^:]*\/[^:]*\):.*/\1 \2/p' "$1" | sort | tr '\n' ' '; }
+# Two versions of DC: as published, and with one tract's code changed.
+ogr2ogr -f "ESRI Shapefile" dc_v1.shp.zip "/vsizip/$data/tl_2010_11_tract10.zip/tl_2010_11_tract10.shp" -nln dc
+ogr2ogr -f "ESRI Shapefile" dc_v2.shp.zip "/vsizip/$data/tl_2010_11_tract10.zip/tl_2010_11_tract10.shp" -nln dc \
+  -dialect SQLite -sql "SELECT Geometry, MTFCC10, INTPTLAT10, INTPTLON10, CASE WHEN GEOID10 = '11001000100'
+    THEN '11001990100' ELSE GEOID10 END AS GEOID10 FROM tl_2010_11_tract10"
+cp dc_v1.shp.zip dc.shp.zip
+cat >p.yaml <<EOF
+name: p
+description: DC and Rhode Island tracts
+dataset:
+  kind: polygons
+  inputs: [dc.shp.zip, $data/tl_2010_44_tract10.zip]
+  code_field: GEOID10
+  class_field: MTFCC10
+  intpt_lat_field: INTPTLAT10
+  intpt_lon_field: INTPTLON10
+levels:
+  - {name: nation, code: US}
+  - {name: state, prefix: 2}
+  - {name: county, prefix: 5}
+  - {name: tract, prefix: 11}
+ingest: {halo_m: 200}
+simplify: {tolerances_m: [1, 16]}
+workflow: {job_mb: 0.001}
+render: {frames: 6}
+EOF
+wf() { "$repo/scripts/workflow" p.yaml "$@"; }
+
+# 1. A clean build: a job per store here (job_mb is tiny), each stage's
+# folder as a whole run of the stage writes it.
+wf >r1.out 2>&1 || fail "the first run failed: $(tail -30 r1.out)"
+all="color county/g11 color county/g44 color nation/gall color state/gUS color tract/g11001 color tract/g44001 "
+all+="color tract/g44003 color tract/g44005 color tract/g44007 color tract/g44009 "
+[ "$(ran r1.out)" = "$all${all//color/simplify}" ] || fail "the first run's group jobs: $(ran r1.out)"
+"$bin/tigerlod-color" --config p.yaml out/p/ingest whole-color >/dev/null || fail "tigerlod-color whole failed"
+"$bin/tigerlod-simplify" --config p.yaml --colors whole-color out/p/ingest whole-simp >/dev/null ||
+  fail "tigerlod-simplify whole failed"
+diff -r -x '*-report.json' whole-color out/p/color >/dev/null || fail "color by jobs differs from a whole run"
+diff -r -x '*-report.json' whole-simp out/p/simplified >/dev/null || fail "simplify by jobs differs from a whole run"
+grep -q "summary of out/p" r1.out || fail "no summary at the end: $(tail r1.out)"
+grep -q "verify: CLEAN" r1.out || fail "the summary does not say verify was clean: $(tail r1.out)"
+
+# 2. Nothing changed: nothing runs. A new description: nothing runs.
+wf >r2.out 2>&1 || fail "a rerun failed"
+grep -q "Nothing to be done" r2.out || fail "a rerun with nothing changed ran jobs: $(cat r2.out)"
+sed -i 's/^description: .*/description: the same tracts, described again/' p.yaml
+wf >r3.out 2>&1 || fail "a rerun with a new description failed"
+grep -q "Nothing to be done" r3.out || fail "a new description ran jobs: $(cat r3.out)"
+
+# 3. A new pack.tile_mb: pack, verify and render only.
+echo "pack: {tile_mb: 2}" >>p.yaml
+wf >r4.out 2>&1 || fail "a rerun with a new tile_mb failed"
+[ -z "$(ran r4.out)" ] || fail "a new tile_mb ran group jobs: $(ran r4.out)"
+grep -q "\] ingest:" r4.out && fail "a new tile_mb ran ingest"
+grep -q "\] pack:" r4.out || fail "a new tile_mb did not run pack: $(cat r4.out)"
+
+# 4. One county's input changed: ingest, then only that county's jobs.
+cp dc_v2.shp.zip dc.shp.zip
+wf >r5.out 2>&1 || fail "the rebuild after a change failed: $(tail -30 r5.out)"
+[ "$(ran r5.out)" = "color tract/g11001 simplify tract/g11001 " ] ||
+  fail "a changed DC tract code reran: $(ran r5.out)"
+# ... and the result is a clean build's, byte for byte.
+mkdir clean && cp p.yaml dc.shp.zip clean/ && (cd clean && "$repo/scripts/workflow" p.yaml >run.out 2>&1) ||
+  fail "the clean build failed"
+for d in ingest color simplified tree; do
+  diff -r -x '*-report.json' -x '*-timings.json' -x '.snakemake_timestamp' "out/p/$d" "clean/out/p/$d" >/dev/null ||
+    fail "out/p/$d after the rebuild differs from a clean build's"
+done
+
+# 5. --regions forces a region's jobs (and its state's and the nation's
+# maps) with nothing changed; a region that names no store is refused.
+wf --regions 44003 >r6.out 2>&1 || fail "a region rebuild failed: $(tail -30 r6.out)"
+want="color county/g44 color nation/gall color state/gUS color tract/g44003 "
+[ "$(ran r6.out)" = "$want${want//color/simplify}" ] || fail "--regions 44003 ran: $(ran r6.out)"
+wf --regions 99 >r7.out 2>&1
+[ $? = 2 ] || fail "a region that matches no store did not exit 2"
+grep -q "region 99 matches no store" r7.out || fail "no message for an unknown region: $(cat r7.out)"
+
+# 6. A bad store fails its own jobs, with its message on the terminal; the
+# other stores' jobs finish; the rerun after the fix does the rest.
+head -c 100 out/p/ingest/tract/44005.tlc >bad && cat bad >out/p/ingest/tract/44005.tlc
+if wf --regions 44 >r8.out 2>&1; then
+  fail "a run with a corrupt store succeeded"
+fi
+grep -q "pipeline: color:tract/g44005 failed (exit 1)" r8.out || fail "no failure line for the bad store: $(cat r8.out)"
+grep -q "tigerlod-color: .*44005.tlc" r8.out || fail "the stage's message is not on the terminal: $(cat r8.out)"
+for g in 44001 44003 44007 44009; do
+  grep -q "\] simplify tract/g$g:" r8.out || fail "tract/g$g did not finish beside the failed store"
+done
+touch dc.shp.zip # the fix: ingest writes the store again
+wf >r9.out 2>&1 || fail "the rerun after the fix failed: $(tail -30 r9.out)"
+[ "$(ran r9.out)" = "color tract/g44005 simplify tract/g44005 " ] || fail "the rerun after the fix ran: $(ran r9.out)"
+grep -q "verify: CLEAN" r9.out || fail "the tree after the fix is not clean"
+
+if [ "$failures" -gt 0 ]; then
+  echo "$failures failure(s)"
+  exit 1
+fi
+echo "partitions: all checks passed"
