@@ -43,6 +43,10 @@ std::vector<Key> input_keys()
               "color and simplify: a job per group of a level's stores whose names share a prefix, the shortest "
               "prefix for which no group holds more than this many MB of stores",
               "32", {0, 1e6, true}),
+        entry("workflow.job_threads", Type::integer,
+              "threads of each color and simplify job (`--threads`; Snakemake runs fewer where it has fewer "
+              "cores): the pipeline's jobs take this, not `simplify.threads`; outputs do not depend on it",
+              "2", integer(1, 1024)),
         section("dataset", "what to read"),
         entry("dataset.kind", Type::choice,
               "`tiger` (EDGES + FACES), `polygons` (any polygon layer: tracts, TopoJSON) or `lines` (any line "

@@ -221,11 +221,16 @@ int run_stage_impl(Stage& stage, const char* name, const char* description, int 
     try {
         ArgSet args;
         bool help = false, version = false, verbose = false;
+        std::string progress = "auto";
         args.group("General");
         args.add("help", &help, "print this help and exit");
         args.add("version", &version, "print versions of tigerlod and its libraries and exit");
         args.add("verbose", &verbose,
                  "log progress to stderr, each line with the elapsed time and the memory resident then");
+        args.add("progress", &progress,
+                 "auto (a progress line on stderr when it is a terminal), bar (always), json (one JSON object a "
+                 "line on stderr, for a workflow engine) or none",
+                 "MODE");
         stage.add_args(args);
         std::string config_file;
         const std::string section = stage.config_section();
@@ -284,7 +289,7 @@ int run_stage_impl(Stage& stage, const char* name, const char* description, int 
         stage.initialize();
         Log log;
         log.set_verbose(verbose);
-        StageContext ctx{log};
+        StageContext ctx{log, parse_progress_mode(progress)};
         return stage.run(ctx);
     } catch (const Error& e) {
         // Messages thrown as "pack: ..." by a stage: the program name says it once.

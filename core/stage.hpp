@@ -8,6 +8,7 @@
 
 #include "core/errors.hpp"
 #include "core/log.hpp"
+#include "core/progress.hpp"
 
 #include <filesystem>
 #include <limits>
@@ -80,6 +81,7 @@ class ArgSet {
 /// What run_stage gives a stage's run().
 struct StageContext {
     Log& log;
+    ProgressMode progress = ProgressMode::none; ///< `--progress` (core/progress.hpp)
 };
 
 /// Log one line per leftover of a dead run that a stage removed

@@ -65,6 +65,7 @@ int ColorStage::run(const StageContext& ctx)
         double class_sum = 0;
     };
     std::vector<Total> totals(m_common.tolerances.size());
+    Progress progress(ctx.progress, "color", stores.size(), "stores");
     for (const auto& sf : stores) {
         const auto store = chains::read(sf.path);
         simplify::check_store(store, sf);
@@ -87,6 +88,7 @@ int ColorStage::run(const StageContext& ctx)
             t.class_sum += r.mean_classes * double(r.tiles.size());
         }
         ctx.log.info("color: " + sf.level + "/" + sf.partition + " done");
+        progress.advance();
     }
     json report;
     report["schema"] = "tigerlod.color-report/1";

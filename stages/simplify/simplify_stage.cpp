@@ -215,6 +215,7 @@ std::vector<ToleranceStats> SimplifyStage::simplify_stores(const std::vector<Sto
     per_store.gl_thread = [&gl_queue](const std::function<void()>& work) { gl_queue.run(work); };
     std::vector<std::vector<ToleranceStats>> per_store_stats(stores.size());
     std::mutex log_mutex;
+    Progress progress(ctx.progress, "simplify", stores.size(), "stores", "vertices");
     // Items after a failed one are skipped; every earlier one still runs, so
     // the error reported is the lowest store's, whatever the threads.
     std::atomic<size_t> first_failed{SIZE_MAX};
@@ -232,6 +233,7 @@ std::vector<ToleranceStats> SimplifyStage::simplify_stores(const std::vector<Sto
                     }
                     throw;
                 }
+                progress.advance(per_store_stats[si].empty() ? 0 : per_store_stats[si].front().input_vertices);
                 std::lock_guard lock(log_mutex);
                 ctx.log.info("simplify: " + stores[si].level + "/" + stores[si].partition + " done");
             });

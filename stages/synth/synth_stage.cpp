@@ -87,42 +87,6 @@ template <class T> json quantiles(std::vector<T> v)
     return q;
 }
 
-/// A progress line on stderr: percent, rate, ETA; rewritten in place.
-class Progress {
-  public:
-    Progress(bool on, size_t total) : m_on(on), m_total(total), m_t0(std::chrono::steady_clock::now()) {}
-    void advance(uint64_t vertices)
-    {
-        const size_t done = ++m_done;
-        m_vertices += vertices;
-        if (!m_on) {
-            return;
-        }
-        std::lock_guard lock(m_mutex);
-        const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - m_t0).count();
-        if (done != m_total && s - m_last < 0.25) {
-            return;
-        }
-        m_last = s;
-        const double rate = double(m_vertices.load()) / std::max(s, 1e-9);
-        const double eta = done > 0 ? s * double(m_total - done) / double(done) : 0;
-        std::fprintf(stderr, "\rsynth: %5.1f%% %zu/%zu counties, %.2f M vertices/s, ETA %.0f s ",
-                     100.0 * double(done) / double(m_total), done, m_total, rate / 1e6, eta);
-        if (done == m_total) {
-            std::fputc('\n', stderr);
-        }
-    }
-
-  private:
-    bool m_on;
-    size_t m_total;
-    std::atomic<size_t> m_done{0};
-    std::atomic<uint64_t> m_vertices{0};
-    std::chrono::steady_clock::time_point m_t0;
-    std::mutex m_mutex;
-    double m_last = -1;
-};
-
 } // namespace
 
 void SynthStage::add_args(ArgSet& args)
@@ -134,7 +98,6 @@ void SynthStage::add_args(ArgSet& args)
     config::add_option(args, "synth.target_vertices", &m_target);
     config::add_option(args, "synth.cell_m", &m_cell_m);
     config::add_option(args, "synth.threads", &m_threads);
-    args.add("progress", &m_progress, "show progress on stderr even when it is not a terminal");
     args.add("overwrite", &m_overwrite, "replace OUTPUT if it exists");
 }
 
@@ -192,7 +155,7 @@ int SynthStage::run(const StageContext& ctx)
     const unsigned threads = m_threads > 0 ? unsigned(m_threads) : std::max(1U, std::thread::hardware_concurrency());
     const size_t counties = nation.units(county).size();
     std::vector<CountyCounts> counts(counties);
-    Progress progress(m_progress || ::isatty(STDERR_FILENO) != 0, counties);
+    Progress progress(ctx.progress, "synth", counties, "counties", "vertices");
     parallel_each(counties, threads, [&](size_t c) {
         const auto& cty = nation.units(county)[c];
         const auto& st = nation.units(state)[cty.parent];

@@ -29,7 +29,7 @@ class SynthStage final : public Stage {
     std::string m_output;
     int m_seed = 1, m_states = 2, m_counties = 4, m_threads = 0, m_target = 1'000'000;
     double m_cell_m = 400;
-    bool m_overwrite = false, m_progress = false;
+    bool m_overwrite = false;
 }; // class SynthStage
 
 } // namespace tigerlod::synth

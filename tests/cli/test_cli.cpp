@@ -12,6 +12,7 @@
 #include <ogr_srs_api.h>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 #include <unistd.h>
 
 #include <algorithm>
@@ -788,6 +789,41 @@ TEST_F(Cli, ColorAndSimplifyByPartitionsWriteTheWholeRunsBytes)
     const Result missing = run("color", in + " " + o + " --partitions @" + (m_dir / "nolist").string());
     EXPECT_EQ(missing.code, 1) << missing.err;
     EXPECT_NE(missing.err.find("nolist: cannot read the list of --partitions"), std::string::npos) << missing.err;
+}
+
+TEST_F(Cli, ProgressAsJsonLinesForAnEngine)
+{
+    make_tiger();
+    const std::string in = (m_dir / "in").string();
+    ASSERT_EQ(run("ingest", tiger_config().string() + " " + in).code, 0);
+    for (const std::string tool : {"color", "simplify"}) {
+        SCOPED_TRACE(tool);
+        const Result r = run(tool, in + " " + (m_dir / tool).string() + " --tolerances 8 --progress json");
+        ASSERT_EQ(r.code, 0) << r.err;
+        std::istringstream lines(r.err);
+        size_t objects = 0, last_done = 0, total = 0;
+        for (std::string line; std::getline(lines, line);) {
+            const auto j = nlohmann::json::parse(line); // every line one object
+            EXPECT_EQ(j.at("stage"), tool);
+            EXPECT_EQ(j.at("unit"), "stores");
+            EXPECT_GT(j.at("done").get<size_t>(), last_done);
+            last_done = j.at("done").get<size_t>();
+            total = j.at("total").get<size_t>();
+            ++objects;
+        }
+        EXPECT_GE(objects, 1U);
+        EXPECT_EQ(last_done, total) << "the last line is the end";
+        size_t stores = 0;
+        for (const auto& e : fs::recursive_directory_iterator(m_dir / "in")) {
+            stores += e.path().extension() == ".tlc" ? 1 : 0;
+        }
+        EXPECT_EQ(total, stores) << "every store of the input";
+    }
+    // On a pipe, by default, nothing; a mode that does not exist: exit 2.
+    const Result quiet = run("color", in + " " + (m_dir / "c2").string() + " --tolerances 8");
+    EXPECT_TRUE(quiet.err.empty()) << quiet.err;
+    expect_failure(run("color", in + " " + out() + " --progress loud"), 2,
+                   "option '--progress' must be auto, bar, json or none, not 'loud'");
 }
 
 TEST_F(Cli, SimplifyGivesTheSameStoresOnEglAndWithASmallFramebuffer)
