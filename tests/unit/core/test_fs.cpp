@@ -9,6 +9,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <fstream>
 #include <set>
 #include <string>
@@ -129,4 +130,42 @@ TEST_F(Fs, AnOutputFolderCleansWhatADeadRunLeftBesideIt)
     }
     EXPECT_EQ(names(), (std::set<std::string>{"out", "other.tmp-" + dead}));
     EXPECT_THROW(OutputDir(m_dir / "out", false), usage_error);
+}
+
+TEST_F(Fs, AnOutputFolderKeepsTheTimesOfFilesWhoseBytesDidNotChange)
+{
+    // A workflow engine reruns the jobs whose input files are newer than
+    // their outputs: after a rebuild, a store with the same bytes must keep
+    // its time, and a changed one (or a new one) must not.
+    {
+        OutputDir out(m_dir / "out", false);
+        write_file(out.path() / "same.tlc", "abc");
+        write_file(out.path() / "changed.tlc", "abc");
+        write_file(out.path() / "longer.tlc", "abc");
+        fs::create_directories(out.path() / "level");
+        write_file(out.path() / "level" / "deep.tlc", "deep");
+        out.commit();
+    }
+    const auto old = fs::file_time_type::clock::now() - std::chrono::hours(24);
+    for (const char* f : {"same.tlc", "changed.tlc", "longer.tlc", "level/deep.tlc"}) {
+        fs::last_write_time(m_dir / "out" / f, old);
+    }
+    OutputDir out(m_dir / "out", true);
+    out.keep_times_of_unchanged_files();
+    write_file(out.path() / "same.tlc", "abc");
+    write_file(out.path() / "changed.tlc", "abd");
+    write_file(out.path() / "longer.tlc", "abcd");
+    write_file(out.path() / "new.tlc", "abc");
+    fs::create_directories(out.path() / "level");
+    write_file(out.path() / "level" / "deep.tlc", "deep");
+    out.commit();
+    EXPECT_EQ(fs::last_write_time(m_dir / "out" / "same.tlc"), old);
+    EXPECT_EQ(fs::last_write_time(m_dir / "out" / "level" / "deep.tlc"), old);
+    EXPECT_GT(fs::last_write_time(m_dir / "out" / "changed.tlc"), old);
+    EXPECT_GT(fs::last_write_time(m_dir / "out" / "longer.tlc"), old);
+    EXPECT_GT(fs::last_write_time(m_dir / "out" / "new.tlc"), old);
+    std::ifstream in(m_dir / "out" / "changed.tlc");
+    std::string text;
+    in >> text;
+    EXPECT_EQ(text, "abd");
 }
