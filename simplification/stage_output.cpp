@@ -119,13 +119,28 @@ const std::vector<fs::path>& StageOutput::removed_leftovers() const noexcept
 void StageOutput::write(const fs::path& relative, std::string_view data) const
 {
     const fs::path file = path() / relative;
-    fs::create_directories(file.parent_path());
+    const fs::path folder = file.parent_path();
     if (m_whole) {
+        fs::create_directories(folder);
         write_file(file, data); // inside the output folder, renamed into place whole
         return;
     }
-    (void)remove_dead_leftovers(file.parent_path(), file.filename().string());
-    write_file_atomic(file, data);
+    {
+        std::lock_guard lock(m_mutex);
+        if (m_folders.insert(folder).second) {
+            fs::create_directories(folder);
+            auto removed = remove_dead_leftovers(folder);
+            m_removed.insert(m_removed.end(), removed.begin(), removed.end());
+        }
+    }
+    const fs::path tmp = temp_sibling(file, ".tmp-");
+    write_file(tmp, data); // synced
+    std::error_code ec;
+    fs::rename(tmp, file, ec);
+    if (ec) {
+        fs::remove(tmp, ec);
+        throw environment_error(file.string() + ": cannot rename into place: " + ec.message());
+    }
 }
 
 void StageOutput::write_report(std::string_view data) const
@@ -143,9 +158,13 @@ void StageOutput::write_report(std::string_view data) const
 
 void StageOutput::commit(std::string_view manifest)
 {
-    // In place, every job of a run writes the same manifest (it holds the
-    // options and the input's digest, never the partitions): the last
-    // rename wins with the bytes of any.
+    // In place, the renames of this run's files, then the manifest. Every
+    // job of a run writes the same manifest (it holds the options and the
+    // input's digest, never the partitions): the last rename wins with the
+    // bytes of any.
+    for (const fs::path& folder : m_folders) {
+        sync_to_disk(folder);
+    }
     write_file_atomic(path() / "manifest.json", manifest);
     if (m_whole) {
         m_whole->commit();

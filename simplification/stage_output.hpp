@@ -15,7 +15,9 @@
 #include "simplification/stage_options.hpp"
 
 #include <filesystem>
+#include <mutex>
 #include <optional>
+#include <set>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -43,15 +45,19 @@ class StageOutput {
     /// OUTPUT itself in place.
     const std::filesystem::path& path() const noexcept;
     bool in_place() const noexcept { return !m_whole; }
-    /// Write a partition's file, `relative` to path().
+    /// Write a partition's file, `relative` to path(). Thread-safe. In
+    /// place: under a temporary name renamed into place; the first write
+    /// into a folder removes what dead runs left there, and commit() syncs
+    /// the folders written into (once each, not once a file: a level folder
+    /// of a national run holds ten thousand stores).
     void write(const std::filesystem::path& relative, std::string_view data) const;
     /// The stage's report: OUTPUT/<stage>-report.json for a whole run; in
     /// place to `--report FILE` if given (a job's share), else nowhere.
     void write_report(std::string_view data) const;
     /// manifest.json, then (whole) the rename into place.
     void commit(std::string_view manifest);
-    /// What dead runs had left (an in-place run removes a dead process's
-    /// temporary of each file it writes, and --finish all of them).
+    /// What dead runs had left: beside OUTPUT (whole, from the start), or in
+    /// the folders written into so far (in place).
     const std::vector<std::filesystem::path>& removed_leftovers() const noexcept;
 
   private:
@@ -59,8 +65,10 @@ class StageOutput {
     std::string m_stage;
     std::optional<OutputDir> m_whole;
     std::filesystem::path m_dir;
-    std::vector<std::filesystem::path> m_removed;
-}; // class StageOutput
+    mutable std::vector<std::filesystem::path> m_removed;
+    mutable std::mutex m_mutex;
+    mutable std::set<std::filesystem::path> m_folders; ///< written into, in place
+};                                                     // class StageOutput
 
 /// `--finish`: throws usage_error naming the first store of `stores` that
 /// has no file `<store's partition><extension>` under

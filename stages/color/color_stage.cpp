@@ -47,7 +47,6 @@ int ColorStage::run(const StageContext& ctx)
         m_common.partitions.empty() ? all : simplify::select_stores(all, m_common.partitions, m_common.input);
     const Manifest ingest = read_manifest(m_common.input, "ingest");
     simplify::StageOutput out(m_common, {m_common.input}, name);
-    log_removed_leftovers(ctx.log, out.removed_leftovers());
     json manifest = new_manifest("color", versions());
     add_input(manifest, "ingest", ingest);
     manifest["options"] = m_common.manifest_options();
@@ -56,6 +55,7 @@ int ColorStage::run(const StageContext& ctx)
             ctx.log.info("color: removed " + p.string() + " (a store or tolerance this run no longer has)");
         }
         out.commit(manifest_text(manifest));
+        log_removed_leftovers(ctx.log, out.removed_leftovers());
         std::printf("color: %s holds the colours of all %zu stores\n", m_common.output.c_str(), all.size());
         return exit_ok;
     }
@@ -111,6 +111,7 @@ int ColorStage::run(const StageContext& ctx)
     report["tolerances"] = std::move(tols);
     out.write_report(report.dump(2) + "\n");
     out.commit(manifest_text(manifest));
+    log_removed_leftovers(ctx.log, out.removed_leftovers());
     std::printf("color: %zu stores\n", stores.size());
     for (size_t ti = 0; ti < totals.size(); ++ti) {
         std::printf("  eps %g m: %zu tiles, %zu splits, classes max %u\n", m_common.tolerances[ti], totals[ti].tiles,

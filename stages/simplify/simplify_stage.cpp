@@ -105,13 +105,13 @@ int SimplifyStage::run(const StageContext& ctx)
         points_sha256 = sha256_file(m_points);
     }
     StageOutput out(m_common, reads, name);
-    log_removed_leftovers(ctx.log, out.removed_leftovers());
     const std::string manifest = manifest_text(manifest_json(ingest, colored, points_sha256));
     if (m_common.finish) {
         for (const auto& p : finish_in_place(out.path(), all, m_common.tolerances, ".tlc")) {
             ctx.log.info("simplify: removed " + p.string() + " (a store or tolerance this run no longer has)");
         }
         out.commit(manifest);
+        log_removed_leftovers(ctx.log, out.removed_leftovers());
         std::printf("simplify: %s holds the simplified stores of all %zu stores\n", m_common.output.c_str(),
                     all.size());
         return exit_ok;
@@ -145,6 +145,7 @@ int SimplifyStage::run(const StageContext& ctx)
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
     out.write_report(report_json(stores.size(), context->describe(), totals, seconds).dump(2) + "\n");
     out.commit(manifest);
+    log_removed_leftovers(ctx.log, out.removed_leftovers());
     print_summary(stores.size(), context->describe(), totals, seconds);
     return exit_ok;
 }

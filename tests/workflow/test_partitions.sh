@@ -84,6 +84,12 @@ sed -i 's/^description: .*/description: the same tracts, described again/' p.yam
 wf >r3.out 2>&1 || fail "a rerun with a new description failed"
 grep -q "Nothing to be done" r3.out || fail "a new description ran jobs: $(cat r3.out)"
 
+# A workflow section the pipeline cannot use: one line, exit 2.
+sed 's/job_mb: 0.001/job_mb: lots/' p.yaml >badwf.yaml
+"$repo/scripts/workflow" badwf.yaml >badwf.out 2>&1
+[ $? = 2 ] || fail "a word for workflow.job_mb did not exit 2"
+grep -q "'workflow.job_mb' must be a number > 0, not 'lots'" badwf.out || fail "no message for job_mb: $(cat badwf.out)"
+
 # 3. A new pack.tile_mb: pack, verify and render only.
 echo "pack: {tile_mb: 2}" >>p.yaml
 wf >r4.out 2>&1 || fail "a rerun with a new tile_mb failed"
