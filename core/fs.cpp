@@ -251,17 +251,17 @@ bool same_bytes(const fs::path& a, const fs::path& b)
     return !fa.bad() && !fb.bad() && fa.eof() && fb.eof();
 }
 
-/// Each file under `fresh` whose bytes equal the file at the same place
-/// under `old_root` gets that file's modification time (nothing on error:
-/// a time is only a hint to the engine).
-void keep_times(const fs::path& fresh, const fs::path& old_root)
+/// Each file `*<extension>` under `fresh` whose bytes equal the file at the
+/// same place under `old_root` gets that file's modification time (nothing
+/// on error: a time is only a hint to the engine).
+void keep_times(const fs::path& fresh, const fs::path& old_root, const std::string& extension)
 {
     std::error_code ec;
     if (!fs::is_directory(old_root, ec)) {
         return;
     }
     for (fs::recursive_directory_iterator it(fresh, ec), end; !ec && it != end; it.increment(ec)) {
-        if (!it->is_regular_file(ec)) {
+        if (!it->is_regular_file(ec) || !it->path().filename().string().ends_with(extension)) {
             continue;
         }
         const fs::path old = old_root / fs::relative(it->path(), fresh, ec);
@@ -323,8 +323,8 @@ void OutputDir::commit()
     for (const fs::path& f : folders) {
         sync_to_disk(f);
     }
-    if (m_keep_times) {
-        keep_times(m_tmp, m_final);
+    if (!m_keep_times.empty()) {
+        keep_times(m_tmp, m_final, m_keep_times);
     }
     fs::path old;
     if (fs::exists(m_final)) {

@@ -73,13 +73,15 @@ class OutputDir {
     const std::filesystem::path& path() const noexcept { return m_tmp; }
     /// Move the temporary folder into place, replacing an old one.
     void commit();
-    /// At commit(), give each new file whose bytes equal the old output's
-    /// file at the same place that file's modification time. A workflow
-    /// engine that compares times (Snakemake) then reruns only the jobs of
-    /// the files that changed: after one county's input changed, ingest
-    /// rewrites its folder whole, and the stores of other regions keep
-    /// their times. Costs a read of both files where the sizes match.
-    void keep_times_of_unchanged_files() noexcept { m_keep_times = true; }
+    /// At commit(), give each new file named `*<extension>` whose bytes
+    /// equal the old output's file at the same place that file's
+    /// modification time. A workflow engine that compares times (Snakemake)
+    /// then reruns only the jobs of the files that changed: after one
+    /// county's input changed, ingest rewrites its folder whole, and the
+    /// stores of other regions keep their times. Other files (the manifest
+    /// that tells the engine the stage ran) get new times. Costs a read of
+    /// both files where the sizes match.
+    void keep_times_of_unchanged_files(std::string extension) { m_keep_times = std::move(extension); }
     /// What dead runs had left beside the output, removed by the
     /// constructor (remove_dead_leftovers), for the stage to log.
     const std::vector<std::filesystem::path>& removed_leftovers() const noexcept { return m_removed; }
@@ -89,7 +91,7 @@ class OutputDir {
     std::filesystem::path m_tmp;
     std::vector<std::filesystem::path> m_removed;
     bool m_committed = false;
-    bool m_keep_times = false;
-}; // class OutputDir
+    std::string m_keep_times; ///< the extension of files whose times are kept; empty: none
+};                            // class OutputDir
 
 } // namespace tigerlod

@@ -372,8 +372,8 @@ int IngestStage::run(const StageContext& ctx)
         reads.emplace_back(f.first);
     }
     OutputDir out(m_output, m_overwrite, reads);
-    out.keep_times_of_unchanged_files(); // stores of unchanged regions keep their times: the engine reruns only the
-                                         // others
+    // Stores of unchanged regions keep their times: the engine reruns only the others' jobs.
+    out.keep_times_of_unchanged_files(".tlc");
     log_removed_leftovers(ctx.log, out.removed_leftovers());
     for (const auto& l : cfg.levels) {
         fs::create_directories(out.path() / l.name);

@@ -134,6 +134,20 @@ touch dc.shp.zip # the fix: ingest writes the store again
 wf >r9.out 2>&1 || fail "the rerun after the fix failed: $(tail -30 r9.out)"
 [ "$(ran r9.out)" = "color tract/g44005 simplify tract/g44005 " ] || fail "the rerun after the fix ran: $(ran r9.out)"
 grep -q "verify: CLEAN" r9.out || fail "the tree after the fix is not clean"
+# ... and after it, nothing is left to do.
+wf >r10.out 2>&1 || fail "a run after the fix failed"
+grep -q "Nothing to be done" r10.out || fail "a run after the fix ran jobs again: $(cat r10.out)"
+
+# 7. An input with other bytes and the same map (a column ingest does not
+# read added): ingest runs and no store changes, so no group job runs; the
+# stages' manifests follow ingest's new one, so pack and verify take them.
+ogr2ogr -f "ESRI Shapefile" dc_again.shp.zip "/vsizip/dc.shp.zip" -nln dc -sql "SELECT *, 'x' AS NOTE FROM dc" \
+  >/dev/null && mv dc_again.shp.zip dc.shp.zip
+wf >r11.out 2>&1 || fail "a run after a rezipped input failed: $(tail -30 r11.out)"
+[ -z "$(ran r11.out)" ] || fail "a rezipped input reran group jobs: $(ran r11.out)"
+grep -q "verify: CLEAN" r11.out || fail "the tree after a rezipped input is not clean"
+wf >r12.out 2>&1 || fail "a run after the rezipped input failed"
+grep -q "Nothing to be done" r12.out || fail "a run after the rezipped input ran jobs again: $(cat r12.out)"
 
 if [ "$failures" -gt 0 ]; then
   echo "$failures failure(s)"

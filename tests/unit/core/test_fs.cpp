@@ -142,17 +142,19 @@ TEST_F(Fs, AnOutputFolderKeepsTheTimesOfFilesWhoseBytesDidNotChange)
         write_file(out.path() / "same.tlc", "abc");
         write_file(out.path() / "changed.tlc", "abc");
         write_file(out.path() / "longer.tlc", "abc");
+        write_file(out.path() / "manifest.json", "{}");
         fs::create_directories(out.path() / "level");
         write_file(out.path() / "level" / "deep.tlc", "deep");
         out.commit();
     }
     const auto old = fs::file_time_type::clock::now() - std::chrono::hours(24);
-    for (const char* f : {"same.tlc", "changed.tlc", "longer.tlc", "level/deep.tlc"}) {
+    for (const char* f : {"same.tlc", "changed.tlc", "longer.tlc", "manifest.json", "level/deep.tlc"}) {
         fs::last_write_time(m_dir / "out" / f, old);
     }
     OutputDir out(m_dir / "out", true);
-    out.keep_times_of_unchanged_files();
+    out.keep_times_of_unchanged_files(".tlc");
     write_file(out.path() / "same.tlc", "abc");
+    write_file(out.path() / "manifest.json", "{}"); // the same bytes, another name: a new time
     write_file(out.path() / "changed.tlc", "abd");
     write_file(out.path() / "longer.tlc", "abcd");
     write_file(out.path() / "new.tlc", "abc");
@@ -164,6 +166,7 @@ TEST_F(Fs, AnOutputFolderKeepsTheTimesOfFilesWhoseBytesDidNotChange)
     EXPECT_GT(fs::last_write_time(m_dir / "out" / "changed.tlc"), old);
     EXPECT_GT(fs::last_write_time(m_dir / "out" / "longer.tlc"), old);
     EXPECT_GT(fs::last_write_time(m_dir / "out" / "new.tlc"), old);
+    EXPECT_GT(fs::last_write_time(m_dir / "out" / "manifest.json"), old);
     std::ifstream in(m_dir / "out" / "changed.tlc");
     std::string text;
     in >> text;
