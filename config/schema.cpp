@@ -44,8 +44,9 @@ std::vector<Key> input_keys()
               "prefix for which no group holds more than this many MB of stores",
               "32", {0, 1e6, true}),
         entry("workflow.job_threads", Type::integer,
-              "threads of each color and simplify job (`--threads`; Snakemake runs fewer where it has fewer "
-              "cores): the pipeline's jobs take this, not `simplify.threads`; outputs do not depend on it",
+              "threads of each simplify job (`--threads`; Snakemake runs fewer where it has fewer cores; a color "
+              "job takes one, the colouring being one thread): the pipeline's jobs take this, not "
+              "`simplify.threads`; outputs do not depend on it",
               "2", integer(1, 1024)),
         section("dataset", "what to read"),
         entry("dataset.kind", Type::choice,
