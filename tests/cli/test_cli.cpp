@@ -488,6 +488,10 @@ TEST_F(Cli, EveryValidatedConfigKeyRejectsBadValues)
         {"simplify: {tolerance: [1]}\n", "unknown key 'simplify.tolerance'"},
         {"simplify: {lazy: sometimes}\n", "'simplify.lazy' must be true or false"},
         {"pack: {tile_size: 4}\n", "unknown key 'pack.tile_size'"},
+        {"regions: {county: 51063}\n", "'regions' must be a code or a list of codes, e.g. [51063, 51067]"},
+        {"workflow: {job_mb: 0}\n", "'workflow.job_mb' must be in (0, 1e+06]"},
+        {"workflow: {job_threads: 1.5}\n", "'workflow.job_threads' must be an integer"},
+        {"workflow: {jobs: 4}\n", "unknown key 'workflow.jobs'"},
         // Values the pipeline turns into flags: the wrong type would reach a
         // stage as a malformed flag (`--tolerances 1,,4`) or not at all.
         {"simplify: {tolerances_m: [1, x, 4]}\n",
