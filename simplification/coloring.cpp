@@ -85,8 +85,155 @@ std::vector<Seg> make_segments(std::span<const ChainGeom> chains, double pixel, 
     return segs;
 }
 
-/// Conflict graph: chains i != j with segments closer than r_i + r_j.
-std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> chains, const std::vector<Seg>& segs)
+/// The distance test of the conflict graph on chains coarsened first.
+///
+/// A run of a chain's segments whose inner vertices all lie within delta of
+/// the run's first point P becomes one coarse segment from P to the run's
+/// last point q. The Hausdorff distance between the run and that segment is
+/// at most delta, both ways: every inner vertex is within delta of P, and
+/// the run's last segment (v, q) has both ends within delta of P q, so lies
+/// within delta of it (the delta-neighbourhood of a segment is convex); and
+/// the point (1 - t) P + t q is (1 - t)|P - v| <= delta from (1 - t) v + t q,
+/// a point of that last segment. So two chains whose coarse segments come
+/// within d of each other are within d +- (delta_a + delta_b) themselves: a
+/// pair of coarse segments decides the pair of chains at once when d is
+/// clearly on one side of r_a + r_b, and only pairs of coarse segments near
+/// the threshold have their own segments tested, with the exact test the
+/// graph always used (the outcome is the same; the slack covers rounding).
+/// A chain is coarsened within r / 8: at 2 km a block's chain of a few
+/// hundred metres is one or two segments, at a metre nothing changes.
+class ChainDistance {
+  public:
+    ChainDistance(std::span<const ChainGeom> chains, const std::vector<Seg>& segs) : m_segs(segs)
+    {
+        m_begin.assign(chains.size() + 1, 0);
+        m_delta.assign(chains.size(), 0.0);
+        m_r.assign(chains.size(), 0.0);
+        m_box.resize(chains.size());
+        size_t i = 0;
+        for (uint32_t c = 0; c < chains.size(); ++c) {
+            m_begin[c] = m_coarse.size();
+            const size_t first = i;
+            while (i < segs.size() && segs[i].chain == c) {
+                m_box[c].add(segs[i]);
+                m_r[c] = segs[i].r;
+                ++i;
+            }
+            coarsen(c, first, i);
+        }
+        m_begin[chains.size()] = m_coarse.size();
+    }
+
+    /// Whether chains a and b have segments closer than r_a + r_b.
+    bool close(uint32_t a, uint32_t b)
+    {
+        const double limit = m_r[a] + m_r[b];
+        const double spread = m_delta[a] + m_delta[b];
+        const double slack = 1e-9 * limit + 1e-6;
+        const double near = limit + spread + slack; // coarse pairs farther apart hold no close pair
+        m_unsure.clear();
+        for (size_t i = m_begin[a]; i < m_begin[a + 1]; ++i) {
+            const Coarse& s = m_coarse[i];
+            if (gap(s.box, m_box[b]) >= near) {
+                continue;
+            }
+            for (size_t j = m_begin[b]; j < m_begin[b + 1]; ++j) {
+                const Coarse& t = m_coarse[j];
+                if (gap(s.box, t.box) >= near) {
+                    continue;
+                }
+                const double d = seg_seg_distance(s.seg, t.seg);
+                if (d + spread + slack < limit) {
+                    return true;
+                }
+                if (d < near) {
+                    m_unsure.emplace_back(i, j);
+                }
+            }
+        }
+        for (const auto& [i, j] : m_unsure) {
+            const Coarse &s = m_coarse[i], &t = m_coarse[j];
+            for (uint32_t u = s.first; u < s.last; ++u) {
+                const Seg& fu = m_segs[u];
+                for (uint32_t v = t.first; v < t.last; ++v) {
+                    const Seg& fv = m_segs[v];
+                    ReachBox bu, bv;
+                    bu.add(fu);
+                    bv.add(fv);
+                    if (bu.meets(bv) && seg_seg_distance(fu, fv) < limit) {
+                        return true;
+                    }
+                }
+            }
+        }
+        return false;
+    }
+
+  private:
+    struct Box {
+        double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
+        void add(const Seg& s) noexcept
+        {
+            x0 = std::min({x0, s.ax, s.bx});
+            y0 = std::min({y0, s.ay, s.by});
+            x1 = std::max({x1, s.ax, s.bx});
+            y1 = std::max({y1, s.ay, s.by});
+        }
+    };
+    struct Coarse {
+        Seg seg;
+        Box box;
+        uint32_t first, last; ///< the chain's segments it stands for, [first, last)
+    };
+
+    /// A lower bound of the distance between two boxes (the larger axis gap).
+    static double gap(const Box& p, const Box& q) noexcept
+    {
+        return std::max({p.x0 - q.x1, q.x0 - p.x1, p.y0 - q.y1, q.y0 - p.y1, 0.0});
+    }
+
+    /// Coarse segments of chain c from its segments [first, end), which
+    /// follow one another except where a halo chain's parts out of reach
+    /// were left out (a new run starts there).
+    void coarsen(uint32_t c, size_t first, size_t end)
+    {
+        const double target = m_r[c] / 8;
+        size_t i = first;
+        while (i < end) {
+            const Seg& s0 = m_segs[i];
+            double far = 0; // of the inner vertices from P
+            size_t j = i;
+            for (; j + 1 < end && m_segs[j + 1].ax == m_segs[j].bx && m_segs[j + 1].ay == m_segs[j].by; ++j) {
+                const double d = std::hypot(m_segs[j].bx - s0.ax, m_segs[j].by - s0.ay);
+                if (d > target) {
+                    break;
+                }
+                far = std::max(far, d);
+            }
+            Coarse k{{s0.ax, s0.ay, m_segs[j].bx, m_segs[j].by, c, m_r[c]}, {}, uint32_t(i), uint32_t(j + 1)};
+            k.box.add(k.seg);
+            m_coarse.push_back(k);
+            m_delta[c] = std::max(m_delta[c], far);
+            i = j + 1;
+        }
+    }
+
+    const std::vector<Seg>& m_segs;
+    std::vector<Coarse> m_coarse;
+    std::vector<size_t> m_begin; ///< first coarse segment of each chain
+    std::vector<double> m_delta; ///< how far each chain's coarse segments may be from it
+    std::vector<double> m_r;
+    std::vector<Box> m_box; ///< of each chain's segments
+    std::vector<std::pair<size_t, size_t>> m_unsure;
+}; // class ChainDistance
+
+/// Conflict graph: chains i != j, one of them owned, with segments closer
+/// than r_i + r_j. Two halo chains are never joined: only owned chains'
+/// shortcuts are tested in the stencil, and a test can be fooled only by a
+/// chain of its own class whose tent reaches it (coloring.hpp). The pairs
+/// to test come from a cell grid: two chains closer than r_i + r_j have
+/// segments in one cell, whose boxes grown by their reach meet there.
+std::vector<std::vector<uint32_t>> graph_of(std::span<const ChainGeom> chains, const std::vector<Seg>& segs)
 {
     double rmax = 0, length = 0;
     for (const auto& s : segs) {
@@ -114,20 +261,28 @@ std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> cha
                     [&](int64_t x, int64_t y) { entries.emplace_back(cells.key(x, y), i); });
     }
     radix_sort_pairs(entries); // each cell's segments in index order, so by chain
-    std::unordered_set<uint64_t> known;
+    ChainDistance distance(chains, segs);
+    std::unordered_set<uint64_t> known; // pairs decided
     std::vector<std::pair<uint32_t, uint32_t>> edges;
     std::vector<size_t> run; // where each chain's entries start in the cell, and its end
     std::vector<ReachBox> boxes;
     for (size_t b = 0; b < entries.size();) {
         size_t e = b;
         run.clear();
+        bool any_owned = false;
         while (e < entries.size() && entries[e].first == entries[b].first) {
-            if (e == b || segs[entries[e].second].chain != segs[entries[e - 1].second].chain) {
+            const uint32_t c = segs[entries[e].second].chain;
+            if (e == b || c != segs[entries[e - 1].second].chain) {
                 run.push_back(e);
+                any_owned = any_owned || chains[c].owned;
             }
             ++e;
         }
         run.push_back(e);
+        if (!any_owned) {
+            b = e;
+            continue;
+        }
         // Each chain's segments in the cell as a box grown by their reach: two
         // chains whose boxes miss each other have no close pair there (dense
         // maps, contours, put dozens of chains in a cell).
@@ -139,36 +294,14 @@ std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> cha
             }
             boxes.push_back(bx);
         }
-        // Each pair of chains in the cell once: the first close pair of
-        // their segments makes the edge.
         for (size_t p = 0; p + 1 < run.size(); ++p) {
             const uint32_t lo = segs[entries[run[p]].second].chain;
             for (size_t q = p + 1; q + 1 < run.size(); ++q) {
-                if (!boxes[p].meets(boxes[q])) {
-                    continue;
-                }
                 const uint32_t hi = segs[entries[run[q]].second].chain;
-                const uint64_t key = (uint64_t{lo} << 32) | hi;
-                if (known.count(key)) {
+                if ((!chains[lo].owned && !chains[hi].owned) || !boxes[p].meets(boxes[q])) {
                     continue;
                 }
-                bool close = false;
-                for (size_t i = run[p]; i < run[p + 1] && !close; ++i) {
-                    const Seg& s = segs[entries[i].second];
-                    ReachBox sb;
-                    sb.add(s);
-                    if (!sb.meets(boxes[q])) {
-                        continue;
-                    }
-                    for (size_t j = run[q]; j < run[q + 1] && !close; ++j) {
-                        const Seg& t = segs[entries[j].second];
-                        ReachBox tb;
-                        tb.add(t);
-                        close = sb.meets(tb) && seg_seg_distance(s, t) < s.r + t.r;
-                    }
-                }
-                if (close) {
-                    known.insert(key);
+                if (known.insert((uint64_t{lo} << 32) | hi).second && distance.close(lo, hi)) {
                     edges.emplace_back(lo, hi);
                 }
             }
@@ -308,6 +441,12 @@ bool dsatur(const std::vector<std::vector<uint32_t>>& adj, uint32_t max_colors, 
     return true;
 }
 
+std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> chains, double pixel,
+                                                  const ColorOptions& opt)
+{
+    return graph_of(chains, make_segments(chains, pixel, opt));
+}
+
 double tile_pixel(std::span<const double> eps, const ColorOptions& opt) noexcept
 {
     double eps_min = 0;
@@ -331,7 +470,7 @@ ColorResult color_tiles(std::span<const ChainGeom> chains, const ColorOptions& o
         return out;
     }
     const auto segs = make_segments(chains, out.pixel, opt);
-    const auto adj = conflict_graph(chains, segs);
+    const auto adj = graph_of(chains, segs);
     for (const auto& l : adj) {
         out.conflict_edges += l.size();
     }

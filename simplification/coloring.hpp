@@ -2,8 +2,10 @@
 /// @file coloring.hpp
 /// Render tiles and stencil classes (tigerlod-color): the tiles a store is
 /// drawn in at one tolerance, and per tile a colouring of the chains that
-/// touch it into classes 1..max_classes such that chains whose tolerance
-/// neighbourhoods can overlap never share a class.
+/// touch it into classes 1..max_classes such that an owned chain never
+/// shares a class with a chain whose tolerance neighbourhood can overlap its
+/// own. Two halo chains may: only owned chains' shortcuts are tested in the
+/// stencil, and a test is fooled only by a tent of the tested chain's class.
 
 #include "core/errors.hpp"
 #include "core/geometry.hpp"
@@ -86,6 +88,13 @@ ColorResult color_tiles(std::span<const ChainGeom> chains, const ColorOptions& o
 
 /// L2 distance between segments ab and cd (0 if they meet), in doubles.
 double segment_distance(GridPoint a, GridPoint b, GridPoint c, GridPoint d) noexcept;
+
+/// The conflict graph as sorted adjacency lists: chains i != j, at least one
+/// of them owned, with segments that take part (ChainGeom::keep) closer than
+/// reach_radius(eps_i) + reach_radius(eps_j) (segment_distance, exactly as
+/// a test of every pair would find).
+std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> chains, double pixel,
+                                                  const ColorOptions& opt);
 
 /// DSatur colouring of a graph given as sorted adjacency lists; colours from
 /// 1. Returns false if more than max_colors would be needed.

@@ -825,6 +825,144 @@ TEST(Color, ConflictingChainsGetDifferentClassesAndTilesSplitBeforeFailing)
     }
 }
 
+// Only owned chains' shortcuts are tested in the stencil, so two halo chains
+// need no edge however close they are; a halo chain near an owned one does.
+TEST(Color, TwoHaloChainsAreNeverJoinedAHaloChainAndAnOwnedOneAre)
+{
+    const Pts a{{0, 0}, {1000, 0}};
+    const Pts near_a{{0, 250}, {1000, 250}};                            // closer than 2 x (100 + 2 pixels of 25)
+    const Pts h1{{0, 5000}, {1000, 5000}}, h2{{0, 5100}, {1000, 5100}}; // close to each other only
+    std::vector<ChainGeom> g{{a, 100, true}, {near_a, 100, false}, {h1, 100, false}, {h2, 100, false}};
+    ColorOptions o;
+    const auto adj = conflict_graph(g, tile_pixel(std::vector<double>{100}, o), o);
+    ASSERT_EQ(adj.size(), 4U);
+    EXPECT_EQ(adj[0], std::vector<uint32_t>{1});
+    EXPECT_EQ(adj[1], std::vector<uint32_t>{0});
+    EXPECT_TRUE(adj[2].empty());
+    EXPECT_TRUE(adj[3].empty());
+    g[2].owned = true; // now h1's shortcuts are tested: h2 must differ from it
+    const auto adj2 = conflict_graph(g, tile_pixel(std::vector<double>{100}, o), o);
+    EXPECT_EQ(adj2[2], std::vector<uint32_t>{3});
+    const auto r = color_tiles(g, o, 1);
+    EXPECT_EQ(r.conflict_edges, 2U);
+}
+
+// The graph coarsens chains within an eighth of their reach and tests the
+// segments of a pair only where the coarse distance is near the threshold:
+// it must find exactly the pairs a test of every pair of segments finds. Wiggly
+// chains with steps far below and above the coarsening radius, gaps in the
+// halo's parts, single points, mixed tolerances, and pairs placed at the
+// threshold exactly (1200 is not closer than 1200) and one unit inside it.
+TEST(Color, ConflictGraphIsExactlyTheTestOfEveryPairOfSegments)
+{
+    std::mt19937 rng(29);
+    std::uniform_int_distribution<int> coin(0, 9), place(0, 12000), tiny(-40, 40), jump(-1500, 1500);
+    const std::vector<double> eps_choices{400, 800, 1600};
+    ColorOptions o;
+    size_t edges_seen = 0;
+    for (int trial = 0; trial < 12; ++trial) {
+        std::vector<Pts> pts;
+        std::vector<double> eps;
+        std::vector<std::vector<uint8_t>> keep;
+        std::vector<bool> owned;
+        for (int c = 0; c < 40; ++c) {
+            Pts p;
+            GridPoint at{place(rng), place(rng)};
+            const int n = coin(rng) == 0 ? 1 : 2 + coin(rng) * 30;
+            for (int i = 0; i < n; ++i) {
+                p.push_back(at);
+                at = coin(rng) < 8 ? GridPoint{at.x + tiny(rng), at.y + tiny(rng)}
+                                   : GridPoint{at.x + jump(rng), at.y + jump(rng)};
+            }
+            pts.push_back(p);
+            eps.push_back(eps_choices[size_t(coin(rng)) % 3]);
+            owned.push_back(coin(rng) < 4);
+            std::vector<uint8_t> k;
+            if (!owned.back() && coin(rng) < 5 && p.size() > 1) { // a halo chain with parts left out
+                for (size_t i = 0; i + 1 < p.size(); ++i) {
+                    k.push_back(coin(rng) < 7 ? 1 : 0);
+                }
+            }
+            keep.push_back(k);
+        }
+        // Wiggly chains and their copies moved by about the threshold (eps
+        // 400: reach 600, 1200 for the pair), so that many pairs are decided
+        // near it, where the coarse distance alone cannot tell.
+        std::uniform_int_distribution<int> offset(1100, 1300);
+        for (int c = 0; c < 10; ++c) {
+            Pts p;
+            GridPoint at{100000 + c * 6000, 100000};
+            for (int i = 0; i < 60; ++i) {
+                p.push_back(at);
+                at = {at.x + 1 + coin(rng) * 5, at.y + tiny(rng)};
+            }
+            const int dy = offset(rng), dx = tiny(rng);
+            Pts q;
+            for (const GridPoint v : p) {
+                q.push_back({v.x + dx, v.y + dy});
+            }
+            for (const Pts* chain : {&p, &q}) {
+                pts.push_back(*chain);
+                eps.push_back(400);
+                owned.push_back(chain == &p);
+                keep.emplace_back();
+            }
+        }
+        // Straight pairs at eps 400 (pixel 100, reach 600): 1200 apart and
+        // 1199 apart, the first owned.
+        for (const int d : {1200, 1199}) {
+            const int x = 200000, y = 200000 + (d - 1199) * 20000; // far from the walks and each other
+            pts.push_back({{x, y}, {x + 2000, y}});
+            pts.push_back({{x + 500, y + d}, {x + 2500, y + d}});
+            for (int i = 0; i < 2; ++i) {
+                eps.push_back(400);
+                owned.push_back(i == 0);
+                keep.emplace_back();
+            }
+        }
+        std::vector<ChainGeom> g;
+        for (size_t c = 0; c < pts.size(); ++c) {
+            g.push_back({pts[c], eps[c], owned[c], keep[c]});
+        }
+        const double pixel = tile_pixel(eps, o);
+        ASSERT_EQ(pixel, 100.0);
+        const auto adj = conflict_graph(g, pixel, o);
+        for (uint32_t i = 0; i < g.size(); ++i) {
+            for (uint32_t j = i + 1; j < g.size(); ++j) {
+                bool close = false;
+                const double limit = reach_radius(eps[i], pixel, o) + reach_radius(eps[j], pixel, o);
+                if (owned[i] || owned[j]) {
+                    auto segs_of = [&](uint32_t c) {
+                        std::vector<std::pair<GridPoint, GridPoint>> s;
+                        for (size_t k = 0; k + 1 < pts[c].size(); ++k) {
+                            if (takes_part(keep[c], k)) {
+                                s.emplace_back(pts[c][k], pts[c][k + 1]);
+                            }
+                        }
+                        if (pts[c].size() == 1) {
+                            s.emplace_back(pts[c][0], pts[c][0]);
+                        }
+                        return s;
+                    };
+                    for (const auto& [a, b] : segs_of(i)) {
+                        for (const auto& [c, d] : segs_of(j)) {
+                            close = close || segment_distance(a, b, c, d) < limit;
+                        }
+                    }
+                }
+                const bool edge = std::binary_search(adj[i].begin(), adj[i].end(), j);
+                EXPECT_EQ(edge, close) << "trial " << trial << ", chains " << i << " and " << j;
+                EXPECT_EQ(edge, std::binary_search(adj[j].begin(), adj[j].end(), i));
+                edges_seen += edge;
+            }
+        }
+        const size_t n = g.size();
+        EXPECT_TRUE(adj[n - 4].empty()) << "1200 apart is not closer than 1200";
+        EXPECT_EQ(adj[n - 2], std::vector<uint32_t>{uint32_t(n - 1)});
+    }
+    EXPECT_GT(edges_seen, 500U) << "the maps must have had pairs to find";
+}
+
 // The partition contract's points (formats/chains/SPEC.md): every unit an
 // owned chain bounds, whoever owns it, has its internal point in the store.
 TEST(Simplify, AStoreMustHoldThePointOfEveryUnitItsOwnChainsBound)
