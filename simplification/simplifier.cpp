@@ -517,6 +517,9 @@ class StoreSimplifier {
                 const auto iv = a == b ? std::optional{std::pair{0.0, 1.0}} : capsule_interval(a, b, c, d, reach);
                 const auto part = iv ? *iv : std::pair{0.0, 1.0}; // rounding: take all of it
                 near = near ? std::pair{std::min(near->first, part.first), std::max(near->second, part.second)} : part;
+                if (near->first == 0 && near->second == 1) {
+                    break; // the whole segment: nothing can add to it (coarse tolerances reach here at once)
+                }
             }
         });
         return near;
