@@ -186,7 +186,7 @@ std::vector<fs::path> remove_dead_leftovers(const fs::path& folder, std::string_
     return removed;
 }
 
-void write_file_atomic(const fs::path& path, std::string_view data)
+void write_file_atomic_unsynced_folder(const fs::path& path, std::string_view data)
 {
     const fs::path tmp = temp_sibling(path, ".tmp-");
     write_to(tmp, path, data);
@@ -196,6 +196,11 @@ void write_file_atomic(const fs::path& path, std::string_view data)
         fs::remove(tmp, ec);
         throw environment_error(path.string() + ": cannot rename into place: " + ec.message());
     }
+}
+
+void write_file_atomic(const fs::path& path, std::string_view data)
+{
+    write_file_atomic_unsynced_folder(path, data);
     sync_to_disk(path.parent_path());
 }
 

@@ -43,6 +43,10 @@ void sync_to_disk(const std::filesystem::path& path);
 /// environment_error on any I/O failure; the temporary is removed then.
 void write_file_atomic(const std::filesystem::path& path, std::string_view data);
 
+/// write_file_atomic without the sync of the folder: for many files of one
+/// folder, whose writer syncs the folder once after the last of them.
+void write_file_atomic_unsynced_folder(const std::filesystem::path& path, std::string_view data);
+
 /// Write `data` to `path` directly, for files inside an OutputDir: the
 /// folder, renamed into place whole, is what keeps them from being seen
 /// half-written. Throws environment_error on any I/O failure; a file it

@@ -133,14 +133,7 @@ void StageOutput::write(const fs::path& relative, std::string_view data) const
             m_removed.insert(m_removed.end(), removed.begin(), removed.end());
         }
     }
-    const fs::path tmp = temp_sibling(file, ".tmp-");
-    write_file(tmp, data); // synced
-    std::error_code ec;
-    fs::rename(tmp, file, ec);
-    if (ec) {
-        fs::remove(tmp, ec);
-        throw environment_error(file.string() + ": cannot rename into place: " + ec.message());
-    }
+    write_file_atomic_unsynced_folder(file, data); // the folders are synced once, at commit
 }
 
 void StageOutput::write_report(std::string_view data) const
