@@ -106,61 +106,88 @@ class ChainDistance {
   public:
     ChainDistance(std::span<const ChainGeom> chains, const std::vector<Seg>& segs) : m_segs(segs)
     {
-        m_begin.assign(chains.size() + 1, 0);
+        m_first.assign(chains.size() + 1, 0);
         m_delta.assign(chains.size(), 0.0);
         m_r.assign(chains.size(), 0.0);
-        m_box.resize(chains.size());
-        size_t i = 0;
-        for (uint32_t c = 0; c < chains.size(); ++c) {
-            m_begin[c] = m_coarse.size();
-            const size_t first = i;
-            while (i < segs.size() && segs[i].chain == c) {
-                m_box[c].add(segs[i]);
-                m_r[c] = segs[i].r;
-                ++i;
-            }
-            coarsen(c, first, i);
+        for (uint32_t i = 0; i < segs.size(); ++i) {
+            m_r[segs[i].chain] = segs[i].r;
+            m_first[segs[i].chain + 1] = i + 1;
         }
-        m_begin[chains.size()] = m_coarse.size();
+        for (size_t c = 0; c < chains.size(); ++c) {
+            m_first[c + 1] = std::max(m_first[c + 1], m_first[c]);
+        }
+        // Where coarsening keeps most segments (a metre's tolerance on a
+        // county), the graph tests the segments themselves: the same result,
+        // without the coarse segments' cost (tract ladder at 1-64 m).
+        size_t count = 0;
+        for (uint32_t c = 0; c < chains.size(); ++c) {
+            coarsen(c, [&](uint32_t, uint32_t, double) { ++count; });
+        }
+        if (10 * count > 7 * segs.size()) {
+            return;
+        }
+        m_coarse_of.reserve(segs.size());
+        for (uint32_t c = 0; c < chains.size(); ++c) {
+            coarsen(c, [&](uint32_t first, uint32_t last, double far) {
+                m_coarse_of.insert(m_coarse_of.end(), last - first, static_cast<uint32_t>(m_coarse.size()));
+                m_coarse.push_back({first, last});
+                m_delta[c] = std::max(m_delta[c], far);
+            });
+        }
     }
 
-    /// Whether chains a and b have segments closer than r_a + r_b.
-    bool close(uint32_t a, uint32_t b)
+    /// Whether chains a and b have segments closer than r_a + r_b, looking
+    /// from their segments in one cell of the grid: `ea` and `eb` index
+    /// segs, ascending; `reach_b` is the box of eb grown by r_b. False says
+    /// only that no segment of ea is that close to one of eb.
+    template <class Entries, class Grown>
+    bool close(uint32_t a, uint32_t b, const Entries& ea, const Entries& eb, const Grown& reach_b)
     {
         const double limit = m_r[a] + m_r[b];
         const double spread = m_delta[a] + m_delta[b];
         const double slack = 1e-9 * limit + 1e-6;
         const double near = limit + spread + slack; // coarse pairs farther apart hold no close pair
+        // A coarse segment of a this far from eb's box (grown by r_b) is
+        // r_b + delta_a + ... away from every segment of eb.
+        const double off = m_r[a] + m_delta[a] + slack;
         m_unsure.clear();
-        for (size_t i = m_begin[a]; i < m_begin[a + 1]; ++i) {
-            const Coarse& s = m_coarse[i];
-            if (gap(s.box, m_box[b]) >= near) {
+        uint32_t last_s = UINT32_MAX;
+        for (const auto& [cell_a, i] : ea) {
+            const uint32_t ks = coarse_of(i);
+            if (ks == last_s) {
                 continue;
             }
-            for (size_t j = m_begin[b]; j < m_begin[b + 1]; ++j) {
-                const Coarse& t = m_coarse[j];
-                if (gap(s.box, t.box) >= near) {
+            last_s = ks;
+            const Seg s = seg_of(ks);
+            const Box sbox = box_of(s);
+            if (gap(sbox, reach_b) >= off) {
+                continue;
+            }
+            uint32_t last_t = UINT32_MAX;
+            for (const auto& [cell_b, j] : eb) {
+                const uint32_t kt = coarse_of(j);
+                if (kt == last_t) {
                     continue;
                 }
-                const double d = seg_seg_distance(s.seg, t.seg);
-                if (d + spread + slack < limit) {
-                    return true;
+                last_t = kt;
+                const Seg t = seg_of(kt);
+                if (gap(sbox, box_of(t)) >= near) {
+                    continue;
                 }
-                if (d < near) {
-                    m_unsure.emplace_back(i, j);
+                const double d = seg_seg_distance(s, t);
+                if (m_coarse.empty() ? d < limit : d + spread + slack < limit) {
+                    return true; // where nothing is coarsened, the test itself
+                }
+                if (d < near && !m_coarse.empty()) {
+                    m_unsure.emplace_back(ks, kt);
                 }
             }
         }
-        for (const auto& [i, j] : m_unsure) {
-            const Coarse &s = m_coarse[i], &t = m_coarse[j];
-            for (uint32_t u = s.first; u < s.last; ++u) {
-                const Seg& fu = m_segs[u];
-                for (uint32_t v = t.first; v < t.last; ++v) {
-                    const Seg& fv = m_segs[v];
-                    ReachBox bu, bv;
-                    bu.add(fu);
-                    bv.add(fv);
-                    if (bu.meets(bv) && seg_seg_distance(fu, fv) < limit) {
+        for (const auto& [ks, kt] : m_unsure) {
+            for (uint32_t u = m_coarse[ks].first; u < m_coarse[ks].last; ++u) {
+                const Box bu = box_of(m_segs[u]);
+                for (uint32_t v = m_coarse[kt].first; v < m_coarse[kt].last; ++v) {
+                    if (gap(bu, box_of(m_segs[v])) < limit && seg_seg_distance(m_segs[u], m_segs[v]) < limit) {
                         return true;
                     }
                 }
@@ -170,61 +197,68 @@ class ChainDistance {
     }
 
   private:
+    /// A box of a segment, not grown.
     struct Box {
-        double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
-        void add(const Seg& s) noexcept
-        {
-            x0 = std::min({x0, s.ax, s.bx});
-            y0 = std::min({y0, s.ay, s.by});
-            x1 = std::max({x1, s.ax, s.bx});
-            y1 = std::max({y1, s.ay, s.by});
-        }
+        double x0, y0, x1, y1;
     };
     struct Coarse {
-        Seg seg;
-        Box box;
         uint32_t first, last; ///< the chain's segments it stands for, [first, last)
     };
 
+    static Box box_of(const Seg& s) noexcept
+    {
+        return {std::min(s.ax, s.bx), std::min(s.ay, s.by), std::max(s.ax, s.bx), std::max(s.ay, s.by)};
+    }
     /// A lower bound of the distance between two boxes (the larger axis gap).
-    static double gap(const Box& p, const Box& q) noexcept
+    template <class P, class Q> static double gap(const P& p, const Q& q) noexcept
     {
         return std::max({p.x0 - q.x1, q.x0 - p.x1, p.y0 - q.y1, q.y0 - p.y1, 0.0});
     }
-
-    /// Coarse segments of chain c from its segments [first, end), which
-    /// follow one another except where a halo chain's parts out of reach
-    /// were left out (a new run starts there).
-    void coarsen(uint32_t c, size_t first, size_t end)
+    /// The coarse segment that segment i is part of (itself where nothing is coarsened).
+    uint32_t coarse_of(uint32_t i) const noexcept { return m_coarse.empty() ? i : m_coarse_of[i]; }
+    Seg seg_of(uint32_t k) const noexcept
     {
-        const double target = m_r[c] / 8;
-        size_t i = first;
+        if (m_coarse.empty()) {
+            return m_segs[k];
+        }
+        const Seg &f = m_segs[m_coarse[k].first], &l = m_segs[m_coarse[k].last - 1];
+        return {f.ax, f.ay, l.bx, l.by, f.chain, f.r};
+    }
+
+    /// Calls emit(first, last, far) for each coarse segment of chain c: its
+    /// segments [first, last), which follow one another except where a halo
+    /// chain's parts out of reach were left out (a new run starts there), and
+    /// how far its inner vertices are from its first point.
+    template <class Emit> void coarsen(uint32_t c, Emit&& emit) const
+    {
+        const double target = m_r[c] / 8, target2 = target * target;
+        const uint32_t end = m_first[c + 1];
+        uint32_t i = m_first[c];
         while (i < end) {
             const Seg& s0 = m_segs[i];
-            double far = 0; // of the inner vertices from P
-            size_t j = i;
+            double far2 = 0; // of the inner vertices from P
+            uint32_t j = i;
             for (; j + 1 < end && m_segs[j + 1].ax == m_segs[j].bx && m_segs[j + 1].ay == m_segs[j].by; ++j) {
-                const double d = std::hypot(m_segs[j].bx - s0.ax, m_segs[j].by - s0.ay);
-                if (d > target) {
+                const double dx = m_segs[j].bx - s0.ax, dy = m_segs[j].by - s0.ay;
+                const double d2 = dx * dx + dy * dy;
+                if (d2 > target2) {
                     break;
                 }
-                far = std::max(far, d);
+                far2 = std::max(far2, d2);
             }
-            Coarse k{{s0.ax, s0.ay, m_segs[j].bx, m_segs[j].by, c, m_r[c]}, {}, uint32_t(i), uint32_t(j + 1)};
-            k.box.add(k.seg);
-            m_coarse.push_back(k);
-            m_delta[c] = std::max(m_delta[c], far);
+            // Rounded up a little: the bound must hold, not be tight.
+            emit(i, j + 1, std::sqrt(far2) * (1 + 1e-12));
             i = j + 1;
         }
     }
 
     const std::vector<Seg>& m_segs;
-    std::vector<Coarse> m_coarse;
-    std::vector<size_t> m_begin; ///< first coarse segment of each chain
-    std::vector<double> m_delta; ///< how far each chain's coarse segments may be from it
+    std::vector<uint32_t> m_first;     ///< first segment of each chain, and the end
+    std::vector<Coarse> m_coarse;      ///< empty where nothing is coarsened
+    std::vector<uint32_t> m_coarse_of; ///< per segment
+    std::vector<double> m_delta;       ///< how far each chain's coarse segments may be from it
     std::vector<double> m_r;
-    std::vector<Box> m_box; ///< of each chain's segments
-    std::vector<std::pair<size_t, size_t>> m_unsure;
+    std::vector<std::pair<uint32_t, uint32_t>> m_unsure;
 }; // class ChainDistance
 
 /// Conflict graph: chains i != j, one of them owned, with segments closer
@@ -262,7 +296,7 @@ std::vector<std::vector<uint32_t>> graph_of(std::span<const ChainGeom> chains, c
     }
     radix_sort_pairs(entries); // each cell's segments in index order, so by chain
     ChainDistance distance(chains, segs);
-    std::unordered_set<uint64_t> known; // pairs decided
+    std::unordered_set<uint64_t> known; // pairs found close
     std::vector<std::pair<uint32_t, uint32_t>> edges;
     std::vector<size_t> run; // where each chain's entries start in the cell, and its end
     std::vector<ReachBox> boxes;
@@ -294,6 +328,9 @@ std::vector<std::vector<uint32_t>> graph_of(std::span<const ChainGeom> chains, c
             }
             boxes.push_back(bx);
         }
+        auto in_cell = [&](size_t p) {
+            return std::span<const std::pair<uint64_t, uint32_t>>(entries).subspan(run[p], run[p + 1] - run[p]);
+        };
         for (size_t p = 0; p + 1 < run.size(); ++p) {
             const uint32_t lo = segs[entries[run[p]].second].chain;
             for (size_t q = p + 1; q + 1 < run.size(); ++q) {
@@ -301,7 +338,9 @@ std::vector<std::vector<uint32_t>> graph_of(std::span<const ChainGeom> chains, c
                 if ((!chains[lo].owned && !chains[hi].owned) || !boxes[p].meets(boxes[q])) {
                     continue;
                 }
-                if (known.insert((uint64_t{lo} << 32) | hi).second && distance.close(lo, hi)) {
+                const uint64_t key = (uint64_t{lo} << 32) | hi;
+                if (!known.contains(key) && distance.close(lo, hi, in_cell(p), in_cell(q), boxes[q])) {
+                    known.insert(key);
                     edges.emplace_back(lo, hi);
                 }
             }

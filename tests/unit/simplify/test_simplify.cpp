@@ -908,6 +908,22 @@ TEST(Color, ConflictGraphIsExactlyTheTestOfEveryPairOfSegments)
                 keep.emplace_back();
             }
         }
+        // A straight chain with one spike toward a straight partner 1250
+        // above: the spike (inside a coarse segment along the line) is the
+        // only part within 1200, or is not, by its height.
+        for (const int spike : {40, 60}) {
+            const int x0 = 300000 + trial * 5000, y0 = 300000 + (spike - 40) * 1000;
+            Pts line, other{{x0, y0 + 1250}, {x0 + 2000, y0 + 1250}};
+            for (int x = 0; x <= 2000; x += 5) {
+                line.push_back({x0 + x, y0 + (x == 1000 + trial * 5 ? spike : 0)});
+            }
+            for (const Pts* chain : {&line, &other}) {
+                pts.push_back(*chain);
+                eps.push_back(400);
+                owned.push_back(chain == &line);
+                keep.emplace_back();
+            }
+        }
         // Straight pairs at eps 400 (pixel 100, reach 600): 1200 apart and
         // 1199 apart, the first owned.
         for (const int d : {1200, 1199}) {
