@@ -142,7 +142,7 @@ class TreeBuilder {
                 payloads[i].push_back(std::move(p));
             }
         }
-        layout_tiles(m_tree, payloads, m_options.tile_bytes);
+        layout_tiles(m_tree, std::move(payloads), m_options.tile_bytes);
         return std::move(m_tree);
     }
 
@@ -550,7 +550,7 @@ PackedTree build_tree(const fs::path& original, const fs::path& simplified, cons
     return TreeBuilder(original, simplified, options).build();
 }
 
-void layout_tiles(PackedTree& tree, const std::vector<std::vector<std::string>>& payloads, uint64_t tile_bytes)
+void layout_tiles(PackedTree& tree, std::vector<std::vector<std::string>>&& payloads, uint64_t tile_bytes)
 {
     auto& sk = tree.skeleton;
     sk.tiles.clear();
@@ -605,10 +605,11 @@ void layout_tiles(PackedTree& tree, const std::vector<std::vector<std::string>>&
         }
         std::string bytes = datatree::tile_header(0);
         const auto tile_index = static_cast<uint32_t>(sk.tiles.size());
-        auto place = [&](const std::string& payload) {
+        auto place = [&](std::string& payload) {
             datatree::PayloadRef ref{tile_index, bytes.size(), static_cast<uint32_t>(payload.size()),
                                      crc32(std::as_bytes(std::span(payload.data(), payload.size())))};
             bytes += payload;
+            std::string().swap(payload); // in its tile now
             return ref;
         };
         for (uint32_t n : members) {

@@ -45,8 +45,9 @@ PackedTree build_tree(const std::filesystem::path& original, const std::filesyst
 
 /// Place the payloads ([node][0] the chain table, [node][1 + k] LOD k) into
 /// tiles and set the skeleton's tiles and payload references. Tiles are
-/// named by their content.
-void layout_tiles(PackedTree& tree, const std::vector<std::vector<std::string>>& payloads, uint64_t tile_bytes);
+/// named by their content. Each payload is released once it is in its tile,
+/// so the payloads and the tiles are not held twice (a national tree's peak).
+void layout_tiles(PackedTree& tree, std::vector<std::vector<std::string>>&& payloads, uint64_t tile_bytes);
 
 /// What writing a tree did.
 struct WriteStats {

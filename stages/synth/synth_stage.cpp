@@ -81,7 +81,9 @@ template <class T> json quantiles(std::vector<T> v)
     }
     for (const int p : {0, 10, 25, 50, 75, 90, 99, 100}) {
         const size_t k = size_t(double(p) / 100 * double(v.size() - 1));
-        q["p" + std::to_string(p)] = std::round(double(v[k]) * 10) / 10;
+        std::string key = "p"; // not "p" + to_string: GCC 12's -Wrestrict false positive at -O3
+        key += std::to_string(p);
+        q[key] = std::round(double(v[k]) * 10) / 10;
     }
     q["mean"] = std::round(sum / double(v.size()) * 10) / 10;
     return q;

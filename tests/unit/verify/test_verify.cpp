@@ -102,7 +102,7 @@ class Verify : public ::testing::Test {
                 }
             }
             tamper(tree, payloads);
-            pack::layout_tiles(tree, payloads, 1ULL << 30);
+            pack::layout_tiles(tree, std::move(payloads), 1ULL << 30);
         }
         pack::write_tree(dir / "tree", tree, "{}\n");
         std::string error;
