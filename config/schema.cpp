@@ -48,6 +48,10 @@ std::vector<Key> input_keys()
               "job takes one, the colouring being one thread): the pipeline's jobs take this, not "
               "`simplify.threads`; outputs do not depend on it",
               "2", integer(1, 1024)),
+        entry("workflow.render", Type::boolean,
+              "run the render job (the overview PNG and the frame-time experiment over the whole tree) after "
+              "verify; `false` for rebuilds that need the tree verified and nothing drawn",
+              "`true`"),
         section("dataset", "what to read"),
         entry("dataset.kind", Type::choice,
               "`tiger` (EDGES + FACES), `polygons` (any polygon layer: tracts, TopoJSON) or `lines` (any line "

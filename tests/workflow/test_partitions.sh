@@ -3,7 +3,8 @@
 # nightly rebuild: color and simplify run a job per group of stores; a
 # changed county reruns only the jobs of the stores that hold it, and the
 # result is byte for byte a clean build's; a new description reruns
-# nothing and a new pack.tile_mb only pack and what reads the tree;
+# nothing and a new pack.tile_mb only pack and what reads the tree (render
+# too, unless workflow.render is false);
 # --regions forces a region's jobs; a bad store fails its own jobs with its
 # message on the terminal while the others finish, and the rerun after the
 # fix does only what is left. Needs the 2010 tracts of DC and Rhode Island
@@ -96,6 +97,22 @@ wf >r4.out 2>&1 || fail "a rerun with a new tile_mb failed"
 [ -z "$(ran r4.out)" ] || fail "a new tile_mb ran group jobs: $(ran r4.out)"
 grep -q "\] ingest:" r4.out && fail "a new tile_mb ran ingest"
 grep -q "\] pack:" r4.out || fail "a new tile_mb did not run pack: $(cat r4.out)"
+
+# workflow.render: false, for rebuilds that need the tree verified and
+# nothing drawn: turning it off runs nothing; a new tile_mb then runs pack
+# and verify, not render. A word for it: exit 2, one line.
+sed -i 's/^workflow: {job_mb: 0.001}/workflow: {job_mb: 0.001, render: false}/' p.yaml
+wf >r4b.out 2>&1 || fail "a rerun with render off failed: $(tail -30 r4b.out)"
+grep -q "Nothing to be done" r4b.out || fail "turning render off ran jobs: $(cat r4b.out)"
+sed -i 's/^pack: {tile_mb: 2}/pack: {tile_mb: 3}/' p.yaml
+wf >r4c.out 2>&1 || fail "a new tile_mb with render off failed: $(tail -30 r4c.out)"
+grep -q "\] verify:" r4c.out || fail "a new tile_mb with render off did not run verify: $(cat r4c.out)"
+grep -q "\] render:" r4c.out && fail "render ran with workflow.render false"
+sed 's/render: false/render: sometimes/' p.yaml >badrender.yaml
+"$repo/scripts/workflow" badrender.yaml >badrender.out 2>&1
+[ $? = 2 ] || fail "a word for workflow.render did not exit 2"
+grep -q "'workflow.render' must be true or false, not 'sometimes'" badrender.out ||
+  fail "no message for workflow.render: $(cat badrender.out)"
 
 # 4. One county's input changed: ingest, then only that county's jobs.
 cp dc_v2.shp.zip dc.shp.zip
