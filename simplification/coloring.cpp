@@ -94,14 +94,14 @@ std::vector<Seg> make_segments(std::span<const ChainGeom> chains, double pixel, 
 /// the run's last segment (v, q) has both ends within delta of P q, so lies
 /// within delta of it (the delta-neighbourhood of a segment is convex); and
 /// the point (1 - t) P + t q is (1 - t)|P - v| <= delta from (1 - t) v + t q,
-/// a point of that last segment. So two chains whose coarse segments come
-/// within d of each other are within d +- (delta_a + delta_b) themselves: a
-/// pair of coarse segments decides the pair of chains at once when d is
-/// clearly on one side of r_a + r_b, and only pairs of coarse segments near
-/// the threshold have their own segments tested, with the exact test the
-/// graph always used (the outcome is the same; the slack covers rounding).
-/// A chain is coarsened within r / 8: at 2 km a block's chain of a few
-/// hundred metres is one or two segments, at a metre nothing changes.
+/// a point of that last segment. So two coarse segments d apart stand for
+/// segments d +- (delta_a + delta_b) apart: a pair of them clearly nearer
+/// than r_a + r_b makes the edge at once, one clearly farther holds no close
+/// pair, and only pairs near the threshold have their own segments tested,
+/// with the exact test the graph always used (the outcome is the same; the
+/// slack covers rounding). A chain is coarsened within r / 8: at 2 km a
+/// block's chain of a few hundred metres is one or two segments; at a metre
+/// nothing is, and the segments are tested as they are.
 class ChainDistance {
   public:
     ChainDistance(std::span<const ChainGeom> chains, const std::vector<Seg>& segs) : m_segs(segs)
@@ -187,7 +187,7 @@ class ChainDistance {
             for (uint32_t u = m_coarse[ks].first; u < m_coarse[ks].last; ++u) {
                 const Box bu = box_of(m_segs[u]);
                 for (uint32_t v = m_coarse[kt].first; v < m_coarse[kt].last; ++v) {
-                    if (gap(bu, box_of(m_segs[v])) < limit && seg_seg_distance(m_segs[u], m_segs[v]) < limit) {
+                    if (gap(bu, box_of(m_segs[v])) < limit + slack && seg_seg_distance(m_segs[u], m_segs[v]) < limit) {
                         return true;
                     }
                 }
