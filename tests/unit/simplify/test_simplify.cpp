@@ -865,6 +865,15 @@ TEST(Color, ConflictGraphIsExactlyTheTestOfEveryPairOfSegments)
         std::vector<double> eps;
         std::vector<std::vector<uint8_t>> keep;
         std::vector<bool> owned;
+        // An owned chain at eps 400 and its halo partner.
+        auto add_pair = [&](const Pts& own, const Pts& partner) {
+            for (const Pts* chain : {&own, &partner}) {
+                pts.push_back(*chain);
+                eps.push_back(400);
+                owned.push_back(chain == &own);
+                keep.emplace_back();
+            }
+        };
         for (int c = 0; c < 40; ++c) {
             Pts p;
             GridPoint at{place(rng), place(rng)};
@@ -901,12 +910,7 @@ TEST(Color, ConflictGraphIsExactlyTheTestOfEveryPairOfSegments)
             for (const GridPoint v : p) {
                 q.push_back({v.x + dx, v.y + dy});
             }
-            for (const Pts* chain : {&p, &q}) {
-                pts.push_back(*chain);
-                eps.push_back(400);
-                owned.push_back(chain == &p);
-                keep.emplace_back();
-            }
+            add_pair(p, q);
         }
         // A straight chain with one spike toward a straight partner 1250
         // above: the spike (inside a coarse segment along the line) is the
@@ -917,24 +921,13 @@ TEST(Color, ConflictGraphIsExactlyTheTestOfEveryPairOfSegments)
             for (int x = 0; x <= 2000; x += 5) {
                 line.push_back({x0 + x, y0 + (x == 1000 + trial * 5 ? spike : 0)});
             }
-            for (const Pts* chain : {&line, &other}) {
-                pts.push_back(*chain);
-                eps.push_back(400);
-                owned.push_back(chain == &line);
-                keep.emplace_back();
-            }
+            add_pair(line, other);
         }
         // Straight pairs at eps 400 (pixel 100, reach 600): 1200 apart and
         // 1199 apart, the first owned.
         for (const int d : {1200, 1199}) {
             const int x = 200000, y = 200000 + (d - 1199) * 20000; // far from the walks and each other
-            pts.push_back({{x, y}, {x + 2000, y}});
-            pts.push_back({{x + 500, y + d}, {x + 2500, y + d}});
-            for (int i = 0; i < 2; ++i) {
-                eps.push_back(400);
-                owned.push_back(i == 0);
-                keep.emplace_back();
-            }
+            add_pair({{x, y}, {x + 2000, y}}, {{x + 500, y + d}, {x + 2500, y + d}});
         }
         std::vector<ChainGeom> g;
         for (size_t c = 0; c < pts.size(); ++c) {
