@@ -284,6 +284,25 @@ TEST_F(PackReal, BadInputIsNamed)
     EXPECT_EQ(run("pack", d + "/ingest " + d + "/simp3 " + d + "/tree3", dir / "log"), 1);
     EXPECT_NE(slurp(dir / "log").find("eps-64m/county/51.tlc: chain"), std::string::npos) << slurp(dir / "log");
     EXPECT_NE(slurp(dir / "log").find("is not a subsequence of its original"), std::string::npos);
+    // Two stores whose files were swapped: each holds the other's partition.
+    fs::copy(dir / "ingest", dir / "ingest3", fs::copy_options::recursive);
+    std::vector<fs::path> groups;
+    for (const auto& e : fs::directory_iterator(dir / "ingest3" / "block_group")) {
+        groups.push_back(e.path());
+    }
+    std::sort(groups.begin(), groups.end());
+    ASSERT_GE(groups.size(), 2U);
+    fs::rename(groups[0], dir / "swap.tlc");
+    fs::rename(groups[1], groups[0]);
+    fs::rename(dir / "swap.tlc", groups[1]);
+    EXPECT_EQ(run("pack", d + "/ingest3 " + d + "/simp " + d + "/tree3", dir / "log"), 1);
+    EXPECT_NE(slurp(dir / "log")
+                  .find(groups[0].filename().string() + ": holds partition " + groups[1].stem().string() +
+                        ", not the one its name says"),
+              std::string::npos)
+        << slurp(dir / "log");
+    EXPECT_FALSE(fs::exists(dir / "tree3" / "skeleton.tls"));
+    fs::remove_all(dir / "ingest3");
     // OUTPUT that is something else.
     fs::create_directories(dir / "other");
     std::ofstream(dir / "other" / "x") << "x";
