@@ -492,6 +492,7 @@ TEST_F(Cli, EveryValidatedConfigKeyRejectsBadValues)
         {"workflow: {job_mb: 0}\n", "'workflow.job_mb' must be in (0, 1e+06]"},
         {"workflow: {job_threads: 1.5}\n", "'workflow.job_threads' must be an integer"},
         {"workflow: {jobs: 4}\n", "unknown key 'workflow.jobs'"},
+        {"workflow: {render: maybe}\n", "'workflow.render' must be true or false"},
         // Values the pipeline turns into flags: the wrong type would reach a
         // stage as a malformed flag (`--tolerances 1,,4`) or not at all.
         {"simplify: {tolerances_m: [1, x, 4]}\n",
