@@ -14,33 +14,69 @@ namespace tigerlod::simplify {
 
 namespace {
 
+// The same bits on every implementation. The fragment shaders decide every
+// pixel with +, - and * alone (and comparisons, abs, min, max, clamp), each
+// on a variable declared precise: GLSL rounds those correctly and may not
+// fuse them into an fma (GLSL 4.50, 4.7.1 and 4.8.1), so llvmpipe and any
+// GPU and driver compute the same floats. Nothing else may decide:
+//  - division, sqrt, length() and distance() are not correctly rounded (a
+//    GPU's division is within 2.5 ulp): the reciprocals come from the CPU,
+//    in double rounded once (a_k, the tested parts' direction and length);
+//  - which pixels a quad covers depends on the rasterizer: the quads reach
+//    past every pixel the shader can accept, and the shader decides;
+//  - a 24-bit depth buffer's conversion may round or truncate: the depth
+//    buffer holds 32-bit floats, the key times a power of two, exactly;
+//  - a GPU may flush denormals to zero: the CPU rounds coordinates and
+//    directions under 1e-20 to 0 and collapses segments shorter than 1e-6
+//    pixel to a point, after which every difference and product the shaders
+//    form is 0 or normal, and the shaders take a square under 1e-30 and a
+//    key under 1e-25 as 0, whatever the hardware made of them.
+// Pixel centres are the tile's (gl_FragCoord plus the piece's integer
+// origin, exact), so how a tile is cut into pieces changes nothing either.
+// On an NVIDIA H200 the shaders before these (length(), division, quad
+// coverage, 24-bit depth) gave other stores than llvmpipe on the tract
+// coarse and the contour ladders; these give the same bytes (BENCHMARKS.md,
+// "OpenGL on a GPU"). tests/unit/simplify/test_raster_spec.cpp checks every
+// decision against this arithmetic, pixel by pixel.
+
+// The tent's key at pixel centre p for segment ab: its squared L2 distance,
+// or its L1 or Linf distance (METRIC 0, 1, 2), with k from the CPU: L2
+// (1 / |b - a|^2, 0, 0, 0); L1 and Linf the reciprocals of d.x, d.y,
+// d.x - d.y and d.x + d.y (0 where that is 0), d = b - a. L1 and Linf: the
+// minimum of a convex function of t over [0, 1], at t = 0, 1 or a breakpoint.
 constexpr const char* distance_glsl = R"(
-// Distance from p to segment ab in the metric chosen by METRIC (0 L2, 1 L1,
-// 2 Linf). L1 and Linf: the minimum of a convex function of t over [0, 1],
-// reached at t = 0, 1 or a breakpoint.
-float seg_distance(vec2 p, vec2 a, vec2 b) {
-    vec2 u = p - a, d = b - a;
-    float len2 = dot(d, d);
+float tent_key(vec2 p, vec4 seg, vec4 k) {
+    precise vec2 u = p - seg.xy;
+    precise vec2 d = seg.zw - seg.xy;
 #if METRIC == 0
-    float t = len2 > 0.0 ? clamp(dot(u, d) / len2, 0.0, 1.0) : 0.0;
-    return length(u - t * d);
+    precise float t = u.x * d.x + u.y * d.y;
+    precise float len2 = d.x * d.x + d.y * d.y;
+    precise float key;
+    if (t <= 0.0) {
+        key = u.x * u.x + u.y * u.y;
+    } else if (t >= len2) {
+        precise vec2 w = p - seg.zw;
+        key = w.x * w.x + w.y * w.y;
+    } else {
+        precise float c = u.x * d.y - u.y * d.x;
+        precise float c2 = c * c;
+        key = (c2 < 1e-30 ? 0.0 : c2) * k.x;
+    }
+    return key < 1e-25 ? 0.0 : key;
 #else
 #if METRIC == 1
 #define MLEN(v) (abs((v).x) + abs((v).y))
 #else
 #define MLEN(v) max(abs((v).x), abs((v).y))
 #endif
-    float best = min(MLEN(u), MLEN(u - d));
-    if (len2 > 0.0) {
-        vec4 ts = vec4(d.x != 0.0 ? u.x / d.x : 0.0, d.y != 0.0 ? u.y / d.y : 0.0,
-                       (d.x - d.y) != 0.0 ? (u.x - u.y) / (d.x - d.y) : 0.0,
-                       (d.x + d.y) != 0.0 ? (u.x + u.y) / (d.x + d.y) : 0.0);
-        for (int i = 0; i < 4; ++i) {
-            vec2 v = u - clamp(ts[i], 0.0, 1.0) * d;
-            best = min(best, MLEN(v));
-        }
+    precise vec2 w = u - d;
+    precise float best = min(MLEN(u), MLEN(w));
+    precise vec4 ts = vec4(u.x * k.x, u.y * k.y, (u.x - u.y) * k.z, (u.x + u.y) * k.w);
+    for (int i = 0; i < 4; ++i) {
+        precise vec2 v = u - clamp(ts[i], 0.0, 1.0) * d;
+        best = min(best, MLEN(v));
     }
-    return best;
+    return best < 1e-25 ? 0.0 : best;
 #endif
 }
 )";
@@ -50,12 +86,14 @@ layout(location = 0) in vec4 a_seg; // a.xy, b.xy in tile pixels
 layout(location = 1) in float a_eps; // pixels
 layout(location = 2) in vec2 a_clip; // the part of the segment whose quad is drawn: t0, t1
 layout(location = 3) in float a_corner; // 0, 1 at a; 2, 3 at b; even: left
+layout(location = 4) in vec4 a_k; // tent_key's reciprocals
 uniform vec2 u_size;
 uniform vec2 u_origin; // the drawn box's corner in tile pixels (integers)
 uniform float u_reach;
 uniform float u_pad;
 uniform float u_z; // 0 for the tents (their fragments set the depth); 1 to reset
 flat out vec4 v_seg;
+flat out vec4 v_k;
 flat out float v_eps;
 void main() {
     vec2 a = a_seg.xy - u_origin, b = a_seg.zw - u_origin, d = b - a;
@@ -64,29 +102,40 @@ void main() {
     vec2 n = vec2(-u.y, u.x);
     float r = a_eps * u_reach + u_pad;
     int c = int(a_corner);
-    // The quad of the part [t0, t1] (all of it: a and b exactly). The
-    // fragments compute the distance to the whole segment, so a pixel gets
-    // the same depth from any quad that covers it.
+    // The quad of the part [t0, t1] (all of it: a and b exactly), u_pad
+    // beyond eps. The fragments compute the key to the whole segment, so a
+    // pixel gets the same depth from any quad that covers it.
     vec2 p = (c < 2 ? mix(a, b, a_clip.x) - u * r : mix(a, b, a_clip.y) + u * r) + ((c & 1) == 0 ? n * r : -n * r);
     gl_Position = vec4(p / u_size * 2.0 - 1.0, u_z, 1.0);
-    v_seg = vec4(a, b);
+    v_seg = a_seg;
+    v_k = a_k;
     v_eps = a_eps;
 }
 )";
 
 constexpr const char* tent_fs_head = R"(#version 450 core
 flat in vec4 v_seg;
+flat in vec4 v_k;
 flat in float v_eps;
-uniform float u_depth_scale;
+uniform vec2 u_origin;
+uniform float u_depth_scale; // a power of two: every key within eps lands at depth <= 1/2
 layout(location = 0) out vec4 o_color;
 )";
 
+// The depth buffer holds 32-bit floats: the key times a power of two,
+// exactly, so the depth test compares the keys themselves.
 constexpr const char* tent_fs_main = R"(
 void main() {
     o_color = vec4(0.0);
-    float d = seg_distance(gl_FragCoord.xy, v_seg.xy, v_seg.zw);
-    if (d > v_eps) discard;
-    gl_FragDepth = d / u_depth_scale;
+    precise vec2 p = gl_FragCoord.xy + u_origin;
+    precise float key = tent_key(p, v_seg, v_k);
+#if METRIC == 0
+    precise float limit = v_eps * v_eps;
+#else
+    precise float limit = v_eps;
+#endif
+    if (key > limit) discard;
+    gl_FragDepth = key * u_depth_scale;
 }
 )";
 
@@ -98,52 +147,76 @@ void main() {
 }
 )";
 
+// A tested part: the pixels whose centre is within half a pixel of it
+// across and between its ends along (the shader decides; the quad reaches
+// 1/16 pixel further), less those within the end margin of the shortcut's
+// ends a and b.
 constexpr const char* test_vs = R"(#version 450 core
-layout(location = 0) in vec4 a_seg;
+layout(location = 0) in vec4 a_seg; // the shortcut's a.xy, b.xy in tile pixels
 layout(location = 1) in uint a_id;
-layout(location = 2) in vec2 a_clip; // the part drawn: t0, t1 along a_seg
-layout(location = 3) in float a_corner; // 0, 1 at a; 2, 3 at b; even: left
+layout(location = 2) in vec4 a_part; // the part's first point, and its unit direction
+layout(location = 3) in float a_corner; // 0, 1 at the first point; 2, 3 at the last; even: left
+layout(location = 4) in float a_len; // the part's length
 uniform vec2 u_size;
 uniform vec2 u_origin;
-uniform float u_half_width;
 flat out vec4 v_seg;
+flat out vec4 v_part;
+flat out float v_len;
 flat out uint v_id;
 void main() {
-    vec2 a = a_seg.xy - u_origin, b = a_seg.zw - u_origin, d = b - a;
-    float len = length(d);
-    vec2 u = len > 0.0 ? d / len : vec2(1.0, 0.0);
-    vec2 n = vec2(-u.y, u.x) * u_half_width;
+    const float m = 1.0 / 16.0;
+    vec2 u = a_part.zw, n = vec2(-u.y, u.x) * (0.5 + m);
     int c = int(a_corner);
-    vec2 p = mix(a, b, c < 2 ? a_clip.x : a_clip.y) + ((c & 1) == 0 ? n : -n);
+    vec2 p = a_part.xy - u_origin + u * (c < 2 ? -m : a_len + m) + ((c & 1) == 0 ? n : -n);
     // Depth 0.9995 under GL_GREATER: only where a tent was drawn (tents'
-    // depths are below 1 / 1.001, the background is 1).
+    // depths are at most 1/2, the background is 1).
     gl_Position = vec4(p / u_size * 2.0 - 1.0, 0.999, 1.0);
-    v_seg = vec4(a, b);
+    v_seg = a_seg;
+    v_part = a_part;
+    v_len = a_len;
     v_id = a_id;
 }
 )";
 
-constexpr const char* test_fs_ssbo = R"(#version 450 core
-layout(early_fragment_tests) in;
-layout(std430, binding = 0) buffer Flags { uint flags[]; };
+constexpr const char* test_in_part = R"(
 flat in vec4 v_seg;
+flat in vec4 v_part;
+flat in float v_len;
 flat in uint v_id;
-uniform float u_end_margin;
-void main() {
-    vec2 p = gl_FragCoord.xy;
-    if (distance(p, v_seg.xy) < u_end_margin || distance(p, v_seg.zw) < u_end_margin) return;
-    flags[v_id] = 1u;
+uniform vec2 u_origin;
+uniform float u_end_margin2;
+bool tested() {
+    precise vec2 p = gl_FragCoord.xy + u_origin;
+    precise vec2 w = p - v_part.xy;
+    precise float along = w.x * v_part.z + w.y * v_part.w;
+    precise float across = w.y * v_part.z - w.x * v_part.w;
+    if (along < 0.0 || along > v_len || abs(across) > 0.5) return false;
+    precise vec2 ea = p - v_seg.xy;
+    precise vec2 eb = p - v_seg.zw;
+    precise float da = ea.x * ea.x + ea.y * ea.y;
+    precise float db = eb.x * eb.x + eb.y * eb.y;
+    return da >= u_end_margin2 && db >= u_end_margin2;
 }
 )";
 
-constexpr const char* test_fs_readback = R"(#version 450 core
-flat in vec4 v_seg;
-flat in uint v_id;
-uniform float u_end_margin;
-layout(location = 0) out vec4 o_color;
+constexpr const char* test_fs_ssbo_head = R"(#version 450 core
+layout(early_fragment_tests) in;
+layout(std430, binding = 0) buffer Flags { uint flags[]; };
+)";
+
+constexpr const char* test_fs_ssbo_main = R"(
 void main() {
-    vec2 p = gl_FragCoord.xy;
-    if (distance(p, v_seg.xy) < u_end_margin || distance(p, v_seg.zw) < u_end_margin) discard;
+    if (tested()) flags[v_id] = 1u;
+}
+)";
+
+constexpr const char* test_fs_readback_head = R"(#version 450 core
+layout(location = 0) out vec4 o_color;
+)";
+
+constexpr const char* test_fs_readback_main = R"(
+void main() {
+    if (!tested()) discard;
     uint c = v_id + 1u;
     o_color = vec4(float(c & 255u), float((c >> 8) & 255u), float((c >> 16) & 255u), 255.0) / 255.0;
 }
@@ -156,13 +229,55 @@ double seconds_since(std::chrono::steady_clock::time_point t0)
 
 struct TentInstance {
     float ax, ay, bx, by, eps;
-    float t0 = 0, t1 = 1; ///< the part whose quad is drawn
+    float t0 = 0, t1 = 1;      ///< the part whose quad is drawn
+    float k[4] = {0, 0, 0, 0}; ///< tent_key's reciprocals (tent_reciprocals)
 };
 struct TestInstance {
-    float ax, ay, bx, by;
+    float ax, ay, bx, by; ///< the shortcut's ends
     uint32_t id;
-    float t0, t1;
+    float t0, t1;         ///< the part tested
+    float px, py, ux, uy; ///< the part's first point and unit direction (part_geometry)
+    float len;            ///< the part's length
 };
+
+/// The reciprocals tent_key reads for segment ab (pixels), in double and
+/// rounded once, on the CPU: the same bits on every machine.
+void tent_reciprocals(TentInstance& t, Metric metric)
+{
+    double dx = double(t.bx) - t.ax, dy = double(t.by) - t.ay;
+    if (dx * dx + dy * dy < 1e-12) { // a point: no reciprocal of a vanishing length
+        t.bx = t.ax;
+        t.by = t.ay;
+        dx = dy = 0;
+    }
+    auto inv = [](double v) { return std::abs(v) >= 1e-6 ? static_cast<float>(1.0 / v) : 0.0f; };
+    if (metric == Metric::l2) {
+        const double len2 = dx * dx + dy * dy; // 0 or at least 1e-12
+        t.k[0] = len2 > 0 ? static_cast<float>(1.0 / len2) : 0.0f;
+        t.k[1] = t.k[2] = t.k[3] = 0;
+    } else {
+        t.k[0] = inv(dx);
+        t.k[1] = inv(dy);
+        t.k[2] = inv(dx - dy);
+        t.k[3] = inv(dx + dy);
+    }
+}
+
+/// The tested part's first point, unit direction and length (pixels),
+/// from its shortcut's ends and [t0, t1], in double, each rounded once.
+void part_geometry(TestInstance& t)
+{
+    const double dx = double(t.bx) - t.ax, dy = double(t.by) - t.ay;
+    const double x0 = t.ax + double(t.t0) * dx, y0 = t.ay + double(t.t0) * dy;
+    const double x1 = t.ax + double(t.t1) * dx, y1 = t.ay + double(t.t1) * dy;
+    const double len = std::hypot(x1 - x0, y1 - y0);
+    t.px = static_cast<float>(x0);
+    t.py = static_cast<float>(y0);
+    auto unit = [](double v) { return std::abs(v) >= 1e-20 ? static_cast<float>(v) : 0.0f; };
+    t.ux = len > 0 ? unit((x1 - x0) / len) : 1.0f;
+    t.uy = len > 0 ? unit((y1 - y0) / len) : 0.0f;
+    t.len = static_cast<float>(len);
+}
 
 /// Runs of instances of one class: class -> (first, count), in drawing order.
 using ClassRanges = std::vector<std::pair<uint8_t, std::pair<GLuint, GLsizei>>>;
@@ -291,7 +406,7 @@ struct Raster::Impl {
         gl.BindFramebuffer(GL_FRAMEBUFFER, t.fbo);
         gl.GenRenderbuffers(1, &t.rb_depth);
         gl.BindRenderbuffer(GL_RENDERBUFFER, t.rb_depth);
-        gl.RenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH24_STENCIL8, s, s);
+        gl.RenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH32F_STENCIL8, s, s);
         gl.FramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_STENCIL_ATTACHMENT, GL_RENDERBUFFER, t.rb_depth);
         if (compliance == Compliance::readback) {
             gl.GenRenderbuffers(1, &t.rb_color);
@@ -347,7 +462,9 @@ Raster::Raster(gl::Context& ctx, const RasterOptions& opt)
     const std::string metric_define = "#define METRIC " + std::to_string(int(opt.metric)) + "\n";
     I.tent_prog = I.link(tent_vs, std::string(tent_fs_head) + metric_define + distance_glsl + tent_fs_main);
     I.reset_prog = I.link(tent_vs, reset_fs);
-    I.test_prog = I.link(test_vs, opt.compliance == Compliance::ssbo ? test_fs_ssbo : test_fs_readback);
+    I.test_prog = I.link(test_vs, opt.compliance == Compliance::ssbo
+                                      ? std::string(test_fs_ssbo_head) + test_in_part + test_fs_ssbo_main
+                                      : std::string(test_fs_readback_head) + test_in_part + test_fs_readback_main);
 
     gl.GenVertexArrays(1, &I.vao_tent);
     gl.GenBuffers(1, &I.vbo_tent);
@@ -363,10 +480,11 @@ Raster::Raster(gl::Context& ctx, const RasterOptions& opt)
                            reinterpret_cast<const void*>(offsetof(TentInstance, t0)));
     gl.VertexAttribPointer(3, 1, GL_FLOAT, GL_FALSE, sizeof(TentVertex),
                            reinterpret_cast<const void*>(offsetof(TentVertex, corner)));
-    gl.EnableVertexAttribArray(0);
-    gl.EnableVertexAttribArray(1);
-    gl.EnableVertexAttribArray(2);
-    gl.EnableVertexAttribArray(3);
+    gl.VertexAttribPointer(4, 4, GL_FLOAT, GL_FALSE, sizeof(TentVertex),
+                           reinterpret_cast<const void*>(offsetof(TentInstance, k)));
+    for (GLuint a = 0; a < 5; ++a) {
+        gl.EnableVertexAttribArray(a);
+    }
 
     gl.GenVertexArrays(1, &I.vao_test);
     gl.GenBuffers(1, &I.vbo_test);
@@ -377,14 +495,15 @@ Raster::Raster(gl::Context& ctx, const RasterOptions& opt)
     gl.VertexAttribPointer(0, 4, GL_FLOAT, GL_FALSE, sizeof(TestVertex), nullptr);
     gl.VertexAttribIPointer(1, 1, GL_UNSIGNED_INT, sizeof(TestVertex),
                             reinterpret_cast<const void*>(offsetof(TestInstance, id)));
-    gl.VertexAttribPointer(2, 2, GL_FLOAT, GL_FALSE, sizeof(TestVertex),
-                           reinterpret_cast<const void*>(offsetof(TestInstance, t0)));
+    gl.VertexAttribPointer(2, 4, GL_FLOAT, GL_FALSE, sizeof(TestVertex),
+                           reinterpret_cast<const void*>(offsetof(TestInstance, px)));
     gl.VertexAttribPointer(3, 1, GL_FLOAT, GL_FALSE, sizeof(TestVertex),
                            reinterpret_cast<const void*>(offsetof(TestVertex, corner)));
-    gl.EnableVertexAttribArray(0);
-    gl.EnableVertexAttribArray(1);
-    gl.EnableVertexAttribArray(2);
-    gl.EnableVertexAttribArray(3);
+    gl.VertexAttribPointer(4, 1, GL_FLOAT, GL_FALSE, sizeof(TestVertex),
+                           reinterpret_cast<const void*>(offsetof(TestInstance, len)));
+    for (GLuint a = 0; a < 5; ++a) {
+        gl.EnableVertexAttribArray(a);
+    }
     gl.BindVertexArray(0);
 
     if (opt.max_tile_pixels < 8 || opt.max_tile_pixels > 16384 || opt.window_pixels < 8) {
@@ -596,9 +715,10 @@ PreparedTile Raster::prepare(const TileSpec& tile, std::span<const TentChain> te
     PreparedTile out;
     auto& d = *out.m;
     const double inv = 1.0 / tile.pixel;
-    auto px = [&](GridPoint p, float& x, float& y) {
-        x = static_cast<float>((double(p.x) - tile.x0) * inv);
-        y = static_cast<float>((double(p.y) - tile.y0) * inv);
+    auto px = [&](GridPoint p, float& x, float& y) { // no denormal: see the shaders' comment
+        const double fx = (double(p.x) - tile.x0) * inv, fy = (double(p.y) - tile.y0) * inv;
+        x = std::abs(fx) >= 1e-20 ? static_cast<float>(fx) : 0.0f;
+        y = std::abs(fy) >= 1e-20 ? static_cast<float>(fy) : 0.0f;
     };
     // The tested parts in pixels, and the cells they can fall in.
     NearCells near(tile);
@@ -610,6 +730,7 @@ PreparedTile Raster::prepare(const TileSpec& tile, std::span<const TentChain> te
         px(sg.b, ti.bx, ti.by);
         ti.t0 = sg.t0;
         ti.t1 = sg.t1;
+        part_geometry(ti);
         const double dx = double(ti.bx) - ti.ax, dy = double(ti.by) - ti.ay;
         d.drawn_pixels += std::hypot(dx, dy) * (double(sg.t1) - sg.t0);
         near.mark(ti);
@@ -638,6 +759,7 @@ PreparedTile Raster::prepare(const TileSpec& tile, std::span<const TentChain> te
             px(t.points[k], ti.ax, ti.ay);
             px(t.points[k + 1], ti.bx, ti.by);
             ti.eps = eps_px;
+            tent_reciprocals(ti, m_opt.metric);
             if (near.reaches(ti, reach)) {
                 inst.push_back(ti);
             } else {
@@ -750,7 +872,12 @@ void Raster::draw_tents(const PreparedTile::Data& d, size_t piece, const Frame& 
     auto& I = *m_impl;
     const auto& gl = I.gl;
     use_tent_quads(I.tent_prog, f, 0.0f);
-    gl.Uniform1f(I.loc(I.tent_prog, "u_depth_scale"), float(d.eps_max * 1.001 + 1e-6));
+    // A power of two at least twice the largest key within eps: depths at
+    // most 1/2, each the key's bits with another exponent.
+    const double limit = m_opt.metric == Metric::l2 ? d.eps_max * d.eps_max : d.eps_max;
+    int e = 0;
+    std::frexp(2 * limit + 1, &e);
+    gl.Uniform1f(I.loc(I.tent_prog, "u_depth_scale"), std::ldexp(1.0f, -e));
     gl.BindVertexArray(I.vao_tent);
     gl.Enable(GL_DEPTH_TEST);
     gl.DepthFunc(GL_LESS);
@@ -782,8 +909,8 @@ void Raster::test_parts(const PreparedTile::Data& d, size_t piece, const Frame& 
     gl.UseProgram(I.test_prog);
     gl.Uniform2f(I.loc(I.test_prog, "u_size"), f.size, f.size);
     gl.Uniform2f(I.loc(I.test_prog, "u_origin"), f.ox, f.oy);
-    gl.Uniform1f(I.loc(I.test_prog, "u_half_width"), 0.5f);
-    gl.Uniform1f(I.loc(I.test_prog, "u_end_margin"), float(m_opt.endpoint_margin_px));
+    gl.Uniform1f(I.loc(I.test_prog, "u_end_margin2"),
+                 static_cast<float>(m_opt.endpoint_margin_px * m_opt.endpoint_margin_px));
     gl.BindVertexArray(I.vao_test);
     if (p.tests.empty()) {
         return;

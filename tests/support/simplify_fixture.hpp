@@ -10,7 +10,10 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdio>
+#include <cstdlib>
 #include <map>
+#include <stdexcept>
 #include <memory>
 #include <string>
 #include <vector>
@@ -47,10 +50,20 @@ struct MapBuilder {
     }
 };
 
-/// The OSMesa context of the tests: one, current on the tests' thread.
+/// The context of the tests: one, current on the tests' thread; OSMesa, or
+/// the backend TIGERLOD_TEST_GL names (egl: the raster tests on a GPU).
 inline gl::Context& context()
 {
-    static std::unique_ptr<gl::Context> ctx = gl::Context::create(gl::Backend::osmesa);
+    static std::unique_ptr<gl::Context> ctx = [] {
+        const char* name = std::getenv("TIGERLOD_TEST_GL");
+        const auto backend = gl::parse_backend(name != nullptr ? name : "osmesa");
+        if (!backend) {
+            throw std::invalid_argument(std::string("TIGERLOD_TEST_GL: no backend ") + name);
+        }
+        auto c = gl::Context::create(*backend);
+        std::printf("[ info ] %s\n", c->describe().c_str());
+        return c;
+    }();
     return *ctx;
 }
 
