@@ -157,7 +157,7 @@ std::vector<Key> stage_keys()
               integer(2, 255), {}, "max-classes", both),
         entry("simplify.window_pixels", Type::integer,
               "the framebuffer's width and height: a tile whose tested parts' box is larger is drawn in pieces of "
-              "this size (the memory of the raster: 4 bytes a pixel)",
+              "this size (the memory of the raster: 8 bytes a pixel)",
               "1024", integer(8, 16384), {}, "window-pixels", "simplify"),
         entry("simplify.threads", Type::integer, "worker threads, 0 for all cores; outputs do not depend on it", "0",
               thread_limits, {}, "threads", both),
