@@ -147,8 +147,9 @@ std::vector<Key> stage_keys()
               "pass, `readback` is the paper's unique-colour loop (Algorithm 5.1); the same result",
               "`ssbo`", {}, {"ssbo", "readback"}, "compliance", "simplify"),
         entry("simplify.gl", Type::choice,
-              "OpenGL backend: `osmesa` (llvmpipe, everywhere) or `egl` (a GPU, or Mesa's device); the same result",
-              "`osmesa`", {}, {"osmesa", "egl"}, "gl", "simplify"),
+              "OpenGL backend: `auto` (a GPU through EGL where the machine has one, else OSMesa), `osmesa` "
+              "(llvmpipe, everywhere) or `egl` (a GPU, or Mesa's device); the same result, bit for bit",
+              "`auto`", {}, {"auto", "osmesa", "egl"}, "gl", "simplify"),
         entry("simplify.pixel_fraction", Type::number, "pixel size as a fraction of the smallest eps", "0.25",
               {0, 0.5, true}, {}, "pixel-fraction", both),
         entry("simplify.tile_pixels", Type::integer, "render tile width and height in pixels", "4096",

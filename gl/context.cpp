@@ -7,6 +7,7 @@
 #include <dlfcn.h>
 
 #include <array>
+#include <filesystem>
 #include <functional>
 #include <vector>
 
@@ -241,6 +242,43 @@ std::unique_ptr<Context> Context::create(Backend backend)
         return std::make_unique<OsMesaContext>();
     }
     return std::make_unique<EglContext>();
+}
+
+bool Context::software() const
+{
+    const auto* s = reinterpret_cast<const char*>(m_api.GetString(GL_RENDERER));
+    const std::string r = s ? s : "";
+    return r.find("llvmpipe") != std::string::npos || r.find("softpipe") != std::string::npos ||
+           r.find("swrast") != std::string::npos || r.find("Software") != std::string::npos;
+}
+
+std::unique_ptr<Context> Context::create_auto(std::string& why)
+{
+    // EGL only where a GPU's device node exists: elsewhere it could only
+    // find Mesa's software device, the same llvmpipe as OSMesa, so it is
+    // not even opened (no libEGL loaded on a machine without a GPU).
+    bool gpu_node = std::filesystem::exists("/dev/nvidiactl");
+    std::error_code ec;
+    if (!gpu_node && std::filesystem::is_directory("/dev/dri", ec)) {
+        for (const auto& e : std::filesystem::directory_iterator("/dev/dri", ec)) {
+            gpu_node = gpu_node || e.path().filename().string().rfind("renderD", 0) == 0;
+        }
+    }
+    if (!gpu_node) {
+        why = "no GPU device node (/dev/nvidiactl, /dev/dri/renderD*)";
+        return create(Backend::osmesa);
+    }
+    try {
+        auto egl = create(Backend::egl);
+        if (!egl->software()) {
+            why = "a GPU through EGL";
+            return egl;
+        }
+        why = "EGL found only a software renderer";
+    } catch (const environment_error& e) {
+        why = std::string("EGL failed: ") + e.what();
+    }
+    return create(Backend::osmesa);
 }
 
 } // namespace tigerlod::gl

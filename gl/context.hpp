@@ -27,6 +27,14 @@ class Context {
     /// environment_error naming the backend and the step that failed (library
     /// missing, no display or device, no 4.5 core context, entry point missing).
     static std::unique_ptr<Context> create(Backend backend);
+    /// A GPU where there is one, else OSMesa: where the machine has a GPU's
+    /// device node (/dev/nvidiactl, /dev/dri/renderD*), an EGL context, kept
+    /// if its renderer is not a software one (llvmpipe, softpipe, swrast);
+    /// else, or if EGL fails, an OSMesa context. `why` says what was chosen
+    /// and why. Throws as create(osmesa) does.
+    static std::unique_ptr<Context> create_auto(std::string& why);
+    /// Whether the renderer is a software rasterizer (llvmpipe and the like).
+    bool software() const;
     virtual ~Context() = default;
 
     const Api& api() const noexcept { return m_api; }

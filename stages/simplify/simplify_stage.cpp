@@ -130,7 +130,11 @@ int SimplifyStage::run(const StageContext& ctx)
     if (llvmpipe_inline) {
         ::setenv("LP_NUM_THREADS", "0", 0);
     }
-    auto context = gl::Context::create(*gl::parse_backend(m_gl));
+    std::string why;
+    auto context = m_gl == "auto" ? gl::Context::create_auto(why) : gl::Context::create(*gl::parse_backend(m_gl));
+    if (!why.empty()) {
+        ctx.log.info("simplify: --gl auto: " + why);
+    }
     RasterOptions ropt;
     ropt.metric = o.metric;
     ropt.compliance = m_compliance == "ssbo" ? Compliance::ssbo : Compliance::readback;

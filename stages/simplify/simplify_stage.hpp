@@ -49,7 +49,7 @@ class SimplifyStage final : public Stage {
     CommonOptions m_common;
     std::string m_points;
     std::string m_compliance = "ssbo";
-    std::string m_gl = "osmesa";
+    std::string m_gl = "auto";
     std::string m_colors;
     bool m_lazy = false; ///< the default, said explicitly
     bool m_exhaustive = false;

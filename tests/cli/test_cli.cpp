@@ -854,6 +854,29 @@ TEST_F(Cli, SimplifyGivesTheSameStoresOnEglAndWithASmallFramebuffer)
         run("simplify", in + " " + (m_dir / "small").string() + " --tolerances 1,8 --window-pixels 64");
     ASSERT_EQ(small.code, 0) << small.err;
     expect_same_stores(m_dir / "small");
+    // The default, --gl auto: a GPU where the machine has a GPU's device
+    // node, else OSMesa without opening EGL; the same stores as OSMesa named.
+    const Result osmesa =
+        run("simplify", in + " " + (m_dir / "osmesa").string() + " --tolerances 1,8 --gl osmesa --verbose");
+    ASSERT_EQ(osmesa.code, 0) << osmesa.err;
+    EXPECT_NE(osmesa.out.find("(osmesa)"), std::string::npos) << osmesa.out;
+    EXPECT_EQ(osmesa.err.find("--gl auto"), std::string::npos) << osmesa.err;
+    expect_same_stores(m_dir / "osmesa");
+    bool gpu_node = fs::exists("/dev/nvidiactl");
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator("/dev/dri", ec)) {
+        gpu_node = gpu_node || e.path().filename().string().rfind("renderD", 0) == 0;
+    }
+    const Result autod = run("simplify", in + " " + (m_dir / "auto").string() + " --tolerances 1,8 --verbose");
+    ASSERT_EQ(autod.code, 0) << autod.err;
+    expect_same_stores(m_dir / "auto");
+    if (!gpu_node) {
+        EXPECT_NE(autod.out.find("(osmesa)"), std::string::npos) << autod.out;
+        EXPECT_NE(autod.err.find("--gl auto: no GPU device node"), std::string::npos) << autod.err;
+    } else {
+        std::printf("[ info ] this machine has a GPU's device node: --gl auto chose %s\n",
+                    autod.out.find("(egl)") != std::string::npos ? "EGL" : "OSMesa");
+    }
     // The EGL backend: on a GPU's driver in production; here Mesa's
     // device or surfaceless platform, where one is installed.
     const Result egl = run("simplify", in + " " + (m_dir / "egl").string() + " --tolerances 1,8 --gl egl");
@@ -914,7 +937,7 @@ TEST_F(Cli, ColorAndSimplifyRejectBadInput)
     expect_failure(run("simplify", in + " --tolerances 8 --colors " + colors), 2, "made at eps");
     expect_failure(run("simplify", in + " --compliance occlusion"), 2, "must be ssbo or readback");
     expect_failure(run("simplify", in + " --lazy --exhaustive"), 2, "'--lazy' and '--exhaustive' exclude each other");
-    expect_failure(run("simplify", in + " --gl glx"), 2, "must be osmesa or egl");
+    expect_failure(run("simplify", in + " --gl glx"), 2, "must be auto, osmesa or egl");
     expect_failure(run("simplify", in + " --window-pixels 4"), 2, "option '--window-pixels' must be in 8..16384");
     expect_failure(run("simplify", in + " --tolerances 800"), 2, "needs at least 1600");
     std::ofstream(m_dir / "points.csv") << "name,lon,lat\na,-95.99,40.001\nb,-95.99,north\n";
