@@ -874,7 +874,11 @@ TEST(Color, ConflictGraphIsExactlyTheTestOfEveryPairOfSegments)
                 keep.emplace_back();
             }
         };
-        for (int c = 0; c < 40; ++c) {
+        // Odd trials leave the random walks out: the rest, finely sampled,
+        // is coarsened, and the pairs near the threshold take the segments'
+        // own test (ChainDistance's unsure pairs); with the walks most
+        // segments stay as they are and are tested directly.
+        for (int c = 0; c < (trial % 2 == 0 ? 40 : 0); ++c) {
             Pts p;
             GridPoint at{place(rng), place(rng)};
             const int n = coin(rng) == 0 ? 1 : 2 + coin(rng) * 30;
