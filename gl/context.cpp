@@ -257,8 +257,8 @@ std::unique_ptr<Context> Context::create_auto(std::string& why)
     // EGL only where a GPU's device node exists: elsewhere it could only
     // find Mesa's software device, the same llvmpipe as OSMesa, so it is
     // not even opened (no libEGL loaded on a machine without a GPU).
-    bool gpu_node = std::filesystem::exists("/dev/nvidiactl");
     std::error_code ec;
+    bool gpu_node = std::filesystem::exists("/dev/nvidiactl", ec);
     if (!gpu_node && std::filesystem::is_directory("/dev/dri", ec)) {
         for (const auto& e : std::filesystem::directory_iterator("/dev/dri", ec)) {
             gpu_node = gpu_node || e.path().filename().string().rfind("renderD", 0) == 0;
