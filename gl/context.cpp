@@ -252,19 +252,26 @@ bool Context::software() const
            r.find("swrast") != std::string::npos || r.find("Software") != std::string::npos;
 }
 
+bool Context::gpu_device_node()
+{
+    std::error_code ec;
+    if (std::filesystem::exists("/dev/nvidiactl", ec)) {
+        return true;
+    }
+    for (const auto& e : std::filesystem::directory_iterator("/dev/dri", ec)) {
+        if (e.path().filename().string().rfind("renderD", 0) == 0) {
+            return true;
+        }
+    }
+    return false;
+}
+
 std::unique_ptr<Context> Context::create_auto(std::string& why)
 {
     // EGL only where a GPU's device node exists: elsewhere it could only
     // find Mesa's software device, the same llvmpipe as OSMesa, so it is
     // not even opened (no libEGL loaded on a machine without a GPU).
-    std::error_code ec;
-    bool gpu_node = std::filesystem::exists("/dev/nvidiactl", ec);
-    if (!gpu_node && std::filesystem::is_directory("/dev/dri", ec)) {
-        for (const auto& e : std::filesystem::directory_iterator("/dev/dri", ec)) {
-            gpu_node = gpu_node || e.path().filename().string().rfind("renderD", 0) == 0;
-        }
-    }
-    if (!gpu_node) {
+    if (!gpu_device_node()) {
         why = "no GPU device node (/dev/nvidiactl, /dev/dri/renderD*)";
         return create(Backend::osmesa);
     }

@@ -33,6 +33,9 @@ class Context {
     /// else, or if EGL fails, an OSMesa context. `why` says what was chosen
     /// and why. Throws as create(osmesa) does.
     static std::unique_ptr<Context> create_auto(std::string& why);
+    /// Whether the machine has a GPU's device node: /dev/nvidiactl, or a
+    /// render node /dev/dri/renderD*.
+    static bool gpu_device_node();
     /// Whether the renderer is a software rasterizer (llvmpipe and the like).
     bool software() const;
     virtual ~Context() = default;

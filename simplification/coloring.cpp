@@ -38,6 +38,9 @@ struct ReachBox {
     }
     bool empty() const noexcept { return !(x0 <= x1); }
     bool meets(const ReachBox& o) const noexcept { return x0 <= o.x1 && o.x0 <= x1 && y0 <= o.y1 && o.y0 <= y1; }
+    /// The box less a reach r it was grown by: its segments' own box, but
+    /// for the rounding of the growth.
+    ReachBox less(double r) const noexcept { return {x0 + r, y0 + r, x1 - r, y1 - r}; }
 };
 
 /// Whether two boxes (x0, y0, x1, y1) are at least d >= 0 apart, which
@@ -370,11 +373,9 @@ std::vector<std::vector<uint32_t>> graph_of(std::span<const ChainGeom> chains, c
                 // close pair in this cell (block stores at 2000 m: most pairs
                 // that are not close). The slack of ChainDistance::close
                 // covers the rounding of the growth.
-                const double limit = segs[entries[run[p]].second].r + segs[entries[run[q]].second].r;
-                const double gx = std::max({boxes[p].x0 - boxes[q].x1, boxes[q].x0 - boxes[p].x1, -limit}) + limit;
-                const double gy = std::max({boxes[p].y0 - boxes[q].y1, boxes[q].y0 - boxes[p].y1, -limit}) + limit;
-                const double far = limit + 1e-9 * limit + 1e-6;
-                if (gx * gx + gy * gy >= far * far) {
+                const double r_lo = segs[entries[run[p]].second].r, r_hi = segs[entries[run[q]].second].r;
+                const double limit = r_lo + r_hi;
+                if (boxes_apart(boxes[p].less(r_lo), boxes[q].less(r_hi), limit + 1e-9 * limit + 1e-6)) {
                     continue;
                 }
                 const uint64_t key = (uint64_t{lo} << 32) | hi;

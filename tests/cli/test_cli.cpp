@@ -4,6 +4,7 @@
 // half-written.
 #include "config/schema.hpp"
 #include "formats/chains/chain_store.hpp"
+#include "gl/context.hpp"
 #include "../support/processes.hpp"
 
 #include <cpl_conv.h>
@@ -862,11 +863,7 @@ TEST_F(Cli, SimplifyGivesTheSameStoresOnEglAndWithASmallFramebuffer)
     EXPECT_NE(osmesa.out.find("(osmesa)"), std::string::npos) << osmesa.out;
     EXPECT_EQ(osmesa.err.find("--gl auto"), std::string::npos) << osmesa.err;
     expect_same_stores(m_dir / "osmesa");
-    bool gpu_node = fs::exists("/dev/nvidiactl");
-    std::error_code ec;
-    for (const auto& e : fs::directory_iterator("/dev/dri", ec)) {
-        gpu_node = gpu_node || e.path().filename().string().rfind("renderD", 0) == 0;
-    }
+    const bool gpu_node = tigerlod::gl::Context::gpu_device_node();
     const Result autod = run("simplify", in + " " + (m_dir / "auto").string() + " --tolerances 1,8 --verbose");
     ASSERT_EQ(autod.code, 0) << autod.err;
     expect_same_stores(m_dir / "auto");
