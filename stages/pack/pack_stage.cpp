@@ -5,6 +5,7 @@
 #include "core/fs.hpp"
 #include "core/manifest.hpp"
 #include "formats/chains/chain_store.hpp"
+#include "core/partitions.hpp"
 #include "stages/pack/packer.hpp"
 
 #include <draco/core/draco_version.h>
@@ -16,6 +17,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <sstream>
 #include <thread>
 
 namespace fs = std::filesystem;
@@ -32,11 +35,48 @@ void PackStage::add_args(ArgSet& args)
     config::add_option(args, "pack.tile_mb", &m_tile_mb);
     config::add_option(args, "pack.draco_speed", &m_draco_speed);
     config::add_option(args, "pack.threads", &m_threads);
+    config::add_option(args, "simplify.tolerances_m", &m_tolerances);
+    args.describe_default("tolerances", "SIMPLIFIED's ladder (its manifest), every eps-<E>m folder with --partitions");
+    args.group("Partition jobs (the workflow's)");
+    args.add("parts", &m_parts,
+             "the folder of part files the jobs below share: DIR/plan.json, DIR/<level>/<partition>.tlp", "DIR");
+    args.add("plan", &m_plan,
+             "write DIR/plan.json from ORIGINAL alone: the stores each store's job reads beside its own (rewritten "
+             "only when it changes); OUTPUT is not touched");
+    args.add("partitions", &m_partitions,
+             "pack these stores' nodes into part files in DIR (OUTPUT not touched): LEVEL/PARTITION, "
+             "LEVEL/PREFIX* or LEVEL/*, separated by commas, or @FILE with one a line",
+             "LIST");
+    args.add("report", &m_report, "with --partitions: write this job's report to FILE", "FILE");
+    args.add("finish", &m_finish,
+             "after the --partitions jobs: assemble OUTPUT from every store's part, byte for byte the tree a whole "
+             "run writes, and remove parts of stores ORIGINAL no longer has");
 }
 
 void PackStage::initialize()
 {
     refuse_to_replace_inputs(m_output, {m_original, m_simplified});
+    const int modes = int(m_plan) + int(!m_partitions.empty()) + int(m_finish);
+    if (modes > 1) {
+        throw usage_error("pack: options '--plan', '--partitions' and '--finish' exclude each other");
+    }
+    if (modes == 1 && m_parts.empty()) {
+        throw usage_error(std::string("pack: option '") +
+                          (m_plan     ? "--plan"
+                           : m_finish ? "--finish"
+                                      : "--partitions") +
+                          "' needs '--parts DIR'");
+    }
+    if (modes == 0 && !m_parts.empty()) {
+        throw usage_error("pack: option '--parts' goes with '--plan', '--partitions' or '--finish'");
+    }
+    if (!m_report.empty() && m_partitions.empty()) {
+        throw usage_error("pack: option '--report' goes with '--partitions' (a whole run writes "
+                          "OUTPUT/pack-report.json)");
+    }
+    if (!m_parts.empty()) {
+        refuse_to_replace_inputs(m_parts, {m_original, m_simplified, m_output});
+    }
     const fs::path out(m_output);
     std::error_code ec;
     // A Data Tree is updated in place; a folder a killed first pack left
@@ -57,6 +97,7 @@ std::string PackStage::help_notes() const
            "  OUTPUT/pack-report.json    nodes, tiles, bytes and vertices per LOD, skeleton fraction\n"
            "  OUTPUT/manifest.json       inputs' manifest digests, options, and simplify's options (verify's "
            "contract)\n"
+           "  DIR/plan.json, DIR/<level>/<partition>.tlp   with --parts: the jobs' plan and part files\n"
            "Exit codes: 0 done; 1 bad input data (corrupt or inconsistent stores); 2 usage error;\n"
            "  3 environment (cannot read or write).\n";
 }
@@ -72,8 +113,116 @@ std::vector<std::string> PackStage::versions() const
             datatree::format_version_text()};
 }
 
+namespace {
+
+/// `--tolerances` (simplify.tolerances_m) as numbers; empty when not given.
+std::vector<double> parse_tolerances(const std::string& text)
+{
+    std::vector<double> out;
+    std::stringstream ss(text);
+    for (std::string item; std::getline(ss, item, ',');) {
+        try {
+            size_t used = 0;
+            out.push_back(std::stod(item, &used));
+            if (used != item.size()) {
+                throw std::invalid_argument(item);
+            }
+        } catch (const std::exception&) {
+            throw usage_error("pack: option '--tolerances' has '" + item + "', not a number");
+        }
+    }
+    return out;
+}
+
+std::string ladder_text(const std::vector<double>& v)
+{
+    std::string out;
+    for (const double e : v) {
+        char buf[32];
+        std::snprintf(buf, sizeof buf, "%s%g", out.empty() ? "" : ", ", e);
+        out += buf;
+    }
+    return out.empty() ? std::string("none") : out + " m";
+}
+
+} // namespace
+
+int PackStage::run_plan(const StageContext& ctx)
+{
+    read_manifest(m_original, "ingest");
+    const unsigned threads =
+        m_threads > 0 ? static_cast<unsigned>(m_threads) : std::max(1U, std::thread::hardware_concurrency());
+    const PackPlan plan = plan_parts(m_original, threads);
+    const std::string text = plan_json(plan);
+    const fs::path path = fs::path(m_parts) / "plan.json";
+    std::string old;
+    if (std::ifstream in(path, std::ios::binary); in) {
+        old.assign(std::istreambuf_iterator<char>(in), {});
+    }
+    // Rewritten only when it changes: its time says when the plan last did.
+    if (old != text) {
+        std::error_code ec;
+        fs::create_directories(m_parts, ec);
+        if (ec) {
+            throw environment_error(m_parts + ": cannot create: " + ec.message());
+        }
+        write_file_atomic(path, text);
+    }
+    ctx.log.info("pack: the plan of " + std::to_string(plan.size()) + " stores" + (old == text ? ", unchanged" : ""));
+    std::printf("pack: plan of %zu stores in %s%s\n", plan.size(), path.c_str(), old == text ? " (unchanged)" : "");
+    return exit_ok;
+}
+
+int PackStage::run_partitions(const StageContext& ctx)
+{
+    const auto t0 = std::chrono::steady_clock::now();
+    read_manifest(m_original, "ingest");
+    const auto all = stores_of(m_original);
+    const auto chosen = select_partitions(all, m_partitions, m_original);
+    std::vector<std::string> stores;
+    for (size_t i = 0; i < all.size(); ++i) {
+        if (chosen[i]) {
+            stores.push_back(all[i].first + "/" + all[i].second);
+        }
+    }
+    const fs::path plan_path = fs::path(m_parts) / "plan.json";
+    std::ifstream in(plan_path, std::ios::binary);
+    if (!in) {
+        throw usage_error(plan_path.string() + " is missing: run tigerlod-pack --plan --parts " + m_parts + " first");
+    }
+    const PackPlan plan = plan_from_json(std::string(std::istreambuf_iterator<char>(in), {}), plan_path.string());
+    PackOptions options;
+    options.draco_speed = m_draco_speed;
+    options.threads =
+        m_threads > 0 ? static_cast<unsigned>(m_threads) : std::max(1U, std::thread::hardware_concurrency());
+    options.lods = parse_tolerances(m_tolerances);
+    const auto totals = write_parts(m_original, m_simplified, stores, plan, m_parts, options);
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    ctx.log.info("pack: " + std::to_string(stores.size()) + " parts written");
+    if (!m_report.empty()) {
+        json report;
+        report["schema"] = "tigerlod.pack-share/1";
+        report["stores"] = stores.size();
+        json lods = json::array();
+        for (const auto& l : totals) {
+            lods.push_back({{"eps_m", l.eps_m}, {"vertices", l.vertices}, {"payload_bytes", l.payload_bytes}});
+        }
+        report["lods"] = std::move(lods);
+        report["seconds"] = seconds;
+        write_file_atomic(m_report, report.dump(2) + "\n");
+    }
+    std::printf("pack: %zu parts in %s\n", stores.size(), m_parts.c_str());
+    return exit_ok;
+}
+
 int PackStage::run(const StageContext& ctx)
 {
+    if (m_plan) {
+        return run_plan(ctx);
+    }
+    if (!m_partitions.empty()) {
+        return run_partitions(ctx);
+    }
     const auto t0 = std::chrono::steady_clock::now();
     PackOptions options;
     options.tile_bytes = static_cast<uint64_t>(m_tile_mb * 1024 * 1024);
@@ -92,22 +241,26 @@ int PackStage::run(const StageContext& ctx)
     } catch (const json::exception& e) {
         throw input_error((fs::path(m_simplified) / "manifest.json").string() + ": tolerances_m: " + e.what());
     }
-    const PackedTree tree = build_tree(m_original, m_simplified, options);
-    std::vector<double> found(tree.skeleton.lod_eps_m.begin() + 1, tree.skeleton.lod_eps_m.end());
     std::sort(ladder.begin(), ladder.end());
+    if (const auto asked = parse_tolerances(m_tolerances); !asked.empty() && asked != ladder) {
+        throw usage_error("pack: " + m_simplified + " was simplified at " + ladder_text(ladder) +
+                          ", the tolerances given (--tolerances, simplify.tolerances_m) are " + ladder_text(asked) +
+                          "; re-run tigerlod-simplify with them first");
+    }
+    // Every eps folder, checked against the ladder (simplify --finish removed
+    // those of other tolerances; one lost since would give an LOD fewer).
+    const PackedTree tree = m_finish ? assemble_parts(m_original, m_simplified, m_parts, options)
+                                     : build_tree(m_original, m_simplified, options);
+    const std::vector<double> found(tree.skeleton.lod_eps_m.begin() + 1, tree.skeleton.lod_eps_m.end());
     if (found != ladder) {
-        auto list = [](const std::vector<double>& v) {
-            std::string out;
-            for (const double e : v) {
-                char buf[32];
-                std::snprintf(buf, sizeof buf, "%s%g", out.empty() ? "" : ", ", e);
-                out += buf;
-            }
-            return out.empty() ? std::string("none") : out + " m";
-        };
-        throw input_error(m_simplified + ": its manifest lists the tolerances " + list(ladder) +
-                          ", but the eps-<E>m folders hold " + list(found) +
+        throw input_error(m_simplified + ": its manifest lists the tolerances " + ladder_text(ladder) +
+                          ", but the eps-<E>m folders hold " + ladder_text(found) +
                           "; re-run tigerlod-simplify rather than pack a partial ladder");
+    }
+    if (m_finish) {
+        for (const auto& p : prune_parts(m_original, m_parts)) {
+            ctx.log.info("pack: removed " + p.string() + " (a store this run no longer has, or a dead run's)");
+        }
     }
     ctx.log.info("pack: built " + std::to_string(tree.skeleton.nodes.size()) + " nodes in " +
                  std::to_string(tree.skeleton.tiles.size()) + " tiles");

@@ -8,6 +8,8 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <functional>
+#include <map>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -20,6 +22,9 @@ struct PackOptions {
     uint64_t tile_bytes = 4ULL << 20;
     int draco_speed = 0;
     unsigned threads = 1;
+    /// The tolerances to pack, one LOD each (the simplify ladder); empty:
+    /// every eps-<E>m folder of SIMPLIFIED.
+    std::vector<double> lods;
 };
 
 /// Per-LOD totals, for the report and the benchmarks.
@@ -40,14 +45,66 @@ struct PackedTree {
 
 /// Build from an ingest output folder (LOD 0) and a simplify output folder
 /// (its eps-<E>m subfolders). Throws input_error naming the store at fault.
+/// The same as pack_parts on every store, then assemble_parts.
 PackedTree build_tree(const std::filesystem::path& original, const std::filesystem::path& simplified,
                       const PackOptions& options);
+
+// ---------------------------------------------------------------------------
+// Pack by partitions: the workflow's jobs. A node is a store of ORIGINAL
+// (<level>/<partition>.tlc); its payloads at every LOD depend on its own
+// stores and on the simplified stores of the neighbours that own the border
+// chains of its units it shows, and on nothing else (the border levels of its
+// table, which need the whole hierarchy, are set when the tree is assembled).
+// So a job packs some nodes into part files, and one job assembles the tree
+// from every part: the bytes of build_tree.
+
+/// The stores of ORIGINAL as (level, partition), sorted.
+std::vector<std::pair<std::string, std::string>> stores_of(const std::filesystem::path& original);
+
+/// For each store of ORIGINAL ("level/partition"), the other stores of its
+/// level that own a chain its node shows: what its job reads beside its own.
+using PackPlan = std::map<std::string, std::vector<std::string>>;
+
+/// The plan, from every store of ORIGINAL (one at a time per thread). Throws
+/// input_error naming a store whose node shows a chain no store owns.
+PackPlan plan_parts(const std::filesystem::path& original, unsigned threads);
+/// As JSON (tigerlod.pack-plan/1), and back (input_error naming `name`).
+std::string plan_json(const PackPlan& plan);
+PackPlan plan_from_json(const std::string& text, const std::string& name);
+
+/// Pack the nodes of `stores` ("level/partition" of ORIGINAL) into part
+/// files `parts`/<level>/<partition>.tlp (each written under a temporary
+/// name and renamed), reading beside each store the ones `plan` names. Each
+/// part records the files it was made from and their checksums. Returns
+/// per-LOD totals of the parts written.
+std::vector<LodTotals> write_parts(const std::filesystem::path& original, const std::filesystem::path& simplified,
+                                   const std::vector<std::string>& stores, const PackPlan& plan,
+                                   const std::filesystem::path& parts, const PackOptions& options);
+
+/// The tree of every store's part in `parts` (write_parts), as build_tree
+/// builds it. Throws usage_error naming a part that is missing, made with
+/// other options or LODs, or stale (a file it was made from has changed
+/// since), and input_error for a damaged one. Payloads are read from the
+/// parts as their tiles are laid out, so memory follows a tile, not the tree.
+PackedTree assemble_parts(const std::filesystem::path& original, const std::filesystem::path& simplified,
+                          const std::filesystem::path& parts, const PackOptions& options);
+
+/// Remove from `parts` the part files of stores ORIGINAL no longer has,
+/// level folders of levels it no longer has, and dead runs' temporaries.
+/// Returns what it removed.
+std::vector<std::filesystem::path> prune_parts(const std::filesystem::path& original,
+                                               const std::filesystem::path& parts);
 
 /// Place the payloads ([node][0] the chain table, [node][1 + k] LOD k) into
 /// tiles and set the skeleton's tiles and payload references. Tiles are
 /// named by their content. Each payload is released once it is in its tile,
 /// so the payloads and the tiles are not held twice (a national tree's peak).
 void layout_tiles(PackedTree& tree, std::vector<std::vector<std::string>>&& payloads, uint64_t tile_bytes);
+
+/// The same, with the payloads' sizes known beforehand and each payload
+/// fetched (`fetch(node, j)`) when its tile is built.
+void layout_tiles(PackedTree& tree, const std::vector<std::vector<uint64_t>>& sizes,
+                  const std::function<std::string(uint32_t, size_t)>& fetch, uint64_t tile_bytes);
 
 /// What writing a tree did.
 struct WriteStats {

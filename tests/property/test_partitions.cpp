@@ -77,6 +77,44 @@ int color_to_verify(const fs::path& dir, const Ladder& ladder, size_t& region_ba
             return -2;
         }
     }
+    // The workflow's pack: a plan, a job per store (reading beside its own
+    // only the stores the plan names), then the assembly: the whole run's
+    // tree, byte for byte.
+    if (run("pack", "--plan --parts " + d + "/parts " + d + "/ingest " + d + "/simp " + d + "/ptree", log) != 0) {
+        ADD_FAILURE() << "pack --plan failed: " << slurp(log);
+        return -2;
+    }
+    size_t jobs = 0;
+    for (const auto& level : fs::directory_iterator(dir / "ingest")) {
+        for (const auto& store :
+             level.is_directory() ? fs::directory_iterator(level.path()) : fs::directory_iterator()) {
+            const std::string item = level.path().filename().string() + "/" + store.path().stem().string();
+            if (run("pack",
+                    "--threads 1 --parts " + d + "/parts --partitions " + item + " " + d + "/ingest " + d + "/simp " +
+                        d + "/ptree",
+                    log) != 0) {
+                ADD_FAILURE() << "pack --partitions " << item << " failed: " << slurp(log);
+                return -2;
+            }
+            ++jobs;
+        }
+    }
+    if (run("pack", "--finish --parts " + d + "/parts " + d + "/ingest " + d + "/simp " + d + "/ptree", log) != 0) {
+        ADD_FAILURE() << "pack --finish failed: " << slurp(log);
+        return -2;
+    }
+    EXPECT_GT(jobs, 0U);
+    size_t files = 0;
+    for (const auto& f : fs::recursive_directory_iterator(dir / "tree")) {
+        const auto rel = fs::relative(f.path(), dir / "tree");
+        if (f.is_regular_file() && rel != "pack-report.json") {
+            ++files;
+            EXPECT_EQ(slurp(f.path()), slurp(dir / "ptree" / rel)) << "the tree packed by stores differs: " << rel;
+        }
+    }
+    EXPECT_EQ(std::distance(fs::recursive_directory_iterator(dir / "tree"), fs::recursive_directory_iterator()),
+              std::distance(fs::recursive_directory_iterator(dir / "ptree"), fs::recursive_directory_iterator()));
+    EXPECT_GE(files, 3U);
     const json simp = json::parse(slurp(dir / "simp" / "simplify-report.json"));
     for (const auto& t : simp["tolerances"]) {
         region_bans += t["banned"]["region"].get<size_t>();
