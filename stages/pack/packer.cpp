@@ -144,8 +144,10 @@ bool shows(const chains::ChainStore& s, const chains::ChainInfo& c, const std::s
 /// ORIGINAL and SIMPLIFIED.
 class TreeContext {
   public:
-    TreeContext(const fs::path& original, const fs::path& simplified, const PackOptions& options)
-        : m_original(original), m_simplified(simplified), m_options(options), m_rel(store_files(original))
+    /// `some`: for jobs on some stores, whose eps folders may lack the
+    /// stores of jobs still to run (pack_level names a missing one it reads).
+    TreeContext(const fs::path& original, const fs::path& simplified, const PackOptions& options, bool some = false)
+        : m_original(original), m_simplified(simplified), m_options(options), m_rel(store_files(original)), m_some(some)
     {
         if (m_rel.empty()) {
             throw input_error(original.string() + ": no chain stores (<level>/<partition>.tlc)");
@@ -198,6 +200,10 @@ class TreeContext {
             std::vector<fs::path> paths;
             for (const auto& r : reads) {
                 paths.push_back(m_lod_dirs[k] / r);
+                if (m_some && !fs::exists(paths.back())) {
+                    throw usage_error(paths.back().string() + " is missing: the simplify job of " +
+                                      fs::path(r).replace_extension().string() + " has not run");
+                }
             }
             const auto stores = read_all(paths, m_options.threads);
             std::map<std::string, size_t> store_of;
@@ -255,7 +261,7 @@ class TreeContext {
                 if (!want.empty() && std::find(want.begin(), want.end(), first.eps_m) == want.end()) {
                     continue;
                 }
-                if (files != m_rel) {
+                if (!m_some && files != m_rel) {
                     throw input_error(d.path().string() + ": its chain stores are not those of " + m_original.string() +
                                       " (" + std::to_string(files.size()) + " against " + std::to_string(m_rel.size()) +
                                       ")");
@@ -443,6 +449,7 @@ class TreeContext {
     const fs::path m_original, m_simplified;
     const PackOptions m_options;
     const std::vector<fs::path> m_rel; ///< the stores, relative to ORIGINAL and each eps folder
+    const bool m_some;
     std::vector<fs::path> m_lod_dirs;
     std::vector<double> m_lod_eps;
     std::map<uint32_t, std::vector<fs::path>> m_level_files;
@@ -886,7 +893,7 @@ std::vector<LodTotals> write_parts(const fs::path& original, const fs::path& sim
                                    const std::vector<std::string>& stores, const PackPlan& plan, const fs::path& parts,
                                    const PackOptions& options)
 {
-    TreeContext ctx(original, simplified, options);
+    TreeContext ctx(original, simplified, options, true);
     std::map<uint32_t, std::vector<std::string>> by_level;
     for (const auto& s : stores) {
         const fs::path p(s);

@@ -797,6 +797,78 @@ TEST_F(Cli, ColorAndSimplifyByPartitionsWriteTheWholeRunsBytes)
     EXPECT_NE(missing.err.find("nolist: cannot read the list of --partitions"), std::string::npos) << missing.err;
 }
 
+TEST_F(Cli, PackByPartitionsWritesTheWholeRunsTree)
+{
+    // The workflow's pack: a plan, jobs on some stores writing part files,
+    // then --finish: the tree a whole pack writes, byte for byte.
+    make_tiger();
+    const std::string in = (m_dir / "in").string(), simp = (m_dir / "simp").string();
+    ASSERT_EQ(run("ingest", tiger_config().string() + " " + in).code, 0);
+    ASSERT_EQ(run("simplify", in + " " + simp + " --tolerances 1,8").code, 0);
+    const std::string whole = (m_dir / "whole").string(), tree = (m_dir / "tree").string();
+    const std::string parts = (m_dir / "parts").string();
+    ASSERT_EQ(run("pack", in + " " + simp + " " + whole).code, 0);
+    const std::string with = " --parts " + parts + " " + in + " " + simp + " " + tree;
+    // Before the plan, a job says what to run first.
+    expect_failure(run("pack", "--partitions 'tract/*'" + with), 2, "plan.json is missing: run tigerlod-pack --plan");
+    ASSERT_EQ(run("pack", "--plan" + with).code, 0) << slurp(m_dir / "stderr");
+    EXPECT_FALSE(fs::exists(m_dir / "tree")) << "--plan wrote into OUTPUT";
+    const auto plan_time = fs::last_write_time(m_dir / "parts" / "plan.json");
+    ASSERT_EQ(run("pack", "--plan" + with).code, 0);
+    EXPECT_EQ(fs::last_write_time(m_dir / "parts" / "plan.json"), plan_time) << "an unchanged plan was rewritten";
+    ASSERT_EQ(
+        run("pack", "--partitions 'block/*,block_group/*' --report " + (m_dir / "share.json").string() + with).code, 0)
+        << slurp(m_dir / "stderr");
+    EXPECT_FALSE(fs::exists(m_dir / "tree")) << "a job wrote into OUTPUT";
+    EXPECT_NE(slurp(m_dir / "share.json").find("tigerlod.pack-share/1"), std::string::npos);
+    // A store without its part is named by --finish, and nothing is written.
+    expect_failure(run("pack", "--finish" + with), 2, "the pack job of county/");
+    EXPECT_FALSE(fs::exists(m_dir / "tree"));
+    std::ofstream(m_dir / "list") << "county/*\nstate/*\ntract/*\n";
+    ASSERT_EQ(run("pack", "--partitions @" + (m_dir / "list").string() + with).code, 0) << slurp(m_dir / "stderr");
+    // A part of a store ORIGINAL no longer has is removed by --finish.
+    fs::copy_file(m_dir / "parts" / "tract" / "51063.tlp", m_dir / "parts" / "tract" / "51999.tlp");
+    ASSERT_EQ(run("pack", "--finish" + with).code, 0) << slurp(m_dir / "stderr");
+    EXPECT_FALSE(fs::exists(m_dir / "parts" / "tract" / "51999.tlp"));
+    size_t files = 0;
+    for (const auto& e : fs::recursive_directory_iterator(m_dir / "whole")) {
+        const auto rel = fs::relative(e.path(), m_dir / "whole");
+        if (e.is_regular_file() && rel != "pack-report.json") {
+            ++files;
+            EXPECT_EQ(slurp(e.path()), slurp(m_dir / "tree" / rel)) << rel;
+        }
+    }
+    EXPECT_GE(files, 3U);
+    // A part whose stores changed since is stale: --finish names it and the
+    // job to run again, and leaves the tree as it was.
+    const std::string skeleton = slurp(m_dir / "tree" / "skeleton.tls");
+    ASSERT_EQ(run("simplify", in + " " + simp + " --tolerances 1,8 --overwrite --metric l1").code, 0);
+    expect_failure(run("pack", "--finish" + with), 2, "changed since it was packed; run tigerlod-pack --partitions");
+    EXPECT_EQ(slurp(m_dir / "tree" / "skeleton.tls"), skeleton);
+    // Parts packed at another Draco speed or ladder are refused.
+    ASSERT_EQ(run("simplify", in + " " + simp + " --tolerances 1,8 --overwrite").code, 0);
+    ASSERT_EQ(run("pack", "--draco-speed 5 --partitions 'tract/51063'" + with).code, 0);
+    expect_failure(run("pack", "--finish" + with), 2, "51063.tlp: packed with other options or tolerances");
+    // A damaged part is named.
+    ASSERT_EQ(run("pack", "--partitions 'tract/51063'" + with).code, 0);
+    {
+        std::string bytes = slurp(m_dir / "parts" / "tract" / "51063.tlp");
+        bytes[30] = static_cast<char>(bytes[30] ^ 0x20);
+        std::ofstream(m_dir / "parts" / "tract" / "51063.tlp", std::ios::binary) << bytes;
+    }
+    expect_failure(run("pack", "--finish" + with), 1, "51063.tlp: checksum mismatch in a pack part file");
+    // Options that do not go together.
+    expect_failure(run("pack", "--plan --finish" + with), 2, "'--plan', '--partitions' and '--finish' exclude");
+    expect_failure(run("pack", "--finish " + in + " " + simp + " " + out()), 2, "'--finish' needs '--parts DIR'");
+    expect_failure(run("pack", "--parts " + parts + " " + in + " " + simp + " " + out()), 2,
+                   "'--parts' goes with '--plan', '--partitions' or '--finish'");
+    expect_failure(run("pack", "--report r.json " + in + " " + simp + " " + out()), 2,
+                   "'--report' goes with '--partitions'");
+    expect_failure(run("pack", "--partitions tract/99999" + with), 2, "'tract/99999', which matches no chain store");
+    expect_failure(run("pack", "--tolerances 1,4 " + in + " " + simp + " " + out()), 2,
+                   "simplified at 1, 8 m, the tolerances given (--tolerances, simplify.tolerances_m) are 1, 4 m");
+}
+
 TEST_F(Cli, ProgressAsJsonLinesForAnEngine)
 {
     make_tiger();

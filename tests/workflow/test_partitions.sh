@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The workflow in partition-sized jobs, as an operator meets it on a
-# nightly rebuild: color and simplify run a job per group of stores; a
+# nightly rebuild: color, simplify and pack run a job per group of stores
+# (a pack job after the simplify jobs of its neighbours' groups too); a
 # changed county reruns only the jobs of the stores that hold it, and the
 # result is byte for byte a clean build's; a new description reruns
 # nothing and a new pack.tile_mb only pack and what reads the tree (render
@@ -26,7 +27,7 @@ for tool in snakemake ogr2ogr; do
   fi
 done
 work=$(mktemp -d "${TMPDIR:-/tmp}/tigerlod-partitions-XXXXXX")
-trap 'rm -rf "$work"' EXIT
+trap '[ -n "${KEEP:-}" ] || rm -rf "$work"' EXIT
 cd "$work"
 export TIGERLOD_BIN=$bin TIGERLOD_CORES=2 TIGERLOD_PROGRESS=
 failures=0
@@ -35,7 +36,7 @@ fail() {
   failures=$((failures + 1))
 }
 # The jobs a run's output says ran, `stage level/group` a line, sorted.
-ran() { sed -n 's/^\[[0-9]*\/[0-9?]*\] \(color\|simplify\) \([^:]*\/[^:]*\):.*/\1 \2/p' "$1" | sort | tr '\n' ' '; }
+ran() { sed -n 's/^\[[0-9]*\/[0-9?]*\] \(color\|simplify\|pack\) \([^:]*\/[^:]*\):.*/\1 \2/p' "$1" | sort | tr '\n' ' '; }
 # Two versions of DC: as published, and with one tract's code changed.
 ogr2ogr -f "ESRI Shapefile" dc_v1.shp.zip "/vsizip/$data/tl_2010_11_tract10.zip/tl_2010_11_tract10.shp" -nln dc
 ogr2ogr -f "ESRI Shapefile" dc_v2.shp.zip "/vsizip/$data/tl_2010_11_tract10.zip/tl_2010_11_tract10.shp" -nln dc \
@@ -69,12 +70,14 @@ wf() { "$repo/scripts/workflow" p.yaml "$@"; }
 wf >r1.out 2>&1 || fail "the first run failed: $(tail -30 r1.out)"
 all="color county/g11 color county/g44 color nation/gall color state/gUS color tract/g11001 color tract/g44001 "
 all+="color tract/g44003 color tract/g44005 color tract/g44007 color tract/g44009 "
-[ "$(ran r1.out)" = "$all${all//color/simplify}" ] || fail "the first run's group jobs: $(ran r1.out)"
+[ "$(ran r1.out)" = "$all${all//color/pack}${all//color/simplify}" ] || fail "the first run's group jobs: $(ran r1.out)"
 "$bin/tigerlod-color" --config p.yaml out/p/ingest whole-color >/dev/null || fail "tigerlod-color whole failed"
 "$bin/tigerlod-simplify" --config p.yaml --colors whole-color out/p/ingest whole-simp >/dev/null ||
   fail "tigerlod-simplify whole failed"
 diff -r -x '*-report.json' whole-color out/p/color >/dev/null || fail "color by jobs differs from a whole run"
 diff -r -x '*-report.json' whole-simp out/p/simplified >/dev/null || fail "simplify by jobs differs from a whole run"
+"$bin/tigerlod-pack" --config p.yaml out/p/ingest whole-simp whole-tree >/dev/null || fail "tigerlod-pack whole failed"
+diff -r -x '*-report.json' whole-tree out/p/tree >/dev/null || fail "pack by jobs differs from a whole run"
 grep -q "summary of out/p" r1.out || fail "no summary at the end: $(tail r1.out)"
 grep -q "verify: CLEAN" r1.out || fail "the summary does not say verify was clean: $(tail r1.out)"
 
@@ -117,7 +120,7 @@ grep -q "'workflow.render' must be true or false, not 'sometimes'" badrender.out
 # 4. One county's input changed: ingest, then only that county's jobs.
 cp dc_v2.shp.zip dc.shp.zip
 wf >r5.out 2>&1 || fail "the rebuild after a change failed: $(tail -30 r5.out)"
-[ "$(ran r5.out)" = "color tract/g11001 simplify tract/g11001 " ] ||
+[ "$(ran r5.out)" = "color tract/g11001 pack tract/g11001 simplify tract/g11001 " ] ||
   fail "a changed DC tract code reran: $(ran r5.out)"
 # ... and the result is a clean build's, byte for byte.
 mkdir clean && cp p.yaml dc.shp.zip clean/ && (cd clean && "$repo/scripts/workflow" p.yaml >run.out 2>&1) ||
@@ -130,8 +133,17 @@ done
 # 5. --regions forces a region's jobs (and its state's and the nation's
 # maps) with nothing changed; a region that names no store is refused.
 wf --regions 44003 >r6.out 2>&1 || fail "a region rebuild failed: $(tail -30 r6.out)"
+# A pack job also follows the simplify jobs of the groups its stores'
+# neighbours are in (the plan): Kent County's borders are in the tract maps
+# of Newport, Providence and Washington.
 want="color county/g44 color nation/gall color state/gUS color tract/g44003 "
-[ "$(ran r6.out)" = "$want${want//color/simplify}" ] || fail "--regions 44003 ran: $(ran r6.out)"
+packs="pack county/g44 pack nation/gall pack state/gUS pack tract/g44003 pack tract/g44005 pack tract/g44007 "
+packs+="pack tract/g44009 "
+[ "$(ran r6.out)" = "$want$packs${want//color/simplify}" ] || fail "--regions 44003 ran: $(ran r6.out)"
+for n in 44005 44007 44009; do
+  python3 -c "import json,sys; sys.exit('tract/44003' not in json.load(open('out/p/pack-parts/plan.json'))['reads']['tract/$n'])" ||
+    fail "the plan does not say tract/$n reads tract/44003"
+done
 wf --regions 99 >r7.out 2>&1
 [ $? = 2 ] || fail "a region that matches no store did not exit 2"
 grep -q "region 99 matches no store" r7.out || fail "no message for an unknown region: $(cat r7.out)"
@@ -149,7 +161,8 @@ for g in 44001 44003 44007 44009; do
 done
 touch dc.shp.zip # the fix: ingest writes the store again
 wf >r9.out 2>&1 || fail "the rerun after the fix failed: $(tail -30 r9.out)"
-[ "$(ran r9.out)" = "color tract/g44005 simplify tract/g44005 " ] || fail "the rerun after the fix ran: $(ran r9.out)"
+[ "$(ran r9.out)" = "color tract/g44005 pack tract/g44005 pack tract/g44009 simplify tract/g44005 " ] ||
+  fail "the rerun after the fix ran: $(ran r9.out)"
 grep -q "verify: CLEAN" r9.out || fail "the tree after the fix is not clean"
 # ... and after it, nothing is left to do.
 wf >r10.out 2>&1 || fail "a run after the fix failed"
