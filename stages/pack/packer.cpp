@@ -36,7 +36,7 @@ std::vector<fs::path> store_files(const fs::path& dir)
         }
         for (const auto& f : fs::directory_iterator(level.path())) {
             if (f.path().extension() == ".tlc") {
-                out.push_back(fs::relative(f.path(), dir));
+                out.push_back(level.path().filename() / f.path().filename()); // not fs::relative: its stats
             }
         }
     }
@@ -167,7 +167,7 @@ class TreeContext {
     fs::path lod_path(size_t k, const fs::path& rel) const { return m_lod_dirs[k] / rel; }
     Source source(size_t k, const fs::path& rel) const
     {
-        return {static_cast<uint32_t>(k), (k == 0 ? rel : fs::relative(m_lod_dirs[k], m_simplified) / rel).string()};
+        return {static_cast<uint32_t>(k), (k == 0 ? rel : m_lod_dirs[k].filename() / rel).string()};
     }
     fs::path source_path(const Source& s) const { return (s.lod == 0 ? m_original : m_simplified) / s.file; }
 
@@ -1023,7 +1023,7 @@ std::vector<fs::path> prune_parts(const fs::path& original, const fs::path& part
             removed.push_back(p);
         }
         for (const auto& f : fs::directory_iterator(level.path())) {
-            if (f.path().extension() == ".tlp" && !want.contains(fs::relative(f.path(), parts))) {
+            if (f.path().extension() == ".tlp" && !want.contains(level.path().filename() / f.path().filename())) {
                 removed.push_back(f.path());
             }
         }
