@@ -85,7 +85,12 @@ class AdversarialMap {
                 out += "[";
                 for (size_t k = 0; k < unit.rings[r].size(); ++k) {
                     out += k ? "," : "";
-                    out += "[" + deg(unit.rings[r][k].lon) + "," + deg(unit.rings[r][k].lat) + "]";
+                    // Appended piece by piece: "[" + a temporary trips GCC 12's -Wrestrict (a false positive).
+                    out += '[';
+                    out += deg(unit.rings[r][k].lon);
+                    out += ',';
+                    out += deg(unit.rings[r][k].lat);
+                    out += ']';
                 }
                 out += "]";
             }
