@@ -168,8 +168,10 @@ int PackStage::run_plan(const StageContext& ctx)
         }
         write_file_atomic(path, text);
     }
-    ctx.log.info("pack: the plan of " + std::to_string(plan.size()) + " stores" + (old == text ? ", unchanged" : ""));
-    std::printf("pack: plan of %zu stores in %s%s\n", plan.size(), path.c_str(), old == text ? " (unchanged)" : "");
+    ctx.log.info("pack: the plan of " + std::to_string(plan.reads.size()) + " stores" +
+                 (old == text ? ", unchanged" : ""));
+    std::printf("pack: plan of %zu stores in %s%s\n", plan.reads.size(), path.c_str(),
+                old == text ? " (unchanged)" : "");
     return exit_ok;
 }
 

@@ -826,7 +826,7 @@ PackPlan plan_parts(const fs::path& original, unsigned threads)
     }
     PackPlan plan;
     for (const auto& [level, members] : levels) {
-        std::vector<std::vector<uint64_t>> owned(members.size()), shown(members.size());
+        std::vector<std::vector<uint64_t>> owned(members.size()), shown(members.size()), halo(members.size());
         parallel_each(members.size(), threads, [&](size_t a) {
             const auto s = chains::read(original / rel[members[a]]);
             const auto units = own_units(s);
@@ -834,8 +834,11 @@ PackPlan plan_parts(const fs::path& original, unsigned threads)
             for (const auto& c : s.chains) {
                 if ((c.flags & chains::chain_halo) == 0) {
                     owned[a].push_back(c.id);
-                } else if (shows(s, c, mine)) {
-                    shown[a].push_back(c.id);
+                } else {
+                    halo[a].push_back(c.id);
+                    if (shows(s, c, mine)) {
+                        shown[a].push_back(c.id);
+                    }
                 }
             }
             std::sort(owned[a].begin(), owned[a].end());
@@ -848,17 +851,22 @@ PackPlan plan_parts(const fs::path& original, unsigned threads)
             std::vector<uint64_t>().swap(owned[a]);
         }
         std::sort(owner.begin(), owner.end());
-        for (size_t a = 0; a < members.size(); ++a) {
-            std::set<std::string> reads;
-            for (const uint64_t id : shown[a]) {
+        auto owners = [&](size_t a, const std::vector<uint64_t>& ids) {
+            std::set<std::string> out;
+            for (const uint64_t id : ids) {
                 const auto it = std::lower_bound(owner.begin(), owner.end(), std::pair<uint64_t, uint32_t>{id, 0});
                 if (it == owner.end() || it->first != id) {
                     throw input_error((original / rel[members[a]]).string() + ": chain " + std::to_string(id) +
-                                      " of its halo bounds one of its units and no store of its level owns it");
+                                      " of its halo is owned by no store of its level");
                 }
-                reads.insert((fs::path(level) / rel[members[it->second]].stem()).string());
+                out.insert((fs::path(level) / rel[members[it->second]].stem()).string());
             }
-            plan[(fs::path(level) / rel[members[a]].stem()).string()] = {reads.begin(), reads.end()};
+            return std::vector<std::string>(out.begin(), out.end());
+        };
+        for (size_t a = 0; a < members.size(); ++a) {
+            const std::string key = (fs::path(level) / rel[members[a]].stem()).string();
+            plan.reads[key] = owners(a, shown[a]);
+            plan.near[key] = owners(a, halo[a]);
         }
     }
     return plan;
@@ -868,11 +876,13 @@ std::string plan_json(const PackPlan& plan)
 {
     nlohmann::ordered_json doc;
     doc["schema"] = "tigerlod.pack-plan/1";
-    nlohmann::ordered_json reads = nlohmann::ordered_json::object();
-    for (const auto& [store, others] : plan) {
-        reads[store] = others;
+    for (const auto* which : {&plan.reads, &plan.near}) {
+        nlohmann::ordered_json stores = nlohmann::ordered_json::object();
+        for (const auto& [store, others] : *which) {
+            stores[store] = others;
+        }
+        doc[which == &plan.reads ? "reads" : "near"] = std::move(stores);
     }
-    doc["reads"] = std::move(reads);
     return doc.dump(1) + "\n";
 }
 
@@ -883,7 +893,10 @@ PackPlan plan_from_json(const std::string& text, const std::string& name)
         if (doc.at("schema") != "tigerlod.pack-plan/1") {
             throw input_error(name + ": not a tigerlod pack plan (schema tigerlod.pack-plan/1)");
         }
-        return doc.at("reads").get<PackPlan>();
+        PackPlan plan;
+        plan.reads = doc.at("reads").get<std::map<std::string, std::vector<std::string>>>();
+        plan.near = doc.at("near").get<std::map<std::string, std::vector<std::string>>>();
+        return plan;
     } catch (const nlohmann::json::exception& e) {
         throw input_error(name + ": not a tigerlod pack plan: " + e.what());
     }
@@ -908,8 +921,8 @@ std::vector<LodTotals> write_parts(const fs::path& original, const fs::path& sim
         std::set<fs::path> reads;
         for (const auto& n : names) {
             const std::string key = level + "/" + n;
-            const auto it = plan.find(key);
-            if (it == plan.end()) {
+            const auto it = plan.reads.find(key);
+            if (it == plan.reads.end()) {
                 throw usage_error("the pack plan has no store " + key +
                                   ": it is older than the stores (run tigerlod-pack --plan again)");
             }

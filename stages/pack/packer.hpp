@@ -61,9 +61,14 @@ PackedTree build_tree(const std::filesystem::path& original, const std::filesyst
 /// The stores of ORIGINAL as (level, partition), sorted.
 std::vector<std::pair<std::string, std::string>> stores_of(const std::filesystem::path& original);
 
-/// For each store of ORIGINAL ("level/partition"), the other stores of its
-/// level that own a chain its node shows: what its job reads beside its own.
-using PackPlan = std::map<std::string, std::vector<std::string>>;
+/// For each store of ORIGINAL ("level/partition"), other stores of its level.
+struct PackPlan {
+    /// Those that own a chain its node shows: what its pack job reads beside its own.
+    std::map<std::string, std::vector<std::string>> reads;
+    /// Those that own a chain of its halo (a superset): the nodes a verify
+    /// job decodes beside its own to look for meetings near them.
+    std::map<std::string, std::vector<std::string>> near;
+};
 
 /// The plan, from every store of ORIGINAL (one at a time per thread). Throws
 /// input_error naming a store whose node shows a chain no store owns.

@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <iterator>
 #include <cmath>
 #include <mutex>
 #include <set>
@@ -249,10 +250,28 @@ struct UserPoint {
     std::string unit; ///< the unit that holds it in the original map
 };
 
+/// The items in report order, the first `max_items` of them kept, the
+/// rest counted as dropped: whatever order they were found in, and however
+/// many runs found them, the same items are kept.
+void keep_first_items(Report& r, size_t max_items)
+{
+    auto& items = r.items;
+    const auto order = [](const Violation& a, const Violation& b) {
+        return std::tie(a.level, a.lod, a.kind, a.node, a.chains, a.x, a.y, a.detail) <
+               std::tie(b.level, b.lod, b.kind, b.node, b.chains, b.x, b.y, b.detail);
+    };
+    if (items.size() > max_items) {
+        std::nth_element(items.begin(), items.begin() + static_cast<std::ptrdiff_t>(max_items), items.end(), order);
+        r.items_dropped += items.size() - max_items;
+        items.resize(max_items);
+    }
+    std::sort(items.begin(), items.end(), order);
+}
+
 class Verifier {
   public:
-    Verifier(const reader::Tree& tree, const fs::path& original, const Options& options)
-        : m_tree(tree), m_sk(tree.skeleton()), m_original(original), m_options(options),
+    Verifier(const reader::Tree& tree, const fs::path& original, const Options& options, const Selection* selection)
+        : m_tree(tree), m_sk(tree.skeleton()), m_original(original), m_options(options), m_selection(selection),
           m_proj(view::projection_of(m_sk)), m_metric(static_cast<Metric>(m_sk.metric))
     {
         m_opt = options.tolerance;
@@ -271,10 +290,7 @@ class Verifier {
             verify_level(l);
         }
         m_report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-        std::sort(m_report.items.begin(), m_report.items.end(), [](const Violation& a, const Violation& b) {
-            return std::tie(a.level, a.lod, a.kind, a.node, a.chains, a.x, a.y) <
-                   std::tie(b.level, b.lod, b.kind, b.node, b.chains, b.x, b.y);
-        });
+        keep_first_items(m_report, m_options.max_items);
         return std::move(m_report);
     }
 
@@ -288,13 +304,12 @@ class Verifier {
             ++ll.violations[v.kind];
             ++m_report.violations[v.kind];
         }
-        if (m_report.items.size() >= m_options.max_items) {
-            ++m_report.items_dropped;
-            return;
-        }
         m_proj.to_lonlat(v.x, v.y, v.lon, v.lat);
         std::sort(v.chains.begin(), v.chains.end());
         m_report.items.push_back(std::move(v));
+        if (m_report.items.size() >= 2 * std::max<size_t>(m_options.max_items, 1)) {
+            keep_first_items(m_report, m_options.max_items); // memory follows max_items, not the violations
+        }
     }
 
     std::string node_code(uint32_t n) const { return m_sk.strings[m_sk.nodes[n].code]; }
@@ -308,75 +323,154 @@ class Verifier {
     /// The chain store partition whose map node `n` shows.
     std::string partition_of(uint32_t n) const { return n == 0 ? std::string("all") : node_code(n); }
 
-    /// A level's original stores, the owned chains by id, the stores by partition.
+    /// The original stores a level is checked with, the owned chains by id,
+    /// the stores by partition, and each store's chains (own and halo) by id.
     struct LevelStores {
         std::vector<chains::ChainStore> stores;
         std::unordered_map<uint64_t, Original> owned;
         std::map<std::string, const chains::ChainStore*> by_partition;
+        std::map<const chains::ChainStore*, std::vector<uint64_t>> ids; ///< sorted
     };
 
-    /// Read the original stores of a level (every store of its folder) into `ls`.
-    void read_level(const fs::path& dir, LevelStores& ls) const
+    /// Read the stores of `partitions` (all of the level's folder when
+    /// empty) into `ls`.
+    void read_level(const fs::path& dir, const std::set<std::string>& partitions, LevelStores& ls) const
     {
-        auto& stores = ls.stores;
-        auto& owned = ls.owned;
-        auto& by_partition = ls.by_partition;
         std::vector<fs::path> paths;
-        for (const auto& f : fs::directory_iterator(dir)) {
-            if (f.path().extension() == ".tlc") {
-                paths.push_back(f.path());
+        if (partitions.empty()) {
+            for (const auto& f : fs::directory_iterator(dir)) {
+                if (f.path().extension() == ".tlc") {
+                    paths.push_back(f.path());
+                }
             }
-        }
-        std::sort(paths.begin(), paths.end());
-        stores.resize(paths.size());
-        parallel_each(paths.size(), m_options.threads, [&](size_t i) { stores[i] = chains::read(paths[i]); });
-        for (const auto& s : stores) {
-            by_partition[s.partition] = &s;
-            for (size_t i = 0; i < s.chains.size(); ++i) {
-                if (!(s.chains[i].flags & chains::chain_halo)) {
-                    owned[s.chains[i].id] = {&s, &s.chains[i], i};
+        } else {
+            for (const auto& p : partitions) {
+                paths.push_back(dir / (p + ".tlc"));
+                if (!fs::exists(paths.back())) {
+                    throw input_error(dir.string() + ": no store for partition " + p);
                 }
             }
         }
+        std::sort(paths.begin(), paths.end());
+        ls.stores.resize(paths.size());
+        parallel_each(paths.size(), m_options.threads, [&](size_t i) { ls.stores[i] = chains::read(paths[i]); });
+        for (const auto& s : ls.stores) {
+            ls.by_partition[s.partition] = &s;
+            auto& ids = ls.ids[&s];
+            for (size_t i = 0; i < s.chains.size(); ++i) {
+                ids.push_back(s.chains[i].id);
+                if (!(s.chains[i].flags & chains::chain_halo)) {
+                    ls.owned[s.chains[i].id] = {&s, &s.chains[i], i};
+                }
+            }
+            std::sort(ids.begin(), ids.end());
+        }
     }
 
-    /// One level at every LOD: each node checked against its original
-    /// store (check_node), then the level as a whole (gather_nodes,
-    /// check_meetings), into the report.
+    /// A chain of the level at one LOD as its home node shows it: the node
+    /// of the store that owns it (every node shows all its store owns).
+    struct HomeChain {
+        uint64_t id = 0;
+        uint32_t home = 0; ///< skeleton node
+        std::span<const GridPoint> points;
+    };
+
+    /// Whether a meeting of chains `a` and `b` is this run's to report, and
+    /// which of them it is filed under: a meeting belongs to the chain of the
+    /// smaller (home node, id), and is reported by the run that checks that
+    /// chain's home node, if the other chain is in its home's store (own or
+    /// halo). Two chains of a level that meet in the tree lie within the
+    /// halo of each other's store unless one strays farther than its
+    /// tolerance from its original (reported as eps_exceeded), so a tree is
+    /// clean exactly when every node's checks are. The same rule whole or by
+    /// partitions, so the report is the same.
+    struct MeetingRule {
+        const std::set<uint32_t>* selected;
+        const std::map<uint32_t, const std::vector<uint64_t>*>* store_ids; ///< home node -> its store's chain ids
+        /// The chain the meeting is filed under, or nullptr when not this run's.
+        const HomeChain* owner(const HomeChain& a, const HomeChain& b) const
+        {
+            const HomeChain& first = std::tie(a.home, a.id) <= std::tie(b.home, b.id) ? a : b;
+            const HomeChain& other = &first == &a ? b : a;
+            if (!selected->contains(first.home)) {
+                return nullptr;
+            }
+            const auto it = store_ids->find(first.home);
+            return it != store_ids->end() && std::binary_search(it->second->begin(), it->second->end(), other.id)
+                       ? &first
+                       : nullptr;
+        }
+    };
+
+    /// One level at every LOD: each selected node checked against its
+    /// original store (check_node), each chain it shows from a neighbour
+    /// compared with the neighbour's (border_mismatch), then the meetings
+    /// near the selected nodes' chains (check_meetings, check_across_lods),
+    /// into the report. The selected nodes: the level's, or those of the
+    /// stores given (verify_stores); beside them the nodes of the stores
+    /// that own a chain of their halos are decoded, not checked.
     void verify_level(uint32_t l)
     {
         const std::string& level = m_sk.level_names[l];
-        std::vector<uint32_t> nodes;
+        std::map<std::string, uint32_t> node_of; // partition -> node of the level
         for (uint32_t n = 0; n < m_sk.nodes.size(); ++n) {
             if (m_sk.nodes[n].level == l && !tiles_root(n)) {
-                nodes.push_back(n);
+                node_of[partition_of(n)] = n;
             }
         }
+        std::vector<uint32_t> nodes; // selected, in order
+        std::set<std::string> partitions;
+        for (const auto& [partition, n] : node_of) {
+            if (!m_selection || m_selection->stores.contains(level + "/" + partition)) {
+                nodes.push_back(n);
+                if (m_selection) {
+                    partitions.insert(partition);
+                    const auto it = m_selection->near.find(level + "/" + partition);
+                    for (const auto& other : it == m_selection->near.end() ? std::vector<std::string>{} : it->second) {
+                        partitions.insert(fs::path(other).filename().string());
+                    }
+                }
+            }
+        }
+        std::sort(nodes.begin(), nodes.end());
         if (nodes.empty()) {
             return;
         }
-        // The original stores of the level.
         const fs::path dir = m_original / level;
         if (!fs::is_directory(dir)) {
             throw input_error(dir.string() + ": no stores for level '" + level + "' of the tree");
         }
         LevelStores ls;
-        read_level(dir, ls);
-        const auto& by_partition = ls.by_partition;
+        read_level(dir, partitions, ls);
         for (uint32_t n : nodes) {
-            const std::string partition = partition_of(n);
-            if (!by_partition.contains(partition)) {
-                throw input_error(dir.string() + ": no store for partition " + partition + " (node " +
+            if (!ls.by_partition.contains(partition_of(n))) {
+                throw input_error(dir.string() + ": no store for partition " + partition_of(n) + " (node " +
                                   std::to_string(n) + ")");
             }
         }
+        // The working stores' nodes, in node order: the selected and those decoded beside them.
+        std::vector<uint32_t> homes;
+        std::map<const chains::ChainStore*, uint32_t> home_of_store;
+        std::map<uint32_t, const std::vector<uint64_t>*> store_ids;
+        for (const auto& [partition, store] : ls.by_partition) {
+            const auto it = node_of.find(partition);
+            if (it == node_of.end()) {
+                throw input_error((dir / (partition + ".tlc")).string() + ": the tree has no node for this store");
+            }
+            homes.push_back(it->second);
+            home_of_store[store] = it->second;
+            store_ids[it->second] = &ls.ids.at(store);
+        }
+        std::sort(homes.begin(), homes.end());
+        const std::set<uint32_t> selected(nodes.begin(), nodes.end());
+        const MeetingRule rule{&selected, &store_ids};
         // The units whose boundary each node's original map holds, and their original area sign.
         std::set<std::pair<uint64_t, uint64_t>> input_meetings; // chain pairs that meet at LOD 0
         std::vector<LodChains> lods(m_sk.lod_eps_m.size());     // each LOD's chains, for check_across_lods
         std::vector<std::vector<UserPoint>> user_points(nodes.size());
         std::vector<std::map<std::string, int>> area_sign(nodes.size());
         parallel_each(nodes.size(), m_options.threads, [&](size_t i) {
-            original_facts(*by_partition.at(partition_of(nodes[i])), area_sign[i], user_points[i]);
+            original_facts(*ls.by_partition.at(partition_of(nodes[i])), area_sign[i], user_points[i]);
         });
 
         for (uint32_t k = 0; k < m_sk.lod_eps_m.size(); ++k) {
@@ -394,36 +488,60 @@ class Verifier {
                     eps[&s] = simplify::chain_tolerances(s, ll.eps_m, m_opt);
                 }
             }
-            std::vector<NodeResult> results(nodes.size());
-            parallel_each(nodes.size(), m_options.threads, [&](size_t i) {
-                results[i] = check_node(nodes[i], k, ls.owned, *by_partition.at(partition_of(nodes[i])), eps,
-                                        area_sign[i], user_points[i]);
+            // The selected nodes checked, the others decoded.
+            std::map<uint32_t, NodeResult> results;
+            for (uint32_t n : homes) {
+                results[n];
+            }
+            parallel_each(homes.size(), m_options.threads, [&](size_t i) {
+                const uint32_t n = homes[i];
+                NodeResult& r = results.at(n);
+                if (selected.contains(n)) {
+                    const size_t slot = size_t(std::lower_bound(nodes.begin(), nodes.end(), n) - nodes.begin());
+                    r = check_node(n, k, ls.owned, *ls.by_partition.at(partition_of(n)), eps, area_sign[slot],
+                                   user_points[slot]);
+                } else {
+                    r.ok = m_tree.read_table(n, r.table).ok() && m_tree.read_geometry(n, k, r.geometry).ok();
+                }
             });
-            const auto unique = gather_nodes(ll, nodes, results);
-            check_meetings(ll, nodes, results, unique, input_meetings);
-            keep_for_lods(lods[k], nodes, results, unique);
+            // Each chain once, from its home node, in (home, id) order.
+            std::vector<HomeChain> unique;
+            for (const uint32_t n : homes) {
+                const NodeResult& r = results.at(n);
+                if (!r.ok) {
+                    continue;
+                }
+                for (size_t c = 0; c < r.table.chains.size(); ++c) {
+                    const auto it = ls.owned.find(r.table.chains[c].id);
+                    if (it != ls.owned.end() && home_of_store.at(it->second.store) == n) {
+                        unique.push_back({r.table.chains[c].id, n, r.geometry.chain(c)});
+                    }
+                }
+            }
+            gather_nodes(ll, nodes, results, unique, ls, home_of_store);
+            check_meetings(ll, unique, rule, input_meetings);
+            keep_for_lods(lods[k], unique);
             m_report.chains += ll.chains;
             m_report.segments += ll.segments;
             m_report.points += ll.points;
             m_report.by_level_lod.push_back(std::move(ll));
         }
-        check_across_lods(level, lods, input_meetings);
+        check_across_lods(level, lods, rule, input_meetings);
     }
 
     /// A level's chains at one LOD, each once, for the check across LODs.
     struct LodChains {
         std::vector<uint64_t> ids;
-        std::vector<uint32_t> nodes; ///< the node each was taken from (a string each held 0.3 GB at 100 M vertices)
+        std::vector<uint32_t> nodes; ///< the home node of each (a string each held 0.3 GB at 100 M vertices)
         datatree::Geometry geometry;
     };
 
-    void keep_for_lods(LodChains& out, const std::vector<uint32_t>& nodes, const std::vector<NodeResult>& results,
-                       const std::vector<std::pair<size_t, size_t>>& unique) const
+    void keep_for_lods(LodChains& out, const std::vector<HomeChain>& unique) const
     {
-        for (const auto& [slot, c] : unique) {
-            out.ids.push_back(results[slot].table.chains[c].id);
-            out.nodes.push_back(nodes[slot]);
-            out.geometry.add_chain(results[slot].geometry.chain(c));
+        for (const auto& u : unique) {
+            out.ids.push_back(u.id);
+            out.nodes.push_back(u.home);
+            out.geometry.add_chain(u.points);
         }
     }
 
@@ -434,9 +552,9 @@ class Verifier {
     /// disguise (b's segment is also b's at LOD i, or a's also a's at LOD j)
     /// was reported by that LOD's check and is left out. One violation per
     /// pair of chains, filed under the coarser LOD of its worst meeting (the
-    /// first found). Chains that already meet in the original map are input
-    /// problems.
-    void check_across_lods(const std::string& level, const std::vector<LodChains>& lods,
+    /// first found) and the home node of the chain there, as MeetingRule
+    /// says. Chains that already meet in the original map are input problems.
+    void check_across_lods(const std::string& level, const std::vector<LodChains>& lods, const MeetingRule& rule,
                            const std::set<std::pair<uint64_t, uint64_t>>& input_meetings)
     {
         if (lods.size() < 2) {
@@ -471,6 +589,9 @@ class Verifier {
             const auto pts = lods[w.lod].geometry.chain(w.chain);
             return Segment{pts[w.segment], pts[w.segment + 1], 0};
         };
+        auto home_chain = [&](const Where& w) {
+            return HomeChain{lods[w.lod].ids[w.chain], lods[w.lod].nodes[w.chain], {}};
+        };
         // Whether segment s of chain `g` is also one of its segments at LOD k.
         auto has_segment = [&](uint32_t g, uint32_t k, const Segment& seg) {
             const uint32_t c = index_of[g][k];
@@ -491,6 +612,9 @@ class Verifier {
         std::map<std::pair<uint64_t, uint64_t>, std::pair<Intersection, int>> meetings; // by chain ids
         for (const auto& x : found) {
             const Where a = where_of(x.first), b = where_of(x.second);
+            if (!rule.owner(home_chain(a), home_chain(b))) {
+                continue; // another run's, or of chains the partition contract keeps apart
+            }
             const uint32_t ga = group_of.at(lods[a.lod].ids[a.chain]), gb = group_of.at(lods[b.lod].ids[b.chain]);
             if (has_segment(gb, a.lod, segment_of(b)) || has_segment(ga, b.lod, segment_of(a))) {
                 continue; // the same meeting at one LOD
@@ -515,28 +639,29 @@ class Verifier {
                                                                        : "meet";
             auto ll = std::find_if(m_report.by_level_lod.begin(), m_report.by_level_lod.end(),
                                    [&](const LevelLod& l) { return l.level == level && l.lod == b.lod; });
-            add(*ll,
-                {input_meetings.contains(ids) ? "input_problem" : "lod_crossings", level, b.lod,
-                 node_code(lods[b.lod].nodes[b.chain]), std::vector<uint64_t>{ids.first, ids.second}, x.x, x.y, 0, 0,
-                 "chain " + std::to_string(lods[a.lod].ids[a.chain]) + " at LOD " + std::to_string(a.lod) +
-                     " segment " + std::to_string(a.segment) + " and chain " +
-                     std::to_string(lods[b.lod].ids[b.chain]) + " at LOD " + std::to_string(b.lod) + " segment " +
-                     std::to_string(b.segment) + " " + rel});
+            add(*ll, {input_meetings.contains(ids) ? "input_problem" : "lod_crossings", level, b.lod,
+                      node_code(rule.owner(home_chain(a), home_chain(b))->home),
+                      std::vector<uint64_t>{ids.first, ids.second}, x.x, x.y, 0, 0,
+                      "chain " + std::to_string(lods[a.lod].ids[a.chain]) + " at LOD " + std::to_string(a.lod) +
+                          " segment " + std::to_string(a.segment) + " and chain " +
+                          std::to_string(lods[b.lod].ids[b.chain]) + " at LOD " + std::to_string(b.lod) + " segment " +
+                          std::to_string(b.segment) + " " + rel});
         }
     }
 
-    /// Node by node, in order, their own findings into `ll`, and each chain
-    /// shown by two nodes compared (border_mismatch). Returns each chain once:
-    /// (node slot, chain) where it was first seen.
-    std::vector<std::pair<size_t, size_t>> gather_nodes(LevelLod& ll, const std::vector<uint32_t>& nodes,
-                                                        std::vector<NodeResult>& results)
+    /// The selected nodes, in order: their own findings into `ll`, their
+    /// chains and points counted, and each chain a node shows from a
+    /// neighbour's store compared with the neighbour's (border_mismatch,
+    /// filed under the node that shows it from the neighbour).
+    void gather_nodes(LevelLod& ll, const std::vector<uint32_t>& nodes, std::map<uint32_t, NodeResult>& results,
+                      const std::vector<HomeChain>& unique, const LevelStores& ls,
+                      const std::map<const chains::ChainStore*, uint32_t>& home_of_store)
     {
         const std::string& level = ll.level;
         const uint32_t k = ll.lod;
-        std::unordered_map<uint64_t, std::pair<size_t, size_t>> first_seen; // id -> (node slot, chain)
-        std::vector<std::pair<size_t, size_t>> unique;                      // (node slot, chain)
-        for (size_t i = 0; i < nodes.size(); ++i) {
-            auto& r = results[i];
+        const std::set<uint32_t> selected(nodes.begin(), nodes.end());
+        for (const uint32_t n : nodes) {
+            auto& r = results.at(n);
             ++ll.nodes;
             ll.points += r.points;
             for (auto& v : r.violations) {
@@ -549,57 +674,81 @@ class Verifier {
             }
             for (size_t c = 0; c < r.table.chains.size(); ++c) {
                 const uint64_t id = r.table.chains[c].id;
-                const auto [it, fresh] = first_seen.try_emplace(id, i, c);
-                if (fresh) {
-                    unique.emplace_back(i, c);
+                const auto it = ls.owned.find(id);
+                if (it == ls.owned.end()) {
+                    continue; // check_chain reported it
+                }
+                const uint32_t home = home_of_store.at(it->second.store);
+                if (home == n) {
                     continue;
                 }
-                const auto a = results[it->second.first].geometry.chain(it->second.second);
+                const auto& h = results.at(home);
+                if (!h.ok) {
+                    continue; // the home node's own check reports it unreadable
+                }
+                const auto at = std::lower_bound(h.table.chains.begin(), h.table.chains.end(), id,
+                                                 [](const auto& e, uint64_t v) { return e.id < v; });
                 const auto b = r.geometry.chain(c);
+                const bool shown = at != h.table.chains.end() && at->id == id;
+                if (!shown) {
+                    add(ll,
+                        {"border_mismatch",
+                         level,
+                         k,
+                         node_code(n),
+                         {id},
+                         double(b.front().x),
+                         double(b.front().y),
+                         0,
+                         0,
+                         "shown by node " + node_code(n) + " and not by " + node_code(home) + ", whose store owns it"});
+                    continue;
+                }
+                const auto a = h.geometry.chain(size_t(at - h.table.chains.begin()));
                 if (!std::equal(a.begin(), a.end(), b.begin(), b.end())) {
-                    add(ll, {"border_mismatch",
-                             level,
-                             k,
-                             node_code(nodes[i]),
-                             {id},
-                             double(b.front().x),
-                             double(b.front().y),
-                             0,
-                             0,
-                             "shown by nodes " + node_code(nodes[it->second.first]) + " and " + node_code(nodes[i]) +
-                                 " with different coordinates"});
+                    add(ll,
+                        {"border_mismatch",
+                         level,
+                         k,
+                         node_code(n),
+                         {id},
+                         double(b.front().x),
+                         double(b.front().y),
+                         0,
+                         0,
+                         "shown by nodes " + node_code(home) + " and " + node_code(n) + " with different coordinates"});
                 }
             }
         }
-        return unique;
+        for (const auto& u : unique) {
+            if (selected.contains(u.home)) {
+                ll.chains += 1;
+                ll.vertices += u.points.size();
+                for (size_t s = 0; s + 1 < u.points.size(); ++s) {
+                    ll.segments +=
+                        u.points[s] == u.points[s + 1] ? 0 : 1; // a zero-length one is the subsequence check's
+                }
+            }
+        }
     }
 
-    /// Crossings, overlaps and self-intersections over the whole level at
-    /// one LOD, one violation per pair of chains (or per chain, meeting
-    /// itself): the worst way they meet (overlap, then cross, then touch), at
-    /// the first place found. Pairs that already meet at LOD 0 are input
-    /// problems (ingest reported and flagged them), listed, not counted.
-    void check_meetings(LevelLod& ll, const std::vector<uint32_t>& nodes, const std::vector<NodeResult>& results,
-                        const std::vector<std::pair<size_t, size_t>>& unique,
+    /// Crossings, overlaps and self-intersections near the selected nodes'
+    /// chains at one LOD, one violation per pair of chains (or per chain,
+    /// meeting itself) as MeetingRule files it: the worst way they meet
+    /// (overlap, then cross, then touch), at the first place found in (home
+    /// node, id) order. Pairs that already meet at LOD 0 are input problems
+    /// (ingest reported and flagged them), listed, not counted.
+    void check_meetings(LevelLod& ll, const std::vector<HomeChain>& unique, const MeetingRule& rule,
                         std::set<std::pair<uint64_t, uint64_t>>& input_meetings)
     {
         const std::string& level = ll.level;
         const uint32_t k = ll.lod;
         std::vector<ChainSegments> chains; // the unique chains, in order
-        for (size_t u = 0; u < unique.size(); ++u) {
-            const auto pts = results[unique[u].first].geometry.chain(unique[u].second);
-            ll.chains += 1;
-            ll.vertices += pts.size();
-            for (size_t s = 0; s + 1 < pts.size(); ++s) {
-                ll.segments += pts[s] == pts[s + 1] ? 0 : 1; // a zero-length one is the subsequence check's
-            }
-            chains.push_back({pts, 0, 0});
+        for (const auto& u : unique) {
+            chains.push_back({u.points, 0, 0});
         }
         std::vector<uint64_t> base;
         const auto found = meetings_by_window(chains, base, false, m_options.window_segments, m_options.threads);
-        // One violation per pair of chains (or per chain, meeting itself):
-        // the worst way they meet (overlap, then cross, then touch), at the
-        // first place found.
         struct Meeting {
             Intersection x;
             size_t ua, ub;
@@ -611,18 +760,18 @@ class Verifier {
         std::map<std::pair<uint64_t, uint64_t>, Meeting> meetings;
         for (const auto& x : found) {
             const size_t ua = chain_segment(base, x.first).first, ub = chain_segment(base, x.second).first;
-            const uint64_t ida = results[unique[ua].first].table.chains[unique[ua].second].id;
-            const uint64_t idb = results[unique[ub].first].table.chains[unique[ub].second].id;
+            const uint64_t ida = unique[ua].id, idb = unique[ub].id;
             const auto key = std::make_pair(std::min(ida, idb), std::max(ida, idb));
+            if (k == 0) {
+                input_meetings.insert(key);
+            }
+            if (!rule.owner(unique[ua], unique[ub])) {
+                continue; // another run's, or of chains the partition contract keeps apart
+            }
             const int rank = rank_of(x.relation);
             auto [it, fresh] = meetings.try_emplace(key, Meeting{x, ua, ub, rank});
             if (!fresh && rank > it->second.rank) {
                 it->second = Meeting{x, ua, ub, rank};
-            }
-        }
-        if (k == 0) {
-            for (const auto& [ids, m] : meetings) {
-                input_meetings.insert(ids);
             }
         }
         for (const auto& [ids, m] : meetings) {
@@ -640,9 +789,10 @@ class Verifier {
             if (ids.second != ids.first) {
                 chain_ids.push_back(ids.second);
             }
-            add(ll, {kind, level, k, node_code(nodes[unique[m.ua].first]), chain_ids, m.x.x, m.x.y, 0, 0,
-                     std::string("segments ") + std::to_string(chain_segment(base, m.x.first).second) + " and " +
-                         std::to_string(chain_segment(base, m.x.second).second) + " " + rel});
+            add(ll,
+                {kind, level, k, node_code(rule.owner(unique[m.ua], unique[m.ub])->home), chain_ids, m.x.x, m.x.y, 0, 0,
+                 std::string("segments ") + std::to_string(chain_segment(base, m.x.first).second) + " and " +
+                     std::to_string(chain_segment(base, m.x.second).second) + " " + rel});
         }
     }
 
@@ -980,6 +1130,7 @@ class Verifier {
     const datatree::Skeleton& m_sk;
     fs::path m_original;
     const Options& m_options;
+    const Selection* m_selection; ///< nullptr: every node
     simplify::SimplifyOptions m_opt;
     Projection m_proj;
     Metric m_metric;
@@ -988,10 +1139,56 @@ class Verifier {
 
 } // namespace
 
-Report verify_tree(const reader::Tree& tree, const fs::path& original, const Options& options)
+Report verify_tree(const reader::Tree& tree, const fs::path& original, const Options& options,
+                   const Selection* selection)
 {
-    Verifier v(tree, original, options);
+    Verifier v(tree, original, options, selection);
     return v.run();
+}
+
+Report merge_reports(std::vector<Report>&& shares, const std::vector<std::string>& levels, size_t max_items)
+{
+    Report out;
+    std::map<std::pair<size_t, uint32_t>, LevelLod> by; // (level index, LOD)
+    for (auto& r : shares) {
+        out.nodes = r.nodes;
+        out.lods = r.lods;
+        out.chains += r.chains;
+        out.segments += r.segments;
+        out.points += r.points;
+        out.input_problems += r.input_problems;
+        out.items_dropped += r.items_dropped;
+        out.seconds += r.seconds;
+        for (const auto& [k, v] : r.violations) {
+            out.violations[k] += v;
+        }
+        for (auto& ll : r.by_level_lod) {
+            const auto li = size_t(std::find(levels.begin(), levels.end(), ll.level) - levels.begin());
+            auto [it, fresh] = by.try_emplace({li, ll.lod}, ll);
+            if (!fresh) {
+                auto& m = it->second;
+                m.nodes += ll.nodes;
+                m.chains += ll.chains;
+                m.segments += ll.segments;
+                m.vertices += ll.vertices;
+                m.points += ll.points;
+                m.input_problems += ll.input_problems;
+                for (const auto& [k, v] : ll.violations) {
+                    m.violations[k] += v;
+                }
+            }
+        }
+        std::move(r.items.begin(), r.items.end(), std::back_inserter(out.items));
+        std::vector<Violation>().swap(r.items);
+    }
+    for (const char* k : kinds) {
+        out.violations[k] += 0;
+    }
+    for (auto& [key, ll] : by) {
+        out.by_level_lod.push_back(std::move(ll));
+    }
+    keep_first_items(out, max_items);
+    return out;
 }
 
 } // namespace tigerlod::verify

@@ -10,6 +10,7 @@
 #include <array>
 #include <filesystem>
 #include <map>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -87,8 +88,28 @@ struct Report {
     }
 };
 
-/// Verify `tree` against the stores of `original` (a tigerlod-ingest output).
+/// The nodes a workflow job checks: those of some stores, and the nodes
+/// decoded beside them to look for meetings near their chains.
+struct Selection {
+    std::set<std::string> stores; ///< "level/partition"
+    /// For each store, the stores of its level that own a chain of its halo
+    /// (tigerlod-pack's plan, "near").
+    std::map<std::string, std::vector<std::string>> near;
+};
+
+/// Verify `tree` against the stores of `original` (a tigerlod-ingest output):
+/// every node, or those of `selection`. A meeting of two chains is filed
+/// under the home node (the node of the store that owns it) of the one with
+/// the smaller (home, id), and is looked for when the other is in that
+/// store, own or halo: so the reports of runs on selections that together
+/// cover every node, merged (merge_reports), are the whole run's report.
 /// Throws input_error when `original` does not match the tree (levels, missing stores).
-Report verify_tree(const reader::Tree& tree, const std::filesystem::path& original, const Options& options);
+Report verify_tree(const reader::Tree& tree, const std::filesystem::path& original, const Options& options,
+                   const Selection* selection = nullptr);
+
+/// The reports of runs on selections that together cover every node once,
+/// as one: counts summed, levels and LODs in the order of `levels`, the
+/// first `max_items` items in report order. Seconds are the runs' sum.
+Report merge_reports(std::vector<Report>&& shares, const std::vector<std::string>& levels, size_t max_items);
 
 } // namespace tigerlod::verify

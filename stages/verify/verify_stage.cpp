@@ -6,6 +6,9 @@
 #include "core/manifest.hpp"
 #include "simplification/stage_options.hpp"
 #include "stages/verify/verifier.hpp"
+#include "core/digest.hpp"
+#include "core/partitions.hpp"
+#include "stages/pack/packer.hpp"
 
 #include <GeographicLib/Config.h>
 #include <gdal.h>
@@ -37,10 +40,35 @@ void VerifyStage::add_args(ArgSet& args)
     args.group("Run");
     config::add_option(args, "verify.threads", &m_threads);
     args.add("overwrite", &m_overwrite, "replace OUTPUT if it exists");
+    args.group("Partition jobs (the workflow's)");
+    args.add("partitions", &m_partitions,
+             "check only these stores' nodes (and the meetings filed under them), OUTPUT not touched: "
+             "LEVEL/PARTITION, LEVEL/PREFIX* or LEVEL/*, separated by commas, or @FILE with one a line",
+             "LIST");
+    args.add("plan", &m_plan,
+             "with --partitions: tigerlod-pack's plan (--plan), whose 'near' names the nodes "
+             "decoded beside them",
+             "FILE");
+    args.add("report", &m_report, "with --partitions: this job's share of the report", "FILE");
+    args.add("finish", &m_finish,
+             "merge the --partitions jobs' shares (--shares) into OUTPUT: the report of a whole run");
+    args.add("shares", &m_shares, "with --finish: the shares, separated by commas, or @FILE with one a line", "LIST");
 }
 
 void VerifyStage::initialize()
 {
+    if (m_finish && !m_partitions.empty()) {
+        throw usage_error("verify: options '--finish' and '--partitions' exclude each other");
+    }
+    if (!m_partitions.empty() && (m_plan.empty() || m_report.empty())) {
+        throw usage_error("verify: option '--partitions' needs '--plan FILE' and '--report FILE'");
+    }
+    if (m_partitions.empty() && (!m_plan.empty() || !m_report.empty())) {
+        throw usage_error("verify: options '--plan' and '--report' go with '--partitions'");
+    }
+    if (m_finish != !m_shares.empty()) {
+        throw usage_error("verify: options '--finish' and '--shares LIST' go together");
+    }
     if (!m_compare.empty() && !fs::is_regular_file(m_compare)) {
         throw usage_error("verify: --compare " + m_compare + ": no such file");
     }
@@ -331,10 +359,251 @@ void print_summary(const Report& r, const std::string& tree, const std::string& 
     std::printf("report: %s/verify-report.json, violations: %s/violations.gpkg\n", output.c_str(), output.c_str());
 }
 
+/// A report as report_json wrote it (a job's share), back.
+Report report_from_json(const json& j)
+{
+    Report r;
+    const auto& checked = j.at("checked");
+    r.nodes = checked.at("nodes");
+    r.lods = checked.at("lods");
+    r.chains = checked.at("chains");
+    r.segments = checked.at("segments");
+    r.points = checked.at("points");
+    for (const auto& [k, v] : j.at("violations").items()) {
+        r.violations[k] = v.get<uint64_t>();
+    }
+    r.input_problems = j.at("input_problems");
+    for (const auto& b : j.at("by_level_lod")) {
+        LevelLod ll;
+        ll.level = b.at("level");
+        ll.lod = b.at("lod");
+        ll.eps_m = b.at("eps_m");
+        ll.nodes = b.at("nodes");
+        ll.chains = b.at("chains");
+        ll.segments = b.at("segments");
+        ll.vertices = b.at("vertices");
+        ll.points = b.at("points");
+        for (const auto& [k, v] : b.at("violations").items()) {
+            ll.violations[k] = v.get<uint64_t>();
+        }
+        ll.input_problems = b.at("input_problems");
+        r.by_level_lod.push_back(std::move(ll));
+    }
+    for (const auto& it : j.at("items")) {
+        Violation v;
+        v.kind = it.at("kind");
+        v.level = it.at("level");
+        v.lod = it.at("lod");
+        v.node = it.at("node");
+        for (const auto& id : it.at("chains")) {
+            v.chains.push_back(std::stoull(id.get<std::string>()));
+        }
+        v.lon = it.at("lon");
+        v.lat = it.at("lat");
+        v.x = it.at("x");
+        v.y = it.at("y");
+        v.detail = it.at("detail");
+        r.items.push_back(std::move(v));
+    }
+    r.items_dropped = j.at("items_dropped");
+    r.seconds = j.at("seconds");
+    return r;
+}
+
+/// What a job's result for a node depends on in the tree: its skeleton
+/// record (box, chains, each LOD's error and vertex count) and its payloads'
+/// CRCs. A share whose nodes' fingerprints still hold is the tree's.
+uint32_t fingerprint(const datatree::Skeleton& sk, uint32_t n)
+{
+    const auto& node = sk.nodes[n];
+    std::string bytes;
+    auto put = [&](const auto& v) { bytes.append(reinterpret_cast<const char*>(&v), sizeof v); };
+    put(node.level);
+    put(node.chains);
+    put(node.box.min_x);
+    put(node.box.min_y);
+    put(node.box.max_x);
+    put(node.box.max_y);
+    put(node.table.crc);
+    put(node.table.size);
+    for (const auto& l : node.lods) {
+        put(l.error_m);
+        put(l.vertices);
+        put(l.payload.crc);
+        put(l.payload.size);
+    }
+    return crc32(std::as_bytes(std::span(bytes.data(), bytes.size())));
+}
+
+/// "level/partition" of node n (the root's partition is "all").
+std::string store_of(const datatree::Skeleton& sk, uint32_t n)
+{
+    return sk.level_names[sk.nodes[n].level] + "/" + (n == 0 ? std::string("all") : sk.code(sk.nodes[n]));
+}
+
+/// The items of a `--partitions` or `--shares` list: commas, or @FILE one a line.
+std::vector<std::string> list_items(const std::string& spec, const char* option)
+{
+    std::vector<std::string> items;
+    if (spec.starts_with("@")) {
+        std::ifstream in(spec.substr(1));
+        if (!in) {
+            throw input_error(spec.substr(1) + ": cannot read the list of " + option);
+        }
+        for (std::string line; std::getline(in, line);) {
+            if (!line.empty()) {
+                items.push_back(line);
+            }
+        }
+    } else {
+        std::stringstream ss(spec);
+        for (std::string item; std::getline(ss, item, ',');) {
+            items.push_back(item);
+        }
+    }
+    return items;
+}
+
+/// The tree's stores that have a node to check (not the root of a line
+/// layer in tiles, which shows nothing), as (level, partition), sorted.
+std::vector<std::pair<std::string, std::string>> checked_stores(const datatree::Skeleton& sk)
+{
+    std::vector<std::pair<std::string, std::string>> all;
+    for (uint32_t n = 0; n < sk.nodes.size(); ++n) {
+        const bool tiles_root = n == 0 && sk.nodes[n].chains == 0 && sk.nodes[n].child_count > 0 &&
+                                sk.nodes[sk.nodes[n].first_child].level == sk.nodes[n].level;
+        if (!tiles_root) {
+            const std::string s = store_of(sk, n);
+            all.emplace_back(s.substr(0, s.find('/')), s.substr(s.find('/') + 1));
+        }
+    }
+    std::sort(all.begin(), all.end());
+    return all;
+}
+
+/// --finish: the shares as the report of a whole run, after checking that
+/// they cover every node once and that every node they read is as it was.
+Report merge_shares(const reader::Tree& tree, const std::vector<std::string>& files, const Options& options)
+{
+    const auto& sk = tree.skeleton();
+    std::map<std::string, uint32_t> node_of;
+    for (uint32_t n = 0; n < sk.nodes.size(); ++n) {
+        node_of[store_of(sk, n)] = n;
+    }
+    std::map<std::string, std::string> covered; // store -> share
+    std::vector<Report> reports;
+    for (const auto& file : files) {
+        std::ifstream in(file, std::ios::binary);
+        if (!in) {
+            throw usage_error("verify: " + file + ": no such share (its verify job has not run)");
+        }
+        json j;
+        try {
+            j = json::parse(in);
+            if (j.at("schema") != "tigerlod.verify-share/1") {
+                throw input_error(file + ": not a verify share (schema tigerlod.verify-share/1)");
+            }
+            for (const auto& s : j.at("stores")) {
+                if (!covered.emplace(s.get<std::string>(), file).second) {
+                    throw usage_error("verify: " + s.get<std::string>() + " is in two shares, " +
+                                      covered.at(s.get<std::string>()) + " and " + file);
+                }
+            }
+            for (const auto& [s, print] : j.at("fingerprints").items()) {
+                const auto it = node_of.find(s);
+                if (it == node_of.end() || fingerprint(sk, it->second) != print.get<uint32_t>()) {
+                    throw usage_error("verify: " + file + " is stale: the node of " + s +
+                                      " has changed since it was checked; run its verify job again");
+                }
+            }
+            reports.push_back(report_from_json(j));
+        } catch (const json::exception& e) {
+            throw input_error(file + ": not a verify share: " + e.what());
+        }
+    }
+    for (const auto& [level, partition] : checked_stores(sk)) {
+        if (!covered.contains(level + "/" + partition)) {
+            throw usage_error("verify: " + level + "/" + partition +
+                              " is in no share: its verify job has not run (--partitions " + level + "/" + partition +
+                              ")");
+        }
+    }
+    return merge_reports(std::move(reports), sk.level_names, options.max_items);
+}
+
 } // namespace
+
+int VerifyStage::run_partitions(const StageContext& ctx)
+{
+    const Manifest packed = read_manifest(m_tree, "pack");
+    const Manifest ingest = read_manifest(m_original, "ingest");
+    require_made_from(packed, "ingest", ingest);
+    if (!packed.doc.contains("simplify")) {
+        throw input_error((fs::path(m_tree) / "manifest.json").string() + ": no 'simplify' section");
+    }
+    std::string error;
+    const auto tree = reader::Tree::open(m_tree, error);
+    if (!tree) {
+        throw input_error(error + " (the skeleton is checked by verify --finish, or a whole verify)");
+    }
+    const auto& sk = tree->skeleton();
+    // The tree's stores; the job's are some of them.
+    const auto all = checked_stores(sk);
+    const auto chosen = select_partitions(all, m_partitions, m_tree);
+    std::ifstream plan_in(m_plan, std::ios::binary);
+    if (!plan_in) {
+        throw usage_error("verify: --plan " + m_plan + ": no such file (tigerlod-pack --plan writes it)");
+    }
+    const pack::PackPlan plan = pack::plan_from_json(std::string(std::istreambuf_iterator<char>(plan_in), {}), m_plan);
+    Selection selection;
+    for (size_t i = 0; i < all.size(); ++i) {
+        if (chosen[i]) {
+            const std::string s = all[i].first + "/" + all[i].second;
+            selection.stores.insert(s);
+            const auto it = plan.near.find(s);
+            if (it == plan.near.end()) {
+                throw usage_error("verify: the plan " + m_plan + " has no store " + s +
+                                  ": it is not the plan of this tree's stores (run tigerlod-pack --plan again)");
+            }
+            selection.near[s] = it->second;
+        }
+    }
+    Options options;
+    options.threads =
+        m_threads > 0 ? static_cast<unsigned>(m_threads) : std::max(1U, std::thread::hardware_concurrency());
+    options.max_items = static_cast<size_t>(m_max_items);
+    options.tolerance =
+        simplify::tolerance_contract(packed.doc.at("simplify"), (fs::path(m_tree) / "manifest.json").string());
+    options.user_points = options.tolerance.user_points;
+    const Report r = verify_tree(*tree, m_original, options, &selection);
+    json share = report_json(r, options, m_tree, m_original);
+    share["schema"] = "tigerlod.verify-share/1";
+    share["stores"] = selection.stores;
+    // The fingerprints of every node the job read: its own and those beside them.
+    json prints = json::object();
+    for (uint32_t n = 0; n < sk.nodes.size(); ++n) {
+        const std::string s = store_of(sk, n);
+        bool read = selection.stores.contains(s);
+        for (const auto& [own, near] : selection.near) {
+            read = read || std::find(near.begin(), near.end(), s) != near.end();
+        }
+        if (read) {
+            prints[s] = fingerprint(sk, n);
+        }
+    }
+    share["fingerprints"] = std::move(prints);
+    write_file_atomic(m_report, share.dump(1) + "\n");
+    ctx.log.info("verify: " + std::to_string(selection.stores.size()) + " stores checked");
+    std::printf("verify: %zu stores' nodes checked, %llu violations; share in %s\n", selection.stores.size(),
+                static_cast<unsigned long long>(r.total()), m_report.c_str());
+    return exit_ok;
+}
 
 int VerifyStage::run(const StageContext& ctx)
 {
+    if (!m_partitions.empty()) {
+        return run_partitions(ctx);
+    }
     // The earlier report first: a bad one is found before the work, not after.
     const json old = m_compare.empty() ? json() : read_earlier_report(m_compare);
     // The tree's manifest says what it was made from and under which
@@ -363,6 +632,8 @@ int VerifyStage::run(const StageContext& ctx)
         // An unreadable skeleton is the tree's failure: one violation, nothing else can be checked.
         r.violations["skeleton"] = 1;
         r.items.push_back({"skeleton", "", 0, "", {}, 0, 0, 0, 0, error});
+    } else if (m_finish) {
+        r = merge_shares(*tree, list_items(m_shares, "--shares"), options);
     } else {
         r = verify_tree(*tree, m_original, options);
     }

@@ -25,7 +25,11 @@ class VerifyStage final : public Stage {
     std::vector<std::string> config_args(const std::filesystem::path& file) const override;
 
   private:
+    int run_partitions(const StageContext& ctx);
+
     std::string m_tree, m_original, m_output, m_compare;
+    std::string m_partitions, m_plan, m_report, m_shares;
+    bool m_finish = false;
     bool m_overwrite = false;
     int m_threads = 0;
     int m_max_items = 10000;

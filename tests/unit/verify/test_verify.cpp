@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <functional>
 #include <map>
 
@@ -109,7 +110,44 @@ class Verify : public ::testing::Test {
         const auto t = reader::Tree::open(dir / "tree", error);
         EXPECT_TRUE(t) << error;
         options.tolerance.projection_scale = false; // eps in grid metres: exact expectations
-        return verify::verify_tree(*t, dir / "orig", options);
+        auto whole = verify::verify_tree(*t, dir / "orig", options);
+        expect_same_by_stores(*t, options, whole);
+        return whole;
+    }
+
+    /// The workflow's verify: a run per store (its node checked, the nodes
+    /// of its halo's owners decoded beside it), the reports merged: the
+    /// whole run's report, item for item.
+    void expect_same_by_stores(const reader::Tree& t, const verify::Options& options, const verify::Report& whole)
+    {
+        const pack::PackPlan plan = pack::plan_parts(dir / "orig", 1);
+        std::vector<verify::Report> shares;
+        for (const auto& [store, near] : plan.near) {
+            verify::Selection one;
+            one.stores = {store};
+            one.near[store] = near;
+            shares.push_back(verify::verify_tree(t, dir / "orig", options, &one));
+        }
+        const auto merged = verify::merge_reports(std::move(shares), t.skeleton().level_names, options.max_items);
+        EXPECT_EQ(merged.violations, whole.violations);
+        EXPECT_EQ(merged.input_problems, whole.input_problems);
+        EXPECT_EQ(std::tie(merged.nodes, merged.lods, merged.chains, merged.segments, merged.points),
+                  std::tie(whole.nodes, whole.lods, whole.chains, whole.segments, whole.points));
+        ASSERT_EQ(merged.by_level_lod.size(), whole.by_level_lod.size());
+        for (size_t i = 0; i < whole.by_level_lod.size(); ++i) {
+            const auto &a = merged.by_level_lod[i], &b = whole.by_level_lod[i];
+            EXPECT_EQ(std::tie(a.level, a.lod, a.nodes, a.chains, a.segments, a.vertices, a.points, a.violations,
+                               a.input_problems),
+                      std::tie(b.level, b.lod, b.nodes, b.chains, b.segments, b.vertices, b.points, b.violations,
+                               b.input_problems));
+        }
+        ASSERT_EQ(merged.items.size(), whole.items.size());
+        for (size_t i = 0; i < whole.items.size(); ++i) {
+            const auto &a = merged.items[i], &b = whole.items[i];
+            EXPECT_EQ(std::tie(a.kind, a.level, a.lod, a.node, a.chains, a.x, a.y, a.lon, a.lat, a.detail),
+                      std::tie(b.kind, b.level, b.lod, b.node, b.chains, b.x, b.y, b.lon, b.lat, b.detail));
+        }
+        EXPECT_EQ(merged.items_dropped, whole.items_dropped);
     }
 
     static void expect(const verify::Report& r, const Counts& want)
@@ -350,6 +388,40 @@ TEST_F(Verify, BorderShownDifferentlyByTwoNodes)
     expect(r, {{"border_mismatch", 1}});
     EXPECT_EQ(r.items.at(0).node, "B");
     EXPECT_EQ(r.items.at(0).chains, (std::vector<uint64_t>{11}));
+}
+
+TEST_F(Verify, AMeetingAcrossPartitionsIsFiledOnceUnderItsOwner)
+{
+    // The map above; at LOD 1 tract B1's outline (13, owned by B) cuts
+    // west across the border (11, owned by A). The run of A's node files
+    // the crossing (11 has the smaller home, and 13 is in A's halo), B's
+    // does not: merged (run() compares), the whole run's one crossing.
+    Map m;
+    ChainStore l0 = store(0, 2, "county", "all");
+    chain(l0, 1, "A", "B", {{1000, 0}, {1010, 500}, {1000, 1000}});
+    chain(l0, 2, "A", "", {{1000, 1000}, {0, 1000}, {0, 0}, {1000, 0}});
+    chain(l0, 3, "B", "", {{1000, 0}, {2000, 0}, {2000, 1000}, {1000, 1000}});
+    point(l0, "A", {500, 500});
+    point(l0, "B", {1500, 500});
+    ChainStore a = store(1, 2, "tract", "A");
+    chain(a, 11, "A1", "B1", {{1000, 0}, {1010, 500}, {1000, 1000}});
+    chain(a, 12, "A1", "", {{1000, 1000}, {0, 1000}, {0, 0}, {1000, 0}});
+    chain(a, 13, "B1", "", {{1000, 0}, {2000, 0}, {2000, 1000}, {1000, 1000}}, true);
+    point(a, "A1", {500, 500});
+    ChainStore b = store(1, 2, "tract", "B");
+    chain(b, 13, "B1", "", {{1000, 0}, {2000, 0}, {2000, 1000}, {1000, 1000}});
+    chain(b, 11, "A1", "B1", {{1000, 0}, {1010, 500}, {1000, 1000}}, true);
+    point(b, "B1", {1500, 500});
+    m.stores = {l0, a, b};
+    const auto r = run(m, [](pack::PackedTree& t, auto& p) {
+        ASSERT_EQ(t.skeleton.strings[t.skeleton.nodes[2].code], "B");
+        set_chain(t, p, 2, 1, 13, {{1000, 0}, {2000, 0}, {2000, 1000}, {1005, 500}, {1000, 1000}});
+    });
+    EXPECT_EQ(r.violations.at("crossings"), 1U);
+    const auto it = std::find_if(r.items.begin(), r.items.end(), [](const auto& v) { return v.kind == "crossings"; });
+    ASSERT_NE(it, r.items.end());
+    EXPECT_EQ(it->node, "A");
+    EXPECT_EQ(it->chains, (std::vector<uint64_t>{11, 13}));
 }
 
 TEST_F(Verify, ChainsThatOverlap)
