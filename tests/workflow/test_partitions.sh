@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The workflow in partition-sized jobs, as an operator meets it on a
-# nightly rebuild: color, simplify and pack run a job per group of stores
-# (a pack job after the simplify jobs of its neighbours' groups too); a
+# nightly rebuild: color, simplify, pack and verify run a job per group of
+# stores (a pack job after the simplify jobs of its neighbours' groups too,
+# a verify job after the pack jobs of the groups whose nodes it reads); a
 # changed county reruns only the jobs of the stores that hold it, and the
 # result is byte for byte a clean build's; a new description reruns
 # nothing and a new pack.tile_mb only pack and what reads the tree (render
@@ -36,7 +37,7 @@ fail() {
   failures=$((failures + 1))
 }
 # The jobs a run's output says ran, `stage level/group` a line, sorted.
-ran() { sed -n 's/^\[[0-9]*\/[0-9?]*\] \(color\|simplify\|pack\) \([^:]*\/[^:]*\):.*/\1 \2/p' "$1" | sort | tr '\n' ' '; }
+ran() { sed -n 's/^\[[0-9]*\/[0-9?]*\] \(color\|simplify\|pack\|verify\) \([^:]*\/[^:]*\):.*/\1 \2/p' "$1" | sort | tr '\n' ' '; }
 # Two versions of DC: as published, and with one tract's code changed.
 ogr2ogr -f "ESRI Shapefile" dc_v1.shp.zip "/vsizip/$data/tl_2010_11_tract10.zip/tl_2010_11_tract10.shp" -nln dc
 ogr2ogr -f "ESRI Shapefile" dc_v2.shp.zip "/vsizip/$data/tl_2010_11_tract10.zip/tl_2010_11_tract10.shp" -nln dc \
@@ -70,7 +71,8 @@ wf() { "$repo/scripts/workflow" p.yaml "$@"; }
 wf >r1.out 2>&1 || fail "the first run failed: $(tail -30 r1.out)"
 all="color county/g11 color county/g44 color nation/gall color state/gUS color tract/g11001 color tract/g44001 "
 all+="color tract/g44003 color tract/g44005 color tract/g44007 color tract/g44009 "
-[ "$(ran r1.out)" = "$all${all//color/pack}${all//color/simplify}" ] || fail "the first run's group jobs: $(ran r1.out)"
+[ "$(ran r1.out)" = "$all${all//color/pack}${all//color/simplify}${all//color/verify}" ] ||
+  fail "the first run's group jobs: $(ran r1.out)"
 "$bin/tigerlod-color" --config p.yaml out/p/ingest whole-color >/dev/null || fail "tigerlod-color whole failed"
 "$bin/tigerlod-simplify" --config p.yaml --colors whole-color out/p/ingest whole-simp >/dev/null ||
   fail "tigerlod-simplify whole failed"
@@ -78,6 +80,17 @@ diff -r -x '*-report.json' whole-color out/p/color >/dev/null || fail "color by 
 diff -r -x '*-report.json' whole-simp out/p/simplified >/dev/null || fail "simplify by jobs differs from a whole run"
 "$bin/tigerlod-pack" --config p.yaml out/p/ingest whole-simp whole-tree >/dev/null || fail "tigerlod-pack whole failed"
 diff -r -x '*-report.json' whole-tree out/p/tree >/dev/null || fail "pack by jobs differs from a whole run"
+"$bin/tigerlod-verify" --config p.yaml out/p/tree out/p/ingest whole-verify >/dev/null || fail "a whole verify failed"
+same_report() { python3 - "$1" "$2" <<'PY'
+import json, sys
+a, b = (json.load(open(p)) for p in sys.argv[1:3])
+for r in (a, b):
+    r.pop("seconds"); r.pop("segments_per_second")
+sys.exit(a != b)
+PY
+}
+same_report whole-verify/verify-report.json out/p/verify/verify-report.json ||
+  fail "verify by jobs reports other than a whole verify"
 grep -q "summary of out/p" r1.out || fail "no summary at the end: $(tail r1.out)"
 grep -q "verify: CLEAN" r1.out || fail "the summary does not say verify was clean: $(tail r1.out)"
 
@@ -120,7 +133,7 @@ grep -q "'workflow.render' must be true or false, not 'sometimes'" badrender.out
 # 4. One county's input changed: ingest, then only that county's jobs.
 cp dc_v2.shp.zip dc.shp.zip
 wf >r5.out 2>&1 || fail "the rebuild after a change failed: $(tail -30 r5.out)"
-[ "$(ran r5.out)" = "color tract/g11001 pack tract/g11001 simplify tract/g11001 " ] ||
+[ "$(ran r5.out)" = "color tract/g11001 pack tract/g11001 simplify tract/g11001 verify tract/g11001 " ] ||
   fail "a changed DC tract code reran: $(ran r5.out)"
 # ... and the result is a clean build's, byte for byte.
 mkdir clean && cp p.yaml dc.shp.zip clean/ && (cd clean && "$repo/scripts/workflow" p.yaml >run.out 2>&1) ||
@@ -139,7 +152,11 @@ wf --regions 44003 >r6.out 2>&1 || fail "a region rebuild failed: $(tail -30 r6.
 want="color county/g44 color nation/gall color state/gUS color tract/g44003 "
 packs="pack county/g44 pack nation/gall pack state/gUS pack tract/g44003 pack tract/g44005 pack tract/g44007 "
 packs+="pack tract/g44009 "
-[ "$(ran r6.out)" = "$want$packs${want//color/simplify}" ] || fail "--regions 44003 ran: $(ran r6.out)"
+# A verify job follows the pack jobs of the groups of the nodes it decodes
+# (the plan's near): Bristol's halo holds Kent's chains.
+verifies="verify county/g44 verify nation/gall verify state/gUS verify tract/g44001 verify tract/g44003 "
+verifies+="verify tract/g44005 verify tract/g44007 verify tract/g44009 "
+[ "$(ran r6.out)" = "$want$packs${want//color/simplify}$verifies" ] || fail "--regions 44003 ran: $(ran r6.out)"
 for n in 44005 44007 44009; do
   python3 -c "import json,sys; sys.exit('tract/44003' not in json.load(open('out/p/pack-parts/plan.json'))['reads']['tract/$n'])" ||
     fail "the plan does not say tract/$n reads tract/44003"
@@ -161,7 +178,9 @@ for g in 44001 44003 44007 44009; do
 done
 touch dc.shp.zip # the fix: ingest writes the store again
 wf >r9.out 2>&1 || fail "the rerun after the fix failed: $(tail -30 r9.out)"
-[ "$(ran r9.out)" = "color tract/g44005 pack tract/g44005 pack tract/g44009 simplify tract/g44005 " ] ||
+want="color tract/g44005 pack tract/g44005 pack tract/g44009 simplify tract/g44005 "
+want+="verify tract/g44001 verify tract/g44003 verify tract/g44005 verify tract/g44009 "
+[ "$(ran r9.out)" = "$want" ] ||
   fail "the rerun after the fix ran: $(ran r9.out)"
 grep -q "verify: CLEAN" r9.out || fail "the tree after the fix is not clean"
 # ... and after it, nothing is left to do.
