@@ -2,7 +2,7 @@
 # The operator's scripts around the workflow refuse bad arguments with one
 # line naming the fault and exit 2 (bad input files: 1), before they start
 # anything: scripts/cluster-estimate, pipeline/merge-reports,
-# scripts/bench-workflow, scripts/bench-gl and scripts/test-slurm (which
+# scripts/bench-workflow, scripts/bench-gl, scripts/bench-partitions and scripts/test-slurm (which
 # would otherwise install and start Slurm first). And merge-reports sums two
 # shares as the whole run writes them.
 #
@@ -71,6 +71,9 @@ if [ "$merged" != "1.0 3 5 9 6.0" ] || [ -e "$work/jobs/tract/bad.json" ]; then
   failures=$((failures + 1))
 fi
 
+expect 2 "usage: scripts/bench-partitions" "$repo/scripts/bench-partitions"
+expect 2 "must be a finished scripts/workflow output" "$repo/scripts/bench-partitions" "$work/none"
+expect 2 "THREADS must be an integer >= 1, not '0'" "$repo/scripts/bench-partitions" "$work/none" 0
 expect 2 "no such config" "$repo/scripts/bench-workflow" "$work/none.yaml"
 expect 2 "two-digit state code, not '4x'" "$repo/scripts/bench-workflow" "$repo/configs/tracts2010.yaml" 4x
 expect 2 "names no input file of state 99" "$repo/scripts/bench-workflow" "$repo/configs/tracts2010.yaml" 99
