@@ -329,7 +329,7 @@ class Verifier {
         std::vector<chains::ChainStore> stores;
         std::unordered_map<uint64_t, Original> owned;
         std::map<std::string, const chains::ChainStore*> by_partition;
-        std::map<const chains::ChainStore*, std::vector<uint64_t>> ids; ///< sorted
+        std::map<const chains::ChainStore*, std::vector<uint64_t>> halo; ///< each store's halo chains, sorted
     };
 
     /// Read the stores of `partitions` (all of the level's folder when
@@ -356,14 +356,15 @@ class Verifier {
         parallel_each(paths.size(), m_options.threads, [&](size_t i) { ls.stores[i] = chains::read(paths[i]); });
         for (const auto& s : ls.stores) {
             ls.by_partition[s.partition] = &s;
-            auto& ids = ls.ids[&s];
+            auto& halo = ls.halo[&s];
             for (size_t i = 0; i < s.chains.size(); ++i) {
-                ids.push_back(s.chains[i].id);
-                if (!(s.chains[i].flags & chains::chain_halo)) {
+                if (s.chains[i].flags & chains::chain_halo) {
+                    halo.push_back(s.chains[i].id);
+                } else {
                     ls.owned[s.chains[i].id] = {&s, &s.chains[i], i};
                 }
             }
-            std::sort(ids.begin(), ids.end());
+            std::sort(halo.begin(), halo.end());
         }
     }
 
@@ -371,9 +372,15 @@ class Verifier {
     /// of the store that owns it (every node shows all its store owns).
     struct HomeChain {
         uint64_t id = 0;
-        uint32_t home = 0; ///< skeleton node
-        std::span<const GridPoint> points;
+        uint32_t home = 0;  ///< skeleton node
+        uint32_t chain = 0; ///< in its home's table (16 bytes a chain: a level of the 100 M nation holds 15 M)
     };
+    /// Each checked or decoded node's result, by node index.
+    using ByNode = std::vector<const NodeResult*>;
+    static std::span<const GridPoint> points_of(const ByNode& by_node, const HomeChain& u)
+    {
+        return by_node[u.home]->geometry.chain(u.chain);
+    }
 
     /// Whether a meeting of chains `a` and `b` is this run's to report, and
     /// which of them it is filed under: a meeting belongs to the chain of the
@@ -386,7 +393,7 @@ class Verifier {
     /// partitions, so the report is the same.
     struct MeetingRule {
         const std::set<uint32_t>* selected;
-        const std::map<uint32_t, const std::vector<uint64_t>*>* store_ids; ///< home node -> its store's chain ids
+        const std::map<uint32_t, const std::vector<uint64_t>*>* store_halo; ///< home node -> its store's halo ids
         /// The chain the meeting is filed under, or nullptr when not this run's.
         const HomeChain* owner(const HomeChain& a, const HomeChain& b) const
         {
@@ -395,8 +402,11 @@ class Verifier {
             if (!selected->contains(first.home)) {
                 return nullptr;
             }
-            const auto it = store_ids->find(first.home);
-            return it != store_ids->end() && std::binary_search(it->second->begin(), it->second->end(), other.id)
+            if (other.home == first.home) {
+                return &first; // both the store's own
+            }
+            const auto it = store_halo->find(first.home);
+            return it != store_halo->end() && std::binary_search(it->second->begin(), it->second->end(), other.id)
                        ? &first
                        : nullptr;
         }
@@ -451,7 +461,7 @@ class Verifier {
         // The working stores' nodes, in node order: the selected and those decoded beside them.
         std::vector<uint32_t> homes;
         std::map<const chains::ChainStore*, uint32_t> home_of_store;
-        std::map<uint32_t, const std::vector<uint64_t>*> store_ids;
+        std::map<uint32_t, const std::vector<uint64_t>*> store_halo;
         for (const auto& [partition, store] : ls.by_partition) {
             const auto it = node_of.find(partition);
             if (it == node_of.end()) {
@@ -459,11 +469,11 @@ class Verifier {
             }
             homes.push_back(it->second);
             home_of_store[store] = it->second;
-            store_ids[it->second] = &ls.ids.at(store);
+            store_halo[it->second] = &ls.halo.at(store);
         }
         std::sort(homes.begin(), homes.end());
         const std::set<uint32_t> selected(nodes.begin(), nodes.end());
-        const MeetingRule rule{&selected, &store_ids};
+        const MeetingRule rule{&selected, &store_halo};
         // The units whose boundary each node's original map holds, and their original area sign.
         std::set<std::pair<uint64_t, uint64_t>> input_meetings; // chain pairs that meet at LOD 0
         std::vector<LodChains> lods(m_sk.lod_eps_m.size());     // each LOD's chains, for check_across_lods
@@ -504,6 +514,10 @@ class Verifier {
                     r.ok = m_tree.read_table(n, r.table).ok() && m_tree.read_geometry(n, k, r.geometry).ok();
                 }
             });
+            ByNode by_node(m_sk.nodes.size(), nullptr);
+            for (const auto& [n, r] : results) {
+                by_node[n] = &r;
+            }
             // Each chain once, from its home node, in (home, id) order.
             std::vector<HomeChain> unique;
             for (const uint32_t n : homes) {
@@ -514,13 +528,13 @@ class Verifier {
                 for (size_t c = 0; c < r.table.chains.size(); ++c) {
                     const auto it = ls.owned.find(r.table.chains[c].id);
                     if (it != ls.owned.end() && home_of_store.at(it->second.store) == n) {
-                        unique.push_back({r.table.chains[c].id, n, r.geometry.chain(c)});
+                        unique.push_back({r.table.chains[c].id, n, static_cast<uint32_t>(c)});
                     }
                 }
             }
-            gather_nodes(ll, nodes, results, unique, ls, home_of_store);
-            check_meetings(ll, unique, rule, input_meetings);
-            keep_for_lods(lods[k], unique);
+            gather_nodes(ll, nodes, results, by_node, unique, ls, home_of_store);
+            check_meetings(ll, by_node, unique, rule, input_meetings);
+            keep_for_lods(lods[k], by_node, unique);
             m_report.chains += ll.chains;
             m_report.segments += ll.segments;
             m_report.points += ll.points;
@@ -536,12 +550,12 @@ class Verifier {
         datatree::Geometry geometry;
     };
 
-    void keep_for_lods(LodChains& out, const std::vector<HomeChain>& unique) const
+    void keep_for_lods(LodChains& out, const ByNode& by_node, const std::vector<HomeChain>& unique) const
     {
         for (const auto& u : unique) {
             out.ids.push_back(u.id);
             out.nodes.push_back(u.home);
-            out.geometry.add_chain(u.points);
+            out.geometry.add_chain(points_of(by_node, u));
         }
     }
 
@@ -590,7 +604,7 @@ class Verifier {
             return Segment{pts[w.segment], pts[w.segment + 1], 0};
         };
         auto home_chain = [&](const Where& w) {
-            return HomeChain{lods[w.lod].ids[w.chain], lods[w.lod].nodes[w.chain], {}};
+            return HomeChain{lods[w.lod].ids[w.chain], lods[w.lod].nodes[w.chain], 0};
         };
         // Whether segment s of chain `g` is also one of its segments at LOD k.
         auto has_segment = [&](uint32_t g, uint32_t k, const Segment& seg) {
@@ -654,7 +668,7 @@ class Verifier {
     /// neighbour's store compared with the neighbour's (border_mismatch,
     /// filed under the node that shows it from the neighbour).
     void gather_nodes(LevelLod& ll, const std::vector<uint32_t>& nodes, std::map<uint32_t, NodeResult>& results,
-                      const std::vector<HomeChain>& unique, const LevelStores& ls,
+                      const ByNode& by_node, const std::vector<HomeChain>& unique, const LevelStores& ls,
                       const std::map<const chains::ChainStore*, uint32_t>& home_of_store)
     {
         const std::string& level = ll.level;
@@ -722,11 +736,11 @@ class Verifier {
         }
         for (const auto& u : unique) {
             if (selected.contains(u.home)) {
+                const auto pts = points_of(by_node, u);
                 ll.chains += 1;
-                ll.vertices += u.points.size();
-                for (size_t s = 0; s + 1 < u.points.size(); ++s) {
-                    ll.segments +=
-                        u.points[s] == u.points[s + 1] ? 0 : 1; // a zero-length one is the subsequence check's
+                ll.vertices += pts.size();
+                for (size_t s = 0; s + 1 < pts.size(); ++s) {
+                    ll.segments += pts[s] == pts[s + 1] ? 0 : 1; // a zero-length one is the subsequence check's
                 }
             }
         }
@@ -738,14 +752,14 @@ class Verifier {
     /// (overlap, then cross, then touch), at the first place found in (home
     /// node, id) order. Pairs that already meet at LOD 0 are input problems
     /// (ingest reported and flagged them), listed, not counted.
-    void check_meetings(LevelLod& ll, const std::vector<HomeChain>& unique, const MeetingRule& rule,
-                        std::set<std::pair<uint64_t, uint64_t>>& input_meetings)
+    void check_meetings(LevelLod& ll, const ByNode& by_node, const std::vector<HomeChain>& unique,
+                        const MeetingRule& rule, std::set<std::pair<uint64_t, uint64_t>>& input_meetings)
     {
         const std::string& level = ll.level;
         const uint32_t k = ll.lod;
         std::vector<ChainSegments> chains; // the unique chains, in order
         for (const auto& u : unique) {
-            chains.push_back({u.points, 0, 0});
+            chains.push_back({points_of(by_node, u), 0, 0});
         }
         std::vector<uint64_t> base;
         const auto found = meetings_by_window(chains, base, false, m_options.window_segments, m_options.threads);
