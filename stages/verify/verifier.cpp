@@ -376,7 +376,7 @@ class Verifier {
         uint32_t chain = 0; ///< in its home's table (16 bytes a chain: a level of the 100 M nation holds 15 M)
     };
     /// Each checked or decoded node's result, by node index.
-    using ByNode = std::vector<const NodeResult*>;
+    using ByNode = std::vector<NodeResult*>;
     static std::span<const GridPoint> points_of(const ByNode& by_node, const HomeChain& u)
     {
         return by_node[u.home]->geometry.chain(u.chain);
@@ -499,13 +499,10 @@ class Verifier {
                 }
             }
             // The selected nodes checked, the others decoded.
-            std::map<uint32_t, NodeResult> results;
-            for (uint32_t n : homes) {
-                results[n];
-            }
+            std::vector<NodeResult> results(homes.size()); // parallel to homes
             parallel_each(homes.size(), m_options.threads, [&](size_t i) {
                 const uint32_t n = homes[i];
-                NodeResult& r = results.at(n);
+                NodeResult& r = results[i];
                 if (selected.contains(n)) {
                     const size_t slot = size_t(std::lower_bound(nodes.begin(), nodes.end(), n) - nodes.begin());
                     r = check_node(n, k, ls.owned, *ls.by_partition.at(partition_of(n)), eps, area_sign[slot],
@@ -515,13 +512,13 @@ class Verifier {
                 }
             });
             ByNode by_node(m_sk.nodes.size(), nullptr);
-            for (const auto& [n, r] : results) {
-                by_node[n] = &r;
+            for (size_t i = 0; i < homes.size(); ++i) {
+                by_node[homes[i]] = &results[i];
             }
             // Each chain once, from its home node, in (home, id) order.
             std::vector<HomeChain> unique;
             for (const uint32_t n : homes) {
-                const NodeResult& r = results.at(n);
+                const NodeResult& r = *by_node[n];
                 if (!r.ok) {
                     continue;
                 }
@@ -532,7 +529,7 @@ class Verifier {
                     }
                 }
             }
-            gather_nodes(ll, nodes, results, by_node, unique, ls, home_of_store);
+            gather_nodes(ll, nodes, by_node, unique, ls, home_of_store);
             check_meetings(ll, by_node, unique, rule, input_meetings);
             keep_for_lods(lods[k], by_node, unique);
             m_report.chains += ll.chains;
@@ -667,15 +664,15 @@ class Verifier {
     /// chains and points counted, and each chain a node shows from a
     /// neighbour's store compared with the neighbour's (border_mismatch,
     /// filed under the node that shows it from the neighbour).
-    void gather_nodes(LevelLod& ll, const std::vector<uint32_t>& nodes, std::map<uint32_t, NodeResult>& results,
-                      const ByNode& by_node, const std::vector<HomeChain>& unique, const LevelStores& ls,
+    void gather_nodes(LevelLod& ll, const std::vector<uint32_t>& nodes, const ByNode& by_node,
+                      const std::vector<HomeChain>& unique, const LevelStores& ls,
                       const std::map<const chains::ChainStore*, uint32_t>& home_of_store)
     {
         const std::string& level = ll.level;
         const uint32_t k = ll.lod;
         const std::set<uint32_t> selected(nodes.begin(), nodes.end());
         for (const uint32_t n : nodes) {
-            auto& r = results.at(n);
+            auto& r = *by_node[n];
             ++ll.nodes;
             ll.points += r.points;
             for (auto& v : r.violations) {
@@ -696,7 +693,7 @@ class Verifier {
                 if (home == n) {
                     continue;
                 }
-                const auto& h = results.at(home);
+                const auto& h = *by_node[home];
                 if (!h.ok) {
                     continue; // the home node's own check reports it unreadable
                 }

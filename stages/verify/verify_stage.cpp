@@ -66,6 +66,9 @@ void VerifyStage::initialize()
     if (m_partitions.empty() && (!m_plan.empty() || !m_report.empty())) {
         throw usage_error("verify: options '--plan' and '--report' go with '--partitions'");
     }
+    if (!m_partitions.empty() && !m_compare.empty()) {
+        throw usage_error("verify: option '--compare' goes with a whole run or '--finish', not '--partitions'");
+    }
     if (m_finish != !m_shares.empty()) {
         throw usage_error("verify: options '--finish' and '--shares LIST' go together");
     }

@@ -869,6 +869,54 @@ TEST_F(Cli, PackByPartitionsWritesTheWholeRunsTree)
                    "simplified at 1, 8 m, the tolerances given (--tolerances, simplify.tolerances_m) are 1, 4 m");
 }
 
+TEST_F(Cli, VerifyByPartitionsMergesToTheWholeRunsReport)
+{
+    // The workflow's verify: jobs on some stores' nodes writing shares, then
+    // --finish: the whole run's report, field for field but the seconds.
+    make_tiger();
+    const std::string in = (m_dir / "in").string(), simp = (m_dir / "simp").string();
+    const std::string tree = (m_dir / "tree").string(), parts = (m_dir / "parts").string();
+    ASSERT_EQ(run("ingest", tiger_config().string() + " " + in).code, 0);
+    ASSERT_EQ(run("simplify", in + " " + simp + " --tolerances 1,8").code, 0);
+    ASSERT_EQ(run("pack", in + " " + simp + " " + tree).code, 0);
+    ASSERT_EQ(run("pack", "--plan --parts " + parts + " " + in + " " + simp + " " + tree).code, 0);
+    ASSERT_EQ(run("verify", tree + " " + in + " " + (m_dir / "whole").string()).code, 0) << slurp(m_dir / "stderr");
+    const std::string plan = " --plan " + parts + "/plan.json ";
+    const std::string a = (m_dir / "a.json").string(), b = (m_dir / "b.json").string();
+    const std::string tail = " " + tree + " " + in + " " + (m_dir / "unused").string();
+    ASSERT_EQ(run("verify", "--partitions 'block/*,block_group/*'" + plan + "--report " + a + tail).code, 0)
+        << slurp(m_dir / "stderr");
+    ASSERT_EQ(run("verify", "--partitions 'county/*,state/*,tract/*'" + plan + "--report " + b + tail).code, 0)
+        << slurp(m_dir / "stderr");
+    EXPECT_FALSE(fs::exists(m_dir / "unused")) << "a job wrote OUTPUT";
+    const std::string merged = (m_dir / "merged").string();
+    expect_failure(run("verify", "--finish --shares " + a + tail), 2, "is in no share: its verify job has not run");
+    expect_failure(run("verify", "--finish --shares " + a + "," + b + "," + a + tail), 2, "is in two shares");
+    ASSERT_EQ(run("verify", "--finish --shares " + a + "," + b + " " + tree + " " + in + " " + merged).code, 0)
+        << slurp(m_dir / "stderr");
+    auto without_seconds = [](const fs::path& p) {
+        auto j = nlohmann::json::parse(slurp(p));
+        j.erase("seconds");
+        j.erase("segments_per_second");
+        return j;
+    };
+    EXPECT_EQ(without_seconds(m_dir / "whole" / "verify-report.json"),
+              without_seconds(m_dir / "merged" / "verify-report.json"));
+    // A tree repacked from other stores: the shares of its old nodes are stale.
+    ASSERT_EQ(run("simplify", in + " " + simp + " --tolerances 1,400 --overwrite").code, 0);
+    ASSERT_EQ(run("pack", in + " " + simp + " " + tree).code, 0);
+    expect_failure(run("verify", "--finish --shares " + a + "," + b + tail), 2,
+                   "has changed since it was checked; run its verify job again");
+    // Options that do not go together.
+    expect_failure(run("verify", "--partitions 'tract/*' --report " + a + tail), 2,
+                   "'--partitions' needs '--plan FILE' and '--report FILE'");
+    expect_failure(run("verify", "--partitions 'tract/*'" + plan + "--report " + a + " --compare " + a + tail), 2,
+                   "'--compare' goes with a whole run or '--finish'");
+    expect_failure(run("verify", "--finish" + tail), 2, "'--finish' and '--shares LIST' go together");
+    expect_failure(run("verify", "--partitions 'tract/99999'" + plan + "--report " + a + tail), 2,
+                   "'tract/99999', which matches no chain store");
+}
+
 TEST_F(Cli, ProgressAsJsonLinesForAnEngine)
 {
     make_tiger();
