@@ -4,8 +4,8 @@
 #include "config/schema.hpp"
 #include "core/fs.hpp"
 #include "core/manifest.hpp"
-#include "formats/chains/chain_store.hpp"
 #include "core/partitions.hpp"
+#include "formats/chains/chain_store.hpp"
 #include "stages/pack/packer.hpp"
 
 #include <draco/core/draco_version.h>
@@ -149,10 +149,11 @@ std::string ladder_text(const std::vector<double>& v)
 
 int PackStage::run_plan(const StageContext& ctx)
 {
-    read_manifest(m_original, "ingest");
+    const Manifest ingest = read_manifest(m_original, "ingest");
     const unsigned threads =
         m_threads > 0 ? static_cast<unsigned>(m_threads) : std::max(1U, std::thread::hardware_concurrency());
-    const PackPlan plan = plan_parts(m_original, threads);
+    PackPlan plan = plan_parts(m_original, threads);
+    plan.ingest_sha256 = ingest.sha256;
     const std::string text = plan_json(plan);
     const fs::path path = fs::path(m_parts) / "plan.json";
     std::string old;
@@ -178,7 +179,7 @@ int PackStage::run_plan(const StageContext& ctx)
 int PackStage::run_partitions(const StageContext& ctx)
 {
     const auto t0 = std::chrono::steady_clock::now();
-    read_manifest(m_original, "ingest");
+    const Manifest ingest = read_manifest(m_original, "ingest");
     const auto all = stores_of(m_original);
     const auto chosen = select_partitions(all, m_partitions, m_original);
     std::vector<std::string> stores;
@@ -193,6 +194,10 @@ int PackStage::run_partitions(const StageContext& ctx)
         throw usage_error(plan_path.string() + " is missing: run tigerlod-pack --plan --parts " + m_parts + " first");
     }
     const PackPlan plan = plan_from_json(std::string(std::istreambuf_iterator<char>(in), {}), plan_path.string());
+    if (plan.ingest_sha256 != ingest.sha256) {
+        throw usage_error(plan_path.string() + " is the plan of another tigerlod-ingest output than " + m_original +
+                          "'s: run tigerlod-pack --plan again");
+    }
     PackOptions options;
     options.draco_speed = m_draco_speed;
     options.threads =

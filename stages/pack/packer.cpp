@@ -876,6 +876,7 @@ std::string plan_json(const PackPlan& plan)
 {
     nlohmann::ordered_json doc;
     doc["schema"] = "tigerlod.pack-plan/1";
+    doc["ingest"] = plan.ingest_sha256;
     for (const auto* which : {&plan.reads, &plan.near}) {
         nlohmann::ordered_json stores = nlohmann::ordered_json::object();
         for (const auto& [store, others] : *which) {
@@ -896,6 +897,7 @@ PackPlan plan_from_json(const std::string& text, const std::string& name)
         PackPlan plan;
         plan.reads = doc.at("reads").get<std::map<std::string, std::vector<std::string>>>();
         plan.near = doc.at("near").get<std::map<std::string, std::vector<std::string>>>();
+        plan.ingest_sha256 = doc.at("ingest").get<std::string>();
         return plan;
     } catch (const nlohmann::json::exception& e) {
         throw input_error(name + ": not a tigerlod pack plan: " + e.what());

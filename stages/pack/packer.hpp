@@ -68,6 +68,9 @@ struct PackPlan {
     /// Those that own a chain of its halo (a superset): the nodes a verify
     /// job decodes beside its own to look for meetings near them.
     std::map<std::string, std::vector<std::string>> near;
+    /// The digest of the ingest manifest it was made from: jobs refuse a
+    /// plan of another ingest output (a neighbour it lacks would be missed).
+    std::string ingest_sha256;
 };
 
 /// The plan, from every store of ORIGINAL (one at a time per thread). Throws

@@ -2,13 +2,13 @@
 
 #include "config/config_file.hpp"
 #include "config/schema.hpp"
+#include "core/digest.hpp"
 #include "core/fs.hpp"
 #include "core/manifest.hpp"
-#include "simplification/stage_options.hpp"
-#include "stages/verify/verifier.hpp"
-#include "core/digest.hpp"
 #include "core/partitions.hpp"
+#include "simplification/stage_options.hpp"
 #include "stages/pack/packer.hpp"
+#include "stages/verify/verifier.hpp"
 
 #include <GeographicLib/Config.h>
 #include <gdal.h>
@@ -558,6 +558,10 @@ int VerifyStage::run_partitions(const StageContext& ctx)
         throw usage_error("verify: --plan " + m_plan + ": no such file (tigerlod-pack --plan writes it)");
     }
     const pack::PackPlan plan = pack::plan_from_json(std::string(std::istreambuf_iterator<char>(plan_in), {}), m_plan);
+    if (plan.ingest_sha256 != ingest.sha256) {
+        throw usage_error("verify: " + m_plan + " is the plan of another tigerlod-ingest output than " + m_original +
+                          "'s: run tigerlod-pack --plan again");
+    }
     Selection selection;
     for (size_t i = 0; i < all.size(); ++i) {
         if (chosen[i]) {

@@ -816,6 +816,16 @@ TEST_F(Cli, PackByPartitionsWritesTheWholeRunsTree)
     const auto plan_time = fs::last_write_time(m_dir / "parts" / "plan.json");
     ASSERT_EQ(run("pack", "--plan" + with).code, 0);
     EXPECT_EQ(fs::last_write_time(m_dir / "parts" / "plan.json"), plan_time) << "an unchanged plan was rewritten";
+    {
+        // A plan of another ingest output is refused: a neighbour it lacks would be missed.
+        const std::string text = slurp(m_dir / "parts" / "plan.json");
+        auto j = nlohmann::json::parse(text);
+        j["ingest"] = "0123";
+        std::ofstream(m_dir / "parts" / "plan.json") << j.dump();
+        expect_failure(run("pack", "--partitions 'tract/*'" + with), 2,
+                       "is the plan of another tigerlod-ingest output");
+        std::ofstream(m_dir / "parts" / "plan.json") << text;
+    }
     ASSERT_EQ(
         run("pack", "--partitions 'block/*,block_group/*' --report " + (m_dir / "share.json").string() + with).code, 0)
         << slurp(m_dir / "stderr");
