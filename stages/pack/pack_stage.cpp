@@ -203,7 +203,8 @@ int PackStage::run_partitions(const StageContext& ctx)
     options.threads =
         m_threads > 0 ? static_cast<unsigned>(m_threads) : std::max(1U, std::thread::hardware_concurrency());
     options.lods = parse_tolerances(m_tolerances);
-    const auto totals = write_parts(m_original, m_simplified, stores, plan, m_parts, options);
+    std::map<std::string, uint32_t> content;
+    const auto totals = write_parts(m_original, m_simplified, stores, plan, m_parts, options, &content);
     ctx.log.info("pack: " + std::to_string(stores.size()) + " parts written in " +
                  std::to_string(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()) + " s");
     if (!m_report.empty()) {
@@ -215,9 +216,11 @@ int PackStage::run_partitions(const StageContext& ctx)
             lods.push_back({{"eps_m", l.eps_m}, {"vertices", l.vertices}, {"payload_bytes", l.payload_bytes}});
         }
         report["lods"] = std::move(lods);
-        // No seconds (the job's benchmark file has them): a job run again on
-        // the same stores writes the same bytes, and the engine, which
-        // compares checksums, reruns nothing after it.
+        // Each part's content, and no seconds (the job's benchmark file has
+        // them): the report changes exactly when a part does, so the engine,
+        // which compares checksums, reruns the verify jobs that read a
+        // changed node and none after a job that wrote the same parts.
+        report["parts"] = content;
         write_file_atomic(m_report, report.dump(2) + "\n");
     }
     std::printf("pack: %zu parts in %s\n", stores.size(), m_parts.c_str());

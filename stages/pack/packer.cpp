@@ -906,7 +906,7 @@ PackPlan plan_from_json(const std::string& text, const std::string& name)
 
 std::vector<LodTotals> write_parts(const fs::path& original, const fs::path& simplified,
                                    const std::vector<std::string>& stores, const PackPlan& plan, const fs::path& parts,
-                                   const PackOptions& options)
+                                   const PackOptions& options, std::map<std::string, uint32_t>* content)
 {
     TreeContext ctx(original, simplified, options, true);
     std::map<uint32_t, std::vector<std::string>> by_level;
@@ -949,6 +949,10 @@ std::vector<LodTotals> write_parts(const fs::path& original, const fs::path& sim
         });
         sync_to_disk(parts / level);
         for (const auto& nb : nodes) {
+            if (content) {
+                const std::string bytes = encode_part(nb, ctx.lod_eps(), options.draco_speed, {});
+                (*content)[level + "/" + nb.partition] = crc32(std::as_bytes(std::span(bytes.data(), bytes.size())));
+            }
             for (size_t k = 0; k < totals.size(); ++k) {
                 totals[k].vertices += nb.node.lods[k].vertices;
                 totals[k].payload_bytes += nb.payloads[k].size();

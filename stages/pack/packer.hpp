@@ -84,10 +84,13 @@ PackPlan plan_from_json(const std::string& text, const std::string& name);
 /// files `parts`/<level>/<partition>.tlp (each written under a temporary
 /// name and renamed), reading beside each store the ones `plan` names. Each
 /// part records the files it was made from and their checksums. Returns
-/// per-LOD totals of the parts written.
+/// per-LOD totals of the parts written; `content` gets each store's CRC-32
+/// of what its part holds for the tree (its node and payloads, not the
+/// files it was made from): a job's report names what changed downstream.
 std::vector<LodTotals> write_parts(const std::filesystem::path& original, const std::filesystem::path& simplified,
                                    const std::vector<std::string>& stores, const PackPlan& plan,
-                                   const std::filesystem::path& parts, const PackOptions& options);
+                                   const std::filesystem::path& parts, const PackOptions& options,
+                                   std::map<std::string, uint32_t>* content = nullptr);
 
 /// The tree of every store's part in `parts` (write_parts), as build_tree
 /// builds it. Throws usage_error naming a part that is missing, made with
