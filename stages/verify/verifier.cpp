@@ -701,33 +701,26 @@ class Verifier {
                                                  [](const auto& e, uint64_t v) { return e.id < v; });
                 const auto b = r.geometry.chain(c);
                 const bool shown = at != h.table.chains.end() && at->id == id;
+                std::string fault;
                 if (!shown) {
-                    add(ll,
-                        {"border_mismatch",
-                         level,
-                         k,
-                         node_code(n),
-                         {id},
-                         double(b.front().x),
-                         double(b.front().y),
-                         0,
-                         0,
-                         "shown by node " + node_code(n) + " and not by " + node_code(home) + ", whose store owns it"});
-                    continue;
+                    fault =
+                        "shown by node " + node_code(n) + " and not by " + node_code(home) + ", whose store owns it";
+                } else if (const auto a = h.geometry.chain(size_t(at - h.table.chains.begin()));
+                           !std::equal(a.begin(), a.end(), b.begin(), b.end())) {
+                    fault =
+                        "shown by nodes " + node_code(home) + " and " + node_code(n) + " with different coordinates";
                 }
-                const auto a = h.geometry.chain(size_t(at - h.table.chains.begin()));
-                if (!std::equal(a.begin(), a.end(), b.begin(), b.end())) {
-                    add(ll,
-                        {"border_mismatch",
-                         level,
-                         k,
-                         node_code(n),
-                         {id},
-                         double(b.front().x),
-                         double(b.front().y),
-                         0,
-                         0,
-                         "shown by nodes " + node_code(home) + " and " + node_code(n) + " with different coordinates"});
+                if (!fault.empty()) {
+                    add(ll, {"border_mismatch",
+                             level,
+                             k,
+                             node_code(n),
+                             {id},
+                             double(b.front().x),
+                             double(b.front().y),
+                             0,
+                             0,
+                             std::move(fault)});
                 }
             }
         }

@@ -357,9 +357,11 @@ TEST_F(Verify, UnitWhoseBoundaryDoesNotClose)
     EXPECT_NE(r.items.at(0).detail.find("unit A2: boundary does not close"), std::string::npos) << r.items.at(0).detail;
 }
 
-TEST_F(Verify, BorderShownDifferentlyByTwoNodes)
+/// Counties A (x < 1000) and B, one tract each (A1, B1), their border (1 at
+/// the county level, 11 at the tract level, owned by A) with a vertex at
+/// (1010, 500); each tract store holds the other's chain of the border area as halo.
+Map two_counties()
 {
-    // Counties A and B, one tract each; their border has a vertex that 300 m drops.
     Map m;
     ChainStore l0 = store(0, 2, "county", "all");
     chain(l0, 1, "A", "B", {{1000, 0}, {1010, 500}, {1000, 1000}});
@@ -377,6 +379,13 @@ TEST_F(Verify, BorderShownDifferentlyByTwoNodes)
     chain(b, 11, "A1", "B1", {{1000, 0}, {1010, 500}, {1000, 1000}}, true);
     point(b, "B1", {1500, 500});
     m.stores = {l0, a, b};
+    return m;
+}
+
+TEST_F(Verify, BorderShownDifferentlyByTwoNodes)
+{
+    // The border's vertex is one that 300 m drops.
+    Map m = two_counties();
     m.simplified[1] = {{1000, 0}, {1000, 1000}};
     m.simplified[11] = {{1000, 0}, {1000, 1000}};
     expect(run(m), {});
@@ -392,27 +401,11 @@ TEST_F(Verify, BorderShownDifferentlyByTwoNodes)
 
 TEST_F(Verify, AMeetingAcrossPartitionsIsFiledOnceUnderItsOwner)
 {
-    // The map above; at LOD 1 tract B1's outline (13, owned by B) cuts
-    // west across the border (11, owned by A). The run of A's node files
-    // the crossing (11 has the smaller home, and 13 is in A's halo), B's
-    // does not: merged (run() compares), the whole run's one crossing.
-    Map m;
-    ChainStore l0 = store(0, 2, "county", "all");
-    chain(l0, 1, "A", "B", {{1000, 0}, {1010, 500}, {1000, 1000}});
-    chain(l0, 2, "A", "", {{1000, 1000}, {0, 1000}, {0, 0}, {1000, 0}});
-    chain(l0, 3, "B", "", {{1000, 0}, {2000, 0}, {2000, 1000}, {1000, 1000}});
-    point(l0, "A", {500, 500});
-    point(l0, "B", {1500, 500});
-    ChainStore a = store(1, 2, "tract", "A");
-    chain(a, 11, "A1", "B1", {{1000, 0}, {1010, 500}, {1000, 1000}});
-    chain(a, 12, "A1", "", {{1000, 1000}, {0, 1000}, {0, 0}, {1000, 0}});
-    chain(a, 13, "B1", "", {{1000, 0}, {2000, 0}, {2000, 1000}, {1000, 1000}}, true);
-    point(a, "A1", {500, 500});
-    ChainStore b = store(1, 2, "tract", "B");
-    chain(b, 13, "B1", "", {{1000, 0}, {2000, 0}, {2000, 1000}, {1000, 1000}});
-    chain(b, 11, "A1", "B1", {{1000, 0}, {1010, 500}, {1000, 1000}}, true);
-    point(b, "B1", {1500, 500});
-    m.stores = {l0, a, b};
+    // At LOD 1 tract B1's outline (13, owned by B) cuts west across the
+    // border (11, owned by A). The run of A's node files the crossing (11
+    // has the smaller home, and 13 is in A's halo), B's does not: merged
+    // (run() compares), the whole run's one crossing.
+    const Map m = two_counties();
     const auto r = run(m, [](pack::PackedTree& t, auto& p) {
         ASSERT_EQ(t.skeleton.strings[t.skeleton.nodes[2].code], "B");
         set_chain(t, p, 2, 1, 13, {{1000, 0}, {2000, 0}, {2000, 1000}, {1005, 500}, {1000, 1000}});
