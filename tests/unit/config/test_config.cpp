@@ -129,8 +129,7 @@ TEST_F(ConfigFiles, ASectionBecomesExactlyItsStagesFlags)
     EXPECT_EQ(config::stage_args(file, "simplify"),
               (V{"--tolerances=1,4.5", "--metric=l1", "--class-scale=S1400=0.5,H3010=2", "--no-projection-scale",
                  "--points=" + (m_dir / "pts" / "p.csv").string(), "--exhaustive", "--tile-pixels=2048"}));
-    // The ladder is the LODs pack packs.
-    EXPECT_EQ(config::stage_args(file, "pack"), (V{"--tolerances=1,4.5", "--tile-mb=2"}));
+    EXPECT_EQ(config::stage_args(file, "pack"), (V{"--tile-mb=2"}));
     EXPECT_EQ(config::stage_args(file, "verify"), V{});
 }
 
