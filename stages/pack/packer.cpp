@@ -470,21 +470,16 @@ struct PartNode {
     std::vector<uint64_t> sizes; ///< geometry payloads per LOD
 };
 
-/// The tree of `parts` (one per store, any order): the hierarchy of nodes,
-/// breadth first from the top level's one partition (a partition of level
-/// l + 1 is a child of the node whose unit it is), each chain's border
-/// level, and the tiles, each payload fetched (`fetch(part, k)`, LOD k's
-/// geometry) as its tile is built.
-PackedTree assemble(const TreeContext& ctx, uint8_t metric, std::vector<PartNode>& parts,
-                    const std::function<std::string(size_t, size_t)>& fetch, uint64_t tile_bytes, int draco_speed)
+/// The root of a line layer cut into tiles has no store: its place in `order`.
+constexpr size_t no_part = SIZE_MAX;
+
+/// assemble, step 1: the nodes, breadth first from the top level's one
+/// partition (a partition of level l + 1 is a child of the node whose unit
+/// it is), into `sk`; returns each node's part (no_part for a tiles root).
+std::vector<size_t> build_hierarchy(const TreeContext& ctx, const std::vector<PartNode>& parts, datatree::Skeleton& sk)
 {
-    PackedTree tree;
-    auto& sk = tree.skeleton;
-    sk = ctx.header();
-    sk.metric = metric;
     const auto& level_names = ctx.level_names();
     const auto nlevels = static_cast<uint32_t>(level_names.size());
-    const size_t nlods = ctx.lod_eps().size();
     // Each level's parts by partition.
     std::vector<std::map<std::string, size_t>> by_level(nlevels);
     for (size_t i = 0; i < parts.size(); ++i) {
@@ -493,8 +488,7 @@ PackedTree assemble(const TreeContext& ctx, uint8_t metric, std::vector<PartNode
     if (by_level[0].empty()) {
         throw input_error(ctx.original().string() + "/" + level_names[0] + ": no stores");
     }
-    constexpr size_t no_part = SIZE_MAX; // the root of a line layer cut into tiles: no store
-    std::vector<size_t> order;           // skeleton node -> part
+    std::vector<size_t> order; // skeleton node -> part
     if (by_level[0].size() == 1) {
         order.push_back(by_level[0].begin()->second);
     } else {
@@ -544,6 +538,17 @@ PackedTree assemble(const TreeContext& ctx, uint8_t metric, std::vector<PartNode
             }
         }
     }
+    return order;
+}
+
+/// assemble, step 2: each node's code, fields and table with its chains'
+/// border levels, the LOD totals, and a tiles root's box. Returns the tables.
+std::vector<std::string> fill_nodes(const TreeContext& ctx, std::vector<PartNode>& parts,
+                                    const std::vector<size_t>& order, PackedTree& tree)
+{
+    auto& sk = tree.skeleton;
+    const auto nlevels = static_cast<uint32_t>(ctx.level_names().size());
+    const size_t nlods = ctx.lod_eps().size();
     // The node whose map has each unit as its own, per level.
     std::vector<std::unordered_map<std::string, uint32_t>> unit_node(nlevels);
     for (uint32_t i = 0; i < order.size(); ++i) {
@@ -626,6 +631,22 @@ PackedTree assemble(const TreeContext& ctx, uint8_t metric, std::vector<PartNode
         }
         root.box = box;
     }
+    return tables;
+}
+
+/// The tree of `parts` (one per store, any order): the hierarchy of nodes,
+/// each chain's border level, and the tiles, each payload fetched
+/// (`fetch(part, k)`, LOD k's geometry) as its tile is built.
+PackedTree assemble(const TreeContext& ctx, uint8_t metric, std::vector<PartNode>& parts,
+                    const std::function<std::string(size_t, size_t)>& fetch, uint64_t tile_bytes, int draco_speed)
+{
+    PackedTree tree;
+    auto& sk = tree.skeleton;
+    sk = ctx.header();
+    sk.metric = metric;
+    const size_t nlods = ctx.lod_eps().size();
+    const std::vector<size_t> order = build_hierarchy(ctx, parts, sk);
+    std::vector<std::string> tables = fill_nodes(ctx, parts, order, tree);
     const std::string empty_geometry = datatree::encode_geometry({}, {0, 0}, {draco_speed});
     std::vector<std::vector<uint64_t>> sizes(order.size());
     for (size_t i = 0; i < order.size(); ++i) {
