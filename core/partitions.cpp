@@ -7,15 +7,13 @@
 
 namespace tigerlod {
 
-namespace {
-
-std::vector<std::string> spec_items(const std::string& spec)
+std::vector<std::string> list_items(const std::string& spec, const std::string& option)
 {
     std::vector<std::string> items;
     if (spec.starts_with("@")) {
         std::ifstream in(spec.substr(1));
         if (!in) {
-            throw input_error(spec.substr(1) + ": cannot read the list of --partitions");
+            throw input_error(spec.substr(1) + ": cannot read the list of " + option);
         }
         for (std::string line; std::getline(in, line);) {
             if (!line.empty() && line.back() == '\r') {
@@ -34,13 +32,11 @@ std::vector<std::string> spec_items(const std::string& spec)
     return items;
 }
 
-} // namespace
-
 std::vector<bool> select_partitions(const std::vector<std::pair<std::string, std::string>>& stores,
                                     const std::string& spec, const std::filesystem::path& input)
 {
     std::vector<bool> chosen(stores.size(), false);
-    for (const std::string& item : spec_items(spec)) {
+    for (const std::string& item : list_items(spec, "--partitions")) {
         const auto slash = item.find('/');
         if (slash == std::string::npos || slash == 0 || slash + 1 == item.size()) {
             throw usage_error("option '--partitions' has '" + item +

@@ -10,6 +10,11 @@
 
 namespace tigerlod {
 
+/// The items of a list option: items separated by commas, or `@FILE` with
+/// one item a line (empty lines skipped). Throws input_error naming FILE,
+/// and `option`, if FILE cannot be read.
+std::vector<std::string> list_items(const std::string& spec, const std::string& option);
+
 /// Which of `stores` (level, partition) `spec` names: items separated by
 /// commas, or `@FILE` with one item a line; an item is `LEVEL/PARTITION`,
 /// `LEVEL/PREFIX*` (the partitions of LEVEL whose names begin with PREFIX)

@@ -444,29 +444,6 @@ std::string store_of(const datatree::Skeleton& sk, uint32_t n)
     return sk.level_names[sk.nodes[n].level] + "/" + (n == 0 ? std::string("all") : sk.code(sk.nodes[n]));
 }
 
-/// The items of a `--partitions` or `--shares` list: commas, or @FILE one a line.
-std::vector<std::string> list_items(const std::string& spec, const char* option)
-{
-    std::vector<std::string> items;
-    if (spec.starts_with("@")) {
-        std::ifstream in(spec.substr(1));
-        if (!in) {
-            throw input_error(spec.substr(1) + ": cannot read the list of " + option);
-        }
-        for (std::string line; std::getline(in, line);) {
-            if (!line.empty()) {
-                items.push_back(line);
-            }
-        }
-    } else {
-        std::stringstream ss(spec);
-        for (std::string item; std::getline(ss, item, ',');) {
-            items.push_back(item);
-        }
-    }
-    return items;
-}
-
 /// The tree's stores that have a node to check (not the root of a line
 /// layer in tiles, which shows nothing), as (level, partition), sorted.
 std::vector<std::pair<std::string, std::string>> checked_stores(const datatree::Skeleton& sk)
