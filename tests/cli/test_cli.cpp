@@ -824,6 +824,8 @@ TEST_F(Cli, PackByPartitionsWritesTheWholeRunsTree)
         std::ofstream(m_dir / "parts" / "plan.json") << j.dump();
         expect_failure(run("pack", "--partitions 'tract/*'" + with), 2,
                        "is the plan of another tigerlod-ingest output");
+        std::ofstream(m_dir / "parts" / "plan.json") << text.substr(0, text.size() / 2);
+        expect_failure(run("pack", "--partitions 'tract/*'" + with), 1, "plan.json: not a tigerlod pack plan");
         std::ofstream(m_dir / "parts" / "plan.json") << text;
     }
     ASSERT_EQ(
@@ -902,6 +904,13 @@ TEST_F(Cli, VerifyByPartitionsMergesToTheWholeRunsReport)
     const std::string merged = (m_dir / "merged").string();
     expect_failure(run("verify", "--finish --shares " + a + tail), 2, "is in no share: its verify job has not run");
     expect_failure(run("verify", "--finish --shares " + a + "," + b + "," + a + tail), 2, "is in two shares");
+    expect_failure(run("verify", "--finish --shares " + a + "," + (m_dir / "nowhere.json").string() + tail), 2,
+                   "nowhere.json: no such share (its verify job has not run)");
+    expect_failure(run("verify", "--finish --shares @" + (m_dir / "nolist").string() + tail), 1,
+                   "nolist: cannot read the list of --shares");
+    std::ofstream(m_dir / "cut.json") << slurp(b).substr(0, 100);
+    expect_failure(run("verify", "--finish --shares " + a + "," + (m_dir / "cut.json").string() + tail), 1,
+                   "cut.json: not a verify share");
     ASSERT_EQ(run("verify", "--finish --shares " + a + "," + b + " " + tree + " " + in + " " + merged).code, 0)
         << slurp(m_dir / "stderr");
     auto without_seconds = [](const fs::path& p) {
