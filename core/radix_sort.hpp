@@ -103,8 +103,10 @@ inline void sort_bucket(KeyValue* v, size_t n, std::vector<KeyValue>& scratch)
         lo = std::min(lo, v[i].first);
         hi = std::max(hi, v[i].first);
     }
-    if (lo == hi) { // one key: by value
-        std::sort(v, v + n, key_value_less);
+    if (lo == hi) { // one key: by value (already so when added with rising values)
+        if (!std::is_sorted(v, v + n, key_value_less)) {
+            std::sort(v, v + n, key_value_less);
+        }
         return;
     }
     if (n > lsd_limit) {
@@ -172,6 +174,9 @@ inline void radix_sort_pairs(std::vector<std::pair<uint64_t, uint32_t>>& v, unsi
     using detail::KeyValue;
     constexpr size_t min_part = size_t{1} << 17; // below this a thread costs more than it saves
     const size_t n = v.size();
+    if (std::is_sorted(v.begin(), v.end(), detail::key_value_less)) {
+        return;
+    }
     if (n < 4096) {
         std::sort(v.begin(), v.end(), detail::key_value_less);
         return;
@@ -223,6 +228,26 @@ inline void radix_sort_pairs(std::vector<std::pair<uint64_t, uint32_t>>& v, unsi
             detail::sort_bucket(v.data() + start[b], start[b + 1] - start[b], scratch);
         }
     });
+}
+
+/// Sorts `v` by key, then value, where every key is below `keys` and the
+/// values never fall in v's order (pairs added with a rising index, no pair
+/// twice): a stable counting sort, O(n + keys) with a second array of the
+/// pairs, the order radix_sort_pairs gives. For keys that index a dense grid.
+inline void counting_sort_pairs(std::vector<std::pair<uint64_t, uint32_t>>& v, uint64_t keys)
+{
+    std::vector<size_t> start(keys + 1, 0);
+    for (const auto& e : v) {
+        ++start[e.first + 1];
+    }
+    for (uint64_t k = 0; k < keys; ++k) {
+        start[k + 1] += start[k];
+    }
+    std::vector<std::pair<uint64_t, uint32_t>> out(v.size());
+    for (const auto& e : v) {
+        out[start[e.first]++] = e;
+    }
+    v = std::move(out);
 }
 
 /// Bounds of `n` parts of sorted pairs, about equal in size, each beginning

@@ -35,6 +35,11 @@ class CellGrid {
     {
     }
     bool contains(int64_t x, int64_t y) const noexcept { return x >= m_x0 && x <= m_x1 && y >= m_y0 && y <= m_y1; }
+    /// The number of cells: every key is below it.
+    uint64_t size() const noexcept
+    {
+        return m_x1 < m_x0 ? 0 : static_cast<uint64_t>(m_x1 - m_x0 + 1) * static_cast<uint64_t>(m_y1 - m_y0 + 1);
+    }
     /// The key of a cell that the box contains.
     uint64_t key(int64_t x, int64_t y) const noexcept
     {

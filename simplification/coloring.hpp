@@ -6,6 +6,9 @@
 /// shares a class with a chain whose tolerance neighbourhood can overlap its
 /// own. Two halo chains may: only owned chains' shortcuts are tested in the
 /// stencil, and a test is fooled only by a tent of the tested chain's class.
+/// So may two chains neither of which can be tested: an owned chain whose
+/// every shortcut is too short for the raster to test a pixel of it
+/// (testable_chain) is coloured as the halo is.
 
 #include "core/errors.hpp"
 #include "core/geometry.hpp"
@@ -22,7 +25,7 @@ namespace tigerlod::simplify {
 struct ChainGeom {
     std::span<const GridPoint> points;
     double eps = 0;     ///< tolerance in grid units
-    bool owned = false; ///< simplified here (not halo)
+    bool owned = false; ///< simplified here (not halo); counts as halo where testable_chain is false
     /// Segment i (points i, i + 1) is seen only if `keep` is empty or
     /// keep[i] != 0: the parts of a halo chain out of every owned chain's reach are left out.
     std::span<const uint8_t> keep = {};
@@ -73,6 +76,34 @@ struct ColorResult {
     double mean_classes = 0;
 };
 
+/// Fragments this close to a shortcut's ends, in pixels, are not tested
+/// (raster.cpp's test shaders): a junction is on every adjacent chain's
+/// region boundary.
+inline constexpr double end_margin_px = 1.5;
+
+/// The squared length in grid units^2 (rounded down) at or below which a
+/// shortcut leaves the raster no pixel to test at this pixel size, so the
+/// raster passes it whatever is drawn. A pixel is tested only when its
+/// centre lies within half a pixel of the segment across and between its
+/// ends along, so within sqrt((L/2)^2 + 1/4) of the nearer end; below the
+/// end margin m for L <= 2 sqrt((m - 0.1)^2 - 1/4), 2.6 pixels. The 0.1
+/// pixel covers the shaders' float rounding (under 0.01 pixel on tiles of
+/// up to 16384 pixels).
+int128 untested_length2(double pixel) noexcept;
+
+/// Whether some shortcut of a chain through `points` can be longer than
+/// that: its bounding box's squared diagonal above untested_length2(pixel).
+/// Exact (integers), so a chain that is not testable has no shortcut above
+/// the length.
+bool testable_chain(std::span<const GridPoint> points, double pixel) noexcept;
+
+/// Whether shortcut ab is longer than untested_length2(pixel), exactly.
+inline bool testable_shortcut(GridPoint a, GridPoint b, int128 untested2) noexcept
+{
+    const int128 dx = int64_t{b.x} - a.x, dy = int64_t{b.y} - a.y;
+    return dx * dx + dy * dy > untested2;
+}
+
 /// Radius in grid units around a chain of tolerance `eps` that its tent and
 /// its candidates can touch: eps in the metric, as an L2 distance, plus the margin.
 double reach_radius(double eps, double pixel, const ColorOptions& opt) noexcept;
@@ -90,7 +121,7 @@ ColorResult color_tiles(std::span<const ChainGeom> chains, const ColorOptions& o
 double segment_distance(GridPoint a, GridPoint b, GridPoint c, GridPoint d) noexcept;
 
 /// The conflict graph as sorted adjacency lists: chains i != j, at least one
-/// of them owned, with segments that take part (ChainGeom::keep) closer than
+/// of them owned and testable_chain at `pixel`, with segments that take part (ChainGeom::keep) closer than
 /// reach_radius(eps_i) + reach_radius(eps_j) (segment_distance, exactly as
 /// a test of every pair would find).
 std::vector<std::vector<uint32_t>> conflict_graph(std::span<const ChainGeom> chains, double pixel,

@@ -909,8 +909,7 @@ void Raster::test_parts(const PreparedTile::Data& d, size_t piece, const Frame& 
     gl.UseProgram(I.test_prog);
     gl.Uniform2f(I.loc(I.test_prog, "u_size"), f.size, f.size);
     gl.Uniform2f(I.loc(I.test_prog, "u_origin"), f.ox, f.oy);
-    gl.Uniform1f(I.loc(I.test_prog, "u_end_margin2"),
-                 static_cast<float>(m_opt.endpoint_margin_px * m_opt.endpoint_margin_px));
+    gl.Uniform1f(I.loc(I.test_prog, "u_end_margin2"), static_cast<float>(end_margin_px * end_margin_px));
     gl.BindVertexArray(I.vao_test);
     if (p.tests.empty()) {
         return;

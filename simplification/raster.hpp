@@ -37,7 +37,9 @@ struct RasterOptions {
     /// the same quads. It was 1 pixel: 0.25 left every store of the tract
     /// and contour ladders the same, and both ran 5-6% faster.
     double margin_px = 0.25;
-    double endpoint_margin_px = 1.5; ///< fragments this close to a shortcut's ends are not tested
+    // Fragments within end_margin_px (coloring.hpp) of a shortcut's ends are
+    // not tested: a constant, since simplify and tigerlod-color settle the
+    // shortcuts too short for a tested pixel by it.
 };
 
 /// A chain drawn into the Voronoi diagram.

@@ -34,6 +34,7 @@ void ToleranceStats::add(const ToleranceStats& o)
     tent_segments += o.tent_segments;
     tent_segments_skipped += o.tent_segments_skipped;
     proved_far += o.proved_far;
+    proved_short += o.proved_short;
     banned_raster += o.banned_raster;
     banned_exact += o.banned_exact;
     banned_region += o.banned_region;
@@ -265,6 +266,7 @@ class StoreSimplifier {
         }
         m_st.seconds_color += since(t0);
         m_pixel = m_colors ? m_colors->pixel : tile_pixel(m_eps, m_opt.color); // m_colors->pixel once known
+        m_untested2 = untested_length2(m_pixel);
     }
 
     /// The owned chains to simplify.
@@ -468,6 +470,9 @@ class StoreSimplifier {
                 return;
             }
             const auto pts = points_of(w);
+            if (!testable_chain(pts, m_pixel)) {
+                return; // every shortcut too short to be drawn (proved_short)
+            }
             auto& b = m_blocked[wi];
             b.assign(pts.size(), 0);
             for (size_t k = 0; k + 1 < pts.size(); ++k) {
@@ -564,6 +569,14 @@ class StoreSimplifier {
         return !b.empty() && b[sc.to] == b[sc.from];
     }
 
+    /// Too short for the raster to test a pixel of it (untested_length2):
+    /// the raster would pass it, whatever is drawn.
+    bool proved_short(uint32_t wi, Shortcut sc) const
+    {
+        const auto pts = points_of(m_work[wi]);
+        return !testable_shortcut(pts[sc.from], pts[sc.to], m_untested2);
+    }
+
     /// Steps 1-2: settle `all_tests` by the far rule where it can, draw the
     /// rest tile by tile (the parts of each shortcut that can fail, in every
     /// tile of its chain), and mark each good or bad_raster.
@@ -571,7 +584,11 @@ class StoreSimplifier {
     {
         std::vector<TestPair> tests;
         for (const auto& [wi, ci] : all_tests) {
-            if (proved_far(wi, m_work[wi].cand.at(ci))) {
+            const Shortcut sc = m_work[wi].cand.at(ci);
+            if (proved_short(wi, sc)) {
+                m_work[wi].state[ci] = good;
+                ++m_st.proved_short;
+            } else if (proved_far(wi, sc)) {
                 m_work[wi].state[ci] = good;
                 ++m_st.proved_far;
             } else {
@@ -689,7 +706,10 @@ class StoreSimplifier {
                     if (w.state[ci] != unknown) {
                         continue; // culled by a point
                     }
-                    if (proved_far(wi, {runs[r].from, k})) {
+                    if (proved_short(wi, {runs[r].from, k})) {
+                        w.state[ci] = good;
+                        ++m_st.proved_short;
+                    } else if (proved_far(wi, {runs[r].from, k})) {
                         w.state[ci] = good;
                         ++m_st.proved_far;
                     } else {
@@ -1085,7 +1105,8 @@ class StoreSimplifier {
     ColorResult m_own_colors;
     /// After m_eps and m_keep, which it reads: destroyed (waited for) before them.
     std::future<std::pair<ColorResult, double>> m_colouring;
-    double m_pixel = 0; ///< the tiles' pixel, grid units
+    double m_pixel = 0;      ///< the tiles' pixel, grid units
+    int128 m_untested2 = -1; ///< shortcuts at most this long (squared) leave no pixel to test
     std::vector<Work> m_work;
     // The far rule (build_far_rule).
     double m_ball_l2 = 0, m_reach_max = 0, m_cell = 0;

@@ -26,6 +26,9 @@ struct ToleranceStats {
     size_t tent_segments = 0;         ///< tents drawn
     size_t tent_segments_skipped = 0; ///< tents of the tiles' chains too far from every drawn part
     size_t proved_far = 0; ///< shortcuts accepted without drawing: farther from every other chain than its reach
+    /// Shortcuts accepted without drawing: too short for the raster to test
+    /// a pixel (untested_length2 in coloring.hpp), so it would pass them.
+    size_t proved_short = 0;
     size_t banned_raster = 0;
     size_t banned_exact = 0;
     /// Shortcuts whose region (between them and the subchain they replace)

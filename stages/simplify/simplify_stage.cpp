@@ -298,6 +298,7 @@ json SimplifyStage::report_json(size_t stores, const std::string& gl, const std:
         j["tents_drawn"] = t.tent_segments;
         j["tents_skipped"] = t.tent_segments_skipped;
         j["proved_far"] = t.proved_far;
+        j["proved_short"] = t.proved_short;
         j["banned"] = {{"raster", t.banned_raster},
                        {"exact", t.banned_exact},
                        {"region", t.banned_region},

@@ -309,5 +309,74 @@ TEST(RasterSpec, EveryDecisionIsTheSpecifiedArithmeticOnEdgeCases)
                 failing, passing, edges, ties);
 }
 
+// untested_length2 (coloring.hpp): simplify and tigerlod-color settle a
+// shortcut no longer than it without drawing, as one the raster passes
+// whatever is drawn, because no pixel of it is tested. Under another class's
+// tent over the whole tile, every shortcut at that length or below, at any
+// sub-pixel place and direction, must pass in both compliance modes (and
+// the reference must find no tested pixel), and longer ones must fail at
+// some places: the bound is not vacuous.
+TEST(RasterSpec, AShortcutNoLongerThanTheUntestedLengthHasNoPixelTested)
+{
+    const TileSpec tile{0, 0, 16, 48, 48}; // 16 grid units a pixel: places on a sixteenth of a pixel
+    const int128 limit2 = untested_length2(tile.pixel);
+    ASSERT_GT(limit2, int128{int64_t(2.5 * 2.5 * 256)}) << "at least 2.5 pixels";
+    ASSERT_LT(limit2, int128{int64_t(2.83 * 2.83 * 256)}) << "under 2 sqrt 2 pixels, where a pixel can be tested";
+    const std::vector<GridPoint> wall{gp(0, 400), gp(768, 400)}; // its tent, eps 30 pixels, covers the tile
+    const std::vector<TentChain> tents{{wall, 30 * tile.pixel, 2}};
+    Lcg g{77};
+    size_t short_tests = 0, long_tests = 0, long_failed = 0, at_limit = 0;
+    for (int round = 0; round < 60; ++round) {
+        std::vector<TestSegment> segs;
+        std::vector<bool> is_short;
+        for (uint32_t id = 0; id < 40; ++id) {
+            const GridPoint a = gp(g.in(100, 660), g.in(100, 660));
+            // A direction, then the longest integer step along it at or under
+            // the limit (short) or up to 3.2 pixels (long).
+            const bool want_short = id % 2 == 0;
+            const double angle = double(g.next() % 3600) * 3.14159265358979 / 1800;
+            const double target =
+                want_short ? std::sqrt(double(limit2)) : tile.pixel * (2.7 + 0.5 * (g.next() % 100) / 100.0);
+            int64_t dx = std::llround(target * std::cos(angle)), dy = std::llround(target * std::sin(angle));
+            while (int128{dx} * dx + int128{dy} * dy > limit2 && want_short) {
+                dx -= dx > 0 ? 1 : (dx < 0 ? -1 : 0);
+                dy -= dy > 0 ? 1 : (dy < 0 ? -1 : 0);
+            }
+            const GridPoint b = gp(a.x + dx, a.y + dy);
+            const bool short_one = !testable_shortcut(a, b, limit2);
+            if (a == b || short_one != want_short) {
+                continue;
+            }
+            at_limit += short_one && int128{dx} * dx + int128{dy} * dy + 40 >= limit2;
+            segs.push_back({a, b, 1, uint32_t(segs.size())});
+            is_short.push_back(short_one);
+        }
+        size_t edges = 0, ties = 0;
+        const auto want = reference(tile, tents, segs, Metric::l2, edges, ties);
+        for (Compliance mode : {Compliance::ssbo, Compliance::readback}) {
+            std::vector<uint8_t> got(segs.size(), 0);
+            raster(mode, Metric::l2).run_tile(tile, tents, segs, got);
+            ASSERT_EQ(got, want) << "round " << round;
+        }
+        for (size_t i = 0; i < segs.size(); ++i) {
+            if (is_short[i]) {
+                ++short_tests;
+                EXPECT_EQ(want[i], 0) << "a shortcut of "
+                                      << std::hypot(segs[i].b.x - segs[i].a.x, segs[i].b.y - segs[i].a.y) / tile.pixel
+                                      << " pixels was tested";
+            } else {
+                ++long_tests;
+                long_failed += want[i];
+            }
+        }
+    }
+    EXPECT_GT(short_tests, 1000U);
+    EXPECT_GT(at_limit, 300U) << "too few shortcuts at the limit itself";
+    EXPECT_GT(long_failed, 50U)
+        << "longer shortcuts must have pixels tested (some places: 2.7 pixels leaves a narrow window)";
+    std::printf("[ info ] %zu shortcuts at most the untested length (%zu near it) pass; %zu of %zu longer ones fail\n",
+                short_tests, at_limit, long_failed, long_tests);
+}
+
 } // namespace
 } // namespace tigerlod::simplify::testing

@@ -847,6 +847,42 @@ TEST(Color, TwoHaloChainsAreNeverJoinedAHaloChainAndAnOwnedOneAre)
     EXPECT_EQ(r.conflict_edges, 2U);
 }
 
+// An owned chain whose every shortcut is too short for the raster to test a
+// pixel (testable_chain: pixel 25, about 65 units) is coloured as a halo
+// chain: two such chains need no edge however close; a testable owned chain
+// near them still does, and a chain one unit over the length is testable.
+TEST(Color, OwnedChainsTooShortToBeTestedAreColouredAsHalo)
+{
+    ColorOptions o;
+    const double pixel = tile_pixel(std::vector<double>{100}, o);
+    ASSERT_EQ(pixel, 25.0);
+    const int128 limit2 = untested_length2(pixel);
+    const auto side = static_cast<int32_t>(std::sqrt(double(limit2) / 2)); // a square's diagonal at the limit
+    ASSERT_LE(int128{2} * side * side, limit2);
+    ASSERT_GT(int128{2} * (side + 1) * (side + 1), limit2);
+    const Pts s1{{0, 0}, {side, side}}, s2{{0, 40}, {side, 40 + side}};
+    const Pts s3{{0, 80}, {side + 1, 80 + side + 1}}; // one unit over: testable
+    const Pts far{{5000, 0}, {6000, 0}};
+    std::vector<ChainGeom> g{{s1, 100, true}, {s2, 100, true}, {far, 100, true}};
+    EXPECT_FALSE(testable_chain(s1, pixel));
+    EXPECT_TRUE(testable_chain(s3, pixel));
+    auto adj = conflict_graph(g, pixel, o);
+    EXPECT_TRUE(adj[0].empty());
+    EXPECT_TRUE(adj[1].empty());
+    auto r = color_tiles(g, o, 1);
+    EXPECT_EQ(r.conflict_edges, 0U);
+    g.push_back({s3, 100, true});
+    adj = conflict_graph(g, pixel, o);
+    EXPECT_EQ(adj[0], std::vector<uint32_t>{3});
+    EXPECT_EQ(adj[1], std::vector<uint32_t>{3});
+    EXPECT_EQ(adj[3], (std::vector<uint32_t>{0, 1}));
+    r = color_tiles(g, o, 1);
+    EXPECT_EQ(r.conflict_edges, 2U);
+    // No testable chain at all: nothing to tile.
+    g = {{s1, 100, true}, {s2, 100, true}};
+    EXPECT_TRUE(color_tiles(g, o, 1).tiles.empty());
+}
+
 // The graph coarsens chains within an eighth of their reach and tests the
 // segments of a pair only where the coarse distance is near the threshold:
 // it must find exactly the pairs a test of every pair of segments finds. Wiggly
@@ -859,7 +895,7 @@ TEST(Color, ConflictGraphIsExactlyTheTestOfEveryPairOfSegments)
     std::uniform_int_distribution<int> coin(0, 9), place(0, 12000), tiny(-40, 40), jump(-1500, 1500);
     const std::vector<double> eps_choices{400, 800, 1600};
     ColorOptions o;
-    size_t edges_seen = 0;
+    size_t edges_seen = 0, short_owned = 0;
     for (int trial = 0; trial < 12; ++trial) {
         std::vector<Pts> pts;
         std::vector<double> eps;
@@ -944,7 +980,10 @@ TEST(Color, ConflictGraphIsExactlyTheTestOfEveryPairOfSegments)
             for (uint32_t j = i + 1; j < g.size(); ++j) {
                 bool close = false;
                 const double limit = reach_radius(eps[i], pixel, o) + reach_radius(eps[j], pixel, o);
-                if (owned[i] || owned[j]) {
+                // Owned and long enough for a shortcut to be tested (coloring.hpp).
+                const bool tested_i = owned[i] && testable_chain(pts[i], pixel);
+                const bool tested_j = owned[j] && testable_chain(pts[j], pixel);
+                if (tested_i || tested_j) {
                     auto segs_of = [&](uint32_t c) {
                         std::vector<std::pair<GridPoint, GridPoint>> s;
                         for (size_t k = 0; k + 1 < pts[c].size(); ++k) {
@@ -970,10 +1009,14 @@ TEST(Color, ConflictGraphIsExactlyTheTestOfEveryPairOfSegments)
             }
         }
         const size_t n = g.size();
+        for (size_t c = 0; c < g.size(); ++c) {
+            short_owned += owned[c] && !testable_chain(pts[c], pixel) ? 1 : 0;
+        }
         EXPECT_TRUE(adj[n - 4].empty()) << "1200 apart is not closer than 1200";
         EXPECT_EQ(adj[n - 2], std::vector<uint32_t>{uint32_t(n - 1)});
     }
     EXPECT_GT(edges_seen, 500U) << "the maps must have had pairs to find";
+    EXPECT_GT(short_owned, 10U) << "the maps must have had owned chains too short to be tested";
 }
 
 // The partition contract's points (formats/chains/SPEC.md): every unit an
