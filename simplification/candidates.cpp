@@ -295,6 +295,13 @@ void Candidates::finish(uint32_t n)
     }
 }
 
+void Candidates::append(const Candidates& later)
+{
+    for (const Run& r : later.m_runs) {
+        add_run(r.from, r.lo, r.hi);
+    }
+}
+
 Shortcut Candidates::at(uint32_t id) const noexcept
 {
     const auto r = static_cast<size_t>(std::upper_bound(m_base.begin(), m_base.end(), id) - m_base.begin()) - 1;
@@ -385,7 +392,8 @@ bool metric_cone(int64_t qx, int64_t qy, int64_t t, bool l1, double cos_s, doubl
 /// each vertex is within that disc of the segment, so within eps in the
 /// metric. The other ends in the wedge take the exact test.
 template <class Wide>
-void scan(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach, int128 reps2, Candidates& out)
+void scan(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach, int128 reps2, uint32_t starts_lo,
+          uint32_t starts_hi, Candidates& out)
 {
     const auto n = static_cast<uint32_t>(pts.size());
     const auto wide_reps2 = static_cast<Wide>(reps2); // fits: checked by the caller
@@ -398,7 +406,7 @@ void scan(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_rea
     const WedgeConstants wc(reps2);
     const double r_eps = wc.r_eps, cos_s = wc.cos_s, sin_s = wc.sin_s, deep2 = wc.deep2;
     UnsureEnds unsure(tol, r_eps, r_in);
-    for (uint32_t j = 0; j + 2 < n; ++j) {
+    for (uint32_t j = starts_lo; j + 2 < n && j < starts_hi; ++j) {
         const GridPoint a = pts[j];
         unsure.reset(j);
         Wedge wide, inner;
@@ -527,7 +535,8 @@ TIGERLOD_AVX2 V4 cross(V4 xx, V4 xy, V4 yx, V4 yy) noexcept
 /// Exact in doubles because every coordinate difference is under 2^26 (the
 /// caller checks): squared lengths are integers below 2^53.
 __attribute__((target("avx2"))) void scan_lanes(std::span<const GridPoint> pts, const Tolerance& tol,
-                                                uint32_t max_reach, int128 reps2, Candidates& out)
+                                                uint32_t max_reach, int128 reps2, uint32_t starts_lo,
+                                                uint32_t starts_hi, Candidates& out)
 {
     const auto n = static_cast<uint32_t>(pts.size());
     // The points as doubles, padded so that lanes past the end read copies of the last point.
@@ -544,7 +553,7 @@ __attribute__((target("avx2"))) void scan_lanes(std::span<const GridPoint> pts, 
     // Per lane, the runs it closed in this group, and its unsure ends' test.
     std::vector<Candidates::Run> closed[lanes];
     std::vector<UnsureEnds> unsure(lanes, UnsureEnds(tol, r_eps, r_eps)); // L2: the ball is the disc
-    for (uint32_t j = 0; j + 2 < n; j += lanes) {
+    for (uint32_t j = starts_lo; j + 2 < n && j < starts_hi; j += lanes) {
         for (int l = 0; l < lanes; ++l) {
             unsure[l].reset(j + static_cast<uint32_t>(l));
         }
@@ -552,7 +561,7 @@ __attribute__((target("avx2"))) void scan_lanes(std::span<const GridPoint> pts, 
         double longest = 0;
         for (int l = 0; l < lanes; ++l) {
             const uint32_t start = j + static_cast<uint32_t>(l);
-            if (start + 2 < n) {
+            if (start + 2 < n && start < starts_hi) {
                 const auto last = max_reach ? std::min<uint64_t>(n - 1, uint64_t{start} + max_reach) : n - 1;
                 steps[l] = double(last - (start + 1));
                 longest = std::max(longest, steps[l]);
@@ -699,8 +708,15 @@ Candidates proximate_shortcuts(std::span<const GridPoint> pts, const Tolerance& 
 Candidates proximate_shortcuts(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach,
                                ScanKernel kernel)
 {
+    Candidates out = proximate_shortcuts_from(pts, tol, max_reach, 0, static_cast<uint32_t>(pts.size()), kernel);
+    out.finish(static_cast<uint32_t>(pts.size()));
+    return out;
+}
+
+Candidates proximate_shortcuts_from(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach,
+                                    uint32_t first, uint32_t last, ScanKernel kernel)
+{
     Candidates out;
-    const auto n = static_cast<uint32_t>(pts.size());
     // The L2 disc that holds the metric's ball: a vertex must be within this
     // radius of the ray from v_j, so the wedge is a necessary condition.
     // Its square is an integer: threshold (L2), threshold^2 (L1), 2 threshold^2 (Linf).
@@ -716,17 +732,15 @@ Candidates proximate_shortcuts(std::span<const GridPoint> pts, const Tolerance& 
     constexpr int64_t lanes_limit = int64_t{1} << 26;
     if (kernel == ScanKernel::fastest && has_avx2() && tol.metric == Metric::l2 && !pts.empty() &&
         box.max_x - box.min_x < lanes_limit && box.max_y - box.min_y < lanes_limit && reps2 < int128{1} << 52) {
-        scan_lanes(pts, tol, max_reach, reps2, out);
-        out.finish(n);
+        scan_lanes(pts, tol, max_reach, reps2, first, last, out);
         return out;
     }
 #endif
     if (!pts.empty() && box.max_x - box.min_x < limit && box.max_y - box.min_y < limit && reps2 < int128{limit}) {
-        scan<int64_t>(pts, tol, max_reach, reps2, out);
+        scan<int64_t>(pts, tol, max_reach, reps2, first, last, out);
     } else {
-        scan<int128>(pts, tol, max_reach, reps2, out);
+        scan<int128>(pts, tol, max_reach, reps2, first, last, out);
     }
-    out.finish(n);
     return out;
 }
 

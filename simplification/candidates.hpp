@@ -41,6 +41,8 @@ class Candidates {
             m_runs.push_back({from, lo, hi});
         }
     }
+    /// Appends the runs of `later` (not finished), whose starts all follow this one's.
+    void append(const Candidates& later);
     /// Ends the list for a chain of `n` vertices; add() may not follow.
     void finish(uint32_t n);
 
@@ -98,6 +100,13 @@ enum class ScanKernel { fastest, scalar };
 const char* fastest_scan_kernel() noexcept;
 Candidates proximate_shortcuts(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach,
                                ScanKernel kernel);
+
+/// The shortcuts from the starts in [first, last) only, not finished: each
+/// start's scan depends on no other, so the pieces of a long chain can run on
+/// threads of their own, and appended in order (Candidates::append) and
+/// finished they are proximate_shortcuts' result, byte for byte.
+Candidates proximate_shortcuts_from(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach,
+                                    uint32_t first, uint32_t last, ScanKernel kernel = ScanKernel::fastest);
 
 /// Point constraints (Algorithm 5.2, exact): the ids of the shortcuts whose
 /// region between them and the original subchain holds one of `points`

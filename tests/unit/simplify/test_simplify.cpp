@@ -182,6 +182,48 @@ TEST(Candidates, ChainsGoingOutAndBackMatchBruteForce)
     }
 }
 
+// A long chain's starts are scanned in pieces on threads of their own
+// (simplify's find_candidates): the pieces, appended in order, must be the
+// whole scan, whichever kernel, metric, reach cap and cut points (cuts off
+// the four-start groups of the AVX2 kernel included).
+TEST(Candidates, StartsScannedInPiecesAppendToTheWholeScan)
+{
+    std::mt19937 rng(11);
+    std::uniform_int_distribution<int> noise(-60, 60);
+    for (Metric m : {Metric::l2, Metric::l1, Metric::linf}) {
+        for (int trial = 0; trial < 12; ++trial) {
+            Pts pts;
+            for (int k = 0; k < 400; ++k) {
+                pts.push_back({static_cast<int32_t>(std::lround(90.0 * k + 300 * std::sin(0.05 * k * (trial + 1)))),
+                               noise(rng) + (trial % 2 == 0 ? k * 5 : 0)});
+            }
+            const auto n = static_cast<uint32_t>(pts.size());
+            const Tolerance tol(double(100 + trial * 60), m);
+            const uint32_t reach = trial % 3 == 0 ? 37 : 0;
+            for (const ScanKernel kernel : {ScanKernel::fastest, ScanKernel::scalar}) {
+                const auto whole = proximate_shortcuts(pts, tol, reach, kernel);
+                std::vector<uint32_t> cuts{0, n};
+                std::uniform_int_distribution<uint32_t> at(1, n - 1);
+                for (int c = 0; c < 1 + trial % 5; ++c) {
+                    cuts.push_back(at(rng));
+                }
+                std::sort(cuts.begin(), cuts.end());
+                Candidates pieces;
+                for (size_t c = 0; c + 1 < cuts.size(); ++c) {
+                    pieces.append(proximate_shortcuts_from(pts, tol, reach, cuts[c], cuts[c + 1], kernel));
+                }
+                pieces.finish(n);
+                ASSERT_GT(whole.size(), 0U);
+                ASSERT_EQ(pieces.list(), whole.list()) << metric_name(m) << " trial " << trial;
+                ASSERT_EQ(pieces.runs().size(), whole.runs().size());
+                for (uint32_t v = 0; v + 1 < n; ++v) {
+                    ASSERT_EQ(pieces.first_id(v), whole.first_id(v));
+                }
+            }
+        }
+    }
+}
+
 TEST(Candidates, AVertexWhoseConeIsNearlyAHalfPlaneStillCounts)
 {
     // Vertex 1 lies just outside the metric's ball around vertex 0, so the
