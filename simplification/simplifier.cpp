@@ -307,12 +307,11 @@ class StoreSimplifier {
             }
             const auto n = static_cast<uint32_t>(points_of(m_work[wi]).size());
             const uint32_t step = m_opt.threads > 1 && n > 2 * piece ? piece : std::max(n, 1U);
-            for (uint32_t first = 0; first < n || first == 0; first += step) {
+            uint32_t first = 0;
+            do { // at least one piece, [0, 0) for a chain without points
                 pieces.push_back({wi, first, std::min(n, first + step)});
-                if (first + step >= n) {
-                    break;
-                }
-            }
+                first += step;
+            } while (first < n);
         }
         std::vector<Candidates> found(pieces.size());
         parallel_each(pieces.size(), m_opt.threads, [&](size_t i) {
