@@ -103,10 +103,8 @@ inline void sort_bucket(KeyValue* v, size_t n, std::vector<KeyValue>& scratch)
         lo = std::min(lo, v[i].first);
         hi = std::max(hi, v[i].first);
     }
-    if (lo == hi) { // one key: by value (already so when added with rising values)
-        if (!std::is_sorted(v, v + n, key_value_less)) {
-            std::sort(v, v + n, key_value_less);
-        }
+    if (lo == hi) { // one key: by value
+        std::sort(v, v + n, key_value_less);
         return;
     }
     if (n > lsd_limit) {
@@ -175,7 +173,7 @@ inline void radix_sort_pairs(std::vector<std::pair<uint64_t, uint32_t>>& v, unsi
     constexpr size_t min_part = size_t{1} << 17; // below this a thread costs more than it saves
     const size_t n = v.size();
     if (std::is_sorted(v.begin(), v.end(), detail::key_value_less)) {
-        return;
+        return; // added in order (one key and rising values, say): nothing to move
     }
     if (n < 4096) {
         std::sort(v.begin(), v.end(), detail::key_value_less);

@@ -524,6 +524,23 @@ TIGERLOD_AVX2 V4 cross(V4 xx, V4 xy, V4 yx, V4 yy) noexcept
     return xx * yy - xy * yx;
 }
 
+/// Per lane of the group of starts j, j + 1, ...: how many ends it tests (0
+/// where no start of [j, starts_hi) is), and the most of them.
+TIGERLOD_AVX2 double lane_steps(uint32_t j, uint32_t n, uint32_t starts_hi, uint32_t max_reach, V4& steps) noexcept
+{
+    steps = V4{};
+    double longest = 0;
+    for (int l = 0; l < lanes; ++l) {
+        const uint32_t start = j + static_cast<uint32_t>(l);
+        if (start + 2 < n && start < starts_hi) {
+            const auto last = max_reach ? std::min<uint64_t>(n - 1, uint64_t{start} + max_reach) : n - 1;
+            steps[l] = double(last - (start + 1));
+            longest = std::max(longest, steps[l]);
+        }
+    }
+    return longest;
+}
+
 /// scan<> for L2 on four consecutive starts at once, one per lane, every
 /// lane doing the scalar scan's arithmetic (no fused multiply-adds), so
 /// both find the same shortcuts (tests compare them; so does scan_bench's
@@ -557,16 +574,8 @@ __attribute__((target("avx2"))) void scan_lanes(std::span<const GridPoint> pts, 
         for (int l = 0; l < lanes; ++l) {
             unsure[l].reset(j + static_cast<uint32_t>(l));
         }
-        V4 steps{}; // per lane, how many ends it tests (0: no start there)
-        double longest = 0;
-        for (int l = 0; l < lanes; ++l) {
-            const uint32_t start = j + static_cast<uint32_t>(l);
-            if (start + 2 < n && start < starts_hi) {
-                const auto last = max_reach ? std::min<uint64_t>(n - 1, uint64_t{start} + max_reach) : n - 1;
-                steps[l] = double(last - (start + 1));
-                longest = std::max(longest, steps[l]);
-            }
-        }
+        V4 steps; // per lane, how many ends it tests (0: no start there)
+        const double longest = lane_steps(j, n, starts_hi, max_reach, steps);
         const V4 ax = load4(&xs[j]), ay = load4(&ys[j]);
         V4 wax{}, way{}, wbx{}, wby{}; // the wedge's arc, from WA counter-clockwise to WB
         M4 open = ~M4{};               // no arc yet

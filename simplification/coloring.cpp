@@ -361,26 +361,29 @@ std::vector<std::vector<uint32_t>> graph_of(std::span<const ChainGeom> chains, c
     ChainDistance distance(chains, segs);
     std::unordered_set<uint64_t> known; // pairs found close
     std::vector<std::pair<uint32_t, uint32_t>> edges;
-    std::vector<size_t> run; // where each chain's entries start in the cell, and its end
-    std::vector<size_t> owned_runs;
+    std::vector<size_t> run;        // where each chain's entries start in the cell, and its end
+    std::vector<size_t> owned_runs; // the runs of the owned chains
     std::vector<ReachBox> boxes;
     for (size_t b = 0; b < entries.size();) {
         size_t e = b;
         run.clear();
-        bool any_owned = false;
+        owned_runs.clear();
         while (e < entries.size() && entries[e].first == entries[b].first) {
             const uint32_t c = segs[entries[e].second].chain;
             if (e == b || c != segs[entries[e - 1].second].chain) {
+                if (chains[c].owned) {
+                    owned_runs.push_back(run.size());
+                }
                 run.push_back(e);
-                any_owned = any_owned || chains[c].owned;
             }
             ++e;
         }
         run.push_back(e);
-        if (!any_owned) {
+        if (owned_runs.empty()) {
             b = e;
             continue;
         }
+        auto chain_at = [&](size_t p) { return segs[entries[run[p]].second].chain; };
         // Each chain's segments in the cell as a box grown by their reach: two
         // chains whose boxes miss each other have no close pair there (dense
         // maps, contours, put dozens of chains in a cell).
@@ -397,8 +400,7 @@ std::vector<std::vector<uint32_t>> graph_of(std::span<const ChainGeom> chains, c
         };
         // The chains p < q in the cell (their runs), one of them owned.
         auto consider = [&](size_t p, size_t q) {
-            const uint32_t lo = segs[entries[run[p]].second].chain;
-            const uint32_t hi = segs[entries[run[q]].second].chain;
+            const uint32_t lo = chain_at(p), hi = chain_at(q);
             if (!boxes[p].meets(boxes[q])) {
                 return;
             }
@@ -420,16 +422,9 @@ std::vector<std::vector<uint32_t>> graph_of(std::span<const ChainGeom> chains, c
         };
         // Pairs from the owned chains only: where few are owned (coarse
         // tolerances) a cell's other chains are not paired among themselves.
-        owned_runs.clear();
-        for (size_t p = 0; p + 1 < run.size(); ++p) {
-            if (chains[segs[entries[run[p]].second].chain].owned) {
-                owned_runs.push_back(p);
-            }
-        }
         for (const size_t p : owned_runs) {
             for (size_t q = 0; q + 1 < run.size(); ++q) {
-                const bool q_owned = chains[segs[entries[run[q]].second].chain].owned;
-                if (q == p || (q_owned && q < p)) {
+                if (q == p || (chains[chain_at(q)].owned && q < p)) {
                     continue; // itself, or a pair of owned chains taken from q
                 }
                 q < p ? consider(q, p) : consider(p, q);

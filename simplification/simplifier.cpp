@@ -609,21 +609,30 @@ class StoreSimplifier {
         return !testable_shortcut(pts[sc.from], pts[sc.to], m_untested2);
     }
 
-    /// Steps 1-2: settle `all_tests` by the far rule where it can, draw the
+    /// Shortcut `sc` (id `ci` of chain `wi`) settled without the raster:
+    /// marked good and counted when it is too short to be tested or far
+    /// from every other chain; false when it must be drawn.
+    bool settled_without_raster(uint32_t wi, Shortcut sc, uint32_t ci)
+    {
+        if (proved_short(wi, sc)) {
+            ++m_st.proved_short;
+        } else if (proved_far(wi, sc)) {
+            ++m_st.proved_far;
+        } else {
+            return false;
+        }
+        m_work[wi].state[ci] = good;
+        return true;
+    }
+
+    /// Steps 1-2: settle `all_tests` without the raster where it can, draw the
     /// rest tile by tile (the parts of each shortcut that can fail, in every
     /// tile of its chain), and mark each good or bad_raster.
     void raster_test(const std::vector<TestPair>& all_tests)
     {
         std::vector<TestPair> tests;
         for (const auto& [wi, ci] : all_tests) {
-            const Shortcut sc = m_work[wi].cand.at(ci);
-            if (proved_short(wi, sc)) {
-                m_work[wi].state[ci] = good;
-                ++m_st.proved_short;
-            } else if (proved_far(wi, sc)) {
-                m_work[wi].state[ci] = good;
-                ++m_st.proved_far;
-            } else {
+            if (!settled_without_raster(wi, m_work[wi].cand.at(ci), ci)) {
                 tests.emplace_back(wi, ci);
             }
         }
@@ -738,13 +747,7 @@ class StoreSimplifier {
                     if (w.state[ci] != unknown) {
                         continue; // culled by a point
                     }
-                    if (proved_short(wi, {runs[r].from, k})) {
-                        w.state[ci] = good;
-                        ++m_st.proved_short;
-                    } else if (proved_far(wi, {runs[r].from, k})) {
-                        w.state[ci] = good;
-                        ++m_st.proved_far;
-                    } else {
+                    if (!settled_without_raster(wi, {runs[r].from, k}, ci)) {
                         near.emplace_back(wi, ci);
                     }
                 }
