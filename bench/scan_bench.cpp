@@ -1,8 +1,8 @@
-// scan_bench LEVEL_DIR EPS_M [ROUNDS [scalar]]: the candidate scan of
+// scan_bench LEVEL_DIR EPS_M [ROUNDS [scalar|lanes|hulls]]: the candidate scan of
 // tigerlod-simplify (proximate_shortcuts) alone, on one thread, over the owned
 // chains of every chain store of a level, at the tolerances tigerlod-simplify
-// would use; with `scalar`, the scalar kernel instead of the fastest this
-// processor has. Prints the kernel, the fastest round's seconds, the shortcuts
+// would use; with `scalar`, `lanes` or `hulls`, that kernel instead of the
+// one tigerlod-simplify chooses. Prints the kernel, the fastest round's seconds, the shortcuts
 // and runs found, and a hash of them, so two builds or two kernels of the scan
 // can be compared for speed and for identical answers on the same stores.
 #include "formats/chains/chain_store.hpp"
@@ -24,13 +24,16 @@ using namespace tigerlod::simplify;
 int main(int argc, char** argv)
 {
     if (argc < 3) {
-        std::fprintf(stderr, "usage: scan_bench LEVEL_DIR EPS_M [ROUNDS [scalar]]\n");
+        std::fprintf(stderr, "usage: scan_bench LEVEL_DIR EPS_M [ROUNDS [scalar|lanes|hulls]]\n");
         return 2;
     }
     const double eps_m = std::atof(argv[2]);
     const int rounds = argc > 3 ? std::atoi(argv[3]) : 3;
-    const bool scalar = argc > 4 && std::string(argv[4]) == "scalar";
-    const ScanKernel kernel = scalar ? ScanKernel::scalar : ScanKernel::fastest;
+    const std::string name = argc > 4 ? argv[4] : "fastest";
+    const ScanKernel kernel = name == "scalar"  ? ScanKernel::scalar
+                              : name == "lanes" ? ScanKernel::lanes
+                              : name == "hulls" ? ScanKernel::hulls
+                                                : ScanKernel::fastest;
     std::vector<fs::path> files;
     for (const auto& e : fs::directory_iterator(argv[1])) {
         if (e.path().extension() == ".tlc") {
@@ -70,7 +73,8 @@ int main(int argc, char** argv)
         best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     }
     std::printf("{\"kernel\": \"%s\", \"seconds\": %.3f, \"shortcuts\": %llu, \"runs\": %llu, \"hash\": \"%016llx\"}\n",
-                scalar ? "scalar" : fastest_scan_kernel(), best, static_cast<unsigned long long>(shortcuts),
-                static_cast<unsigned long long>(runs), static_cast<unsigned long long>(hash));
+                name == "fastest" ? (std::string("hulls or ") + fastest_scan_kernel()).c_str() : name.c_str(), best,
+                static_cast<unsigned long long>(shortcuts), static_cast<unsigned long long>(runs),
+                static_cast<unsigned long long>(hash));
     return 0;
 }

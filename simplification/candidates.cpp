@@ -1,5 +1,8 @@
 #include "simplification/candidates.hpp"
 
+#include "simplification/hull_scan.hpp"
+#include "simplification/wedge.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -11,18 +14,9 @@
 
 namespace tigerlod::simplify {
 
-namespace {
+using namespace detail;
 
-/// Brute-force check of shortcut (j, k): every vertex between within tol.
-bool proximate_exact(std::span<const GridPoint> pts, uint32_t j, uint32_t k, const Tolerance& tol) noexcept
-{
-    for (uint32_t i = j + 1; i < k; ++i) {
-        if (!within(pts[i], pts[j], pts[k], tol)) {
-            return false;
-        }
-    }
-    return true;
-}
+namespace {
 
 /// The exact test of the ends of one start a that the wedge leaves unsure,
 /// made cheap where a chain meanders far out and back (coarse tolerances:
@@ -206,73 +200,6 @@ class UnsureEnds {
     double m_anchor_safe2 = 0, m_anchor_d = 0;
 };
 
-/// The directions from A counter-clockwise to B, an arc of less than pi;
-/// vectors need not be unit.
-struct Arc {
-    double ax = 0, ay = 0, bx = 0, by = 0;
-    /// v within the arc, its edges included (or excluded when `strict`).
-    bool holds(double x, double y, bool strict = false) const noexcept
-    {
-        const double c1 = ax * y - ay * x, c2 = x * by - y * bx;
-        return strict ? (c1 > 0 && c2 > 0) : (c1 >= 0 && c2 >= 0);
-    }
-    /// v inside the arc with an angle whose squared sine is at least `sin2`
-    /// from both edges; `len2` = |v|^2.
-    bool deep_inside(double x, double y, double len2, double sin2) const noexcept
-    {
-        const double c1 = ax * y - ay * x, c2 = x * by - y * bx;
-        return c1 > 0 && c2 > 0 && c1 * c1 >= sin2 * (ax * ax + ay * ay) * len2 &&
-               c2 * c2 >= sin2 * (bx * bx + by * by) * len2;
-    }
-    /// This arc narrowed to its intersection with `o` (both under pi); false if empty.
-    bool intersect(const Arc& o) noexcept
-    {
-        // Each edge of the intersection: ours if o holds it, else o's if we hold that.
-        auto edge = [&](double x, double y, double ox, double oy, double& rx, double& ry) {
-            if (o.holds(x, y)) {
-                rx = x;
-                ry = y;
-            } else if (holds(ox, oy)) {
-                rx = ox;
-                ry = oy;
-            } else {
-                return false;
-            }
-            return true;
-        };
-        Arc r;
-        if (!edge(ax, ay, o.ax, o.ay, r.ax, r.ay) || !edge(bx, by, o.bx, o.by, r.bx, r.by)) {
-            return false;
-        }
-        *this = r;
-        return true;
-    }
-};
-
-/// Directions narrowed arc by arc: open (no arc yet), an arc, or empty.
-struct Wedge {
-    enum State { open, set, empty } state = open;
-    Arc arc;
-    /// Intersects with `a`; false once empty.
-    bool narrow(const Arc& a) noexcept
-    {
-        if (state == open) {
-            arc = a;
-            state = set;
-        } else if (state == set && !arc.intersect(a)) {
-            state = empty;
-        }
-        return state != empty;
-    }
-};
-
-/// The arc of directions within half-angle h of direction (ux, uy), given
-/// sin h and cos h times the same positive factor as |u| (h < pi / 2).
-Arc arc_around(double ux, double uy, double sin_h, double cos_h) noexcept
-{
-    return {ux * cos_h + uy * sin_h, uy * cos_h - ux * sin_h, ux * cos_h - uy * sin_h, uy * cos_h + ux * sin_h};
-}
-
 } // namespace
 
 void Candidates::finish(uint32_t n)
@@ -321,20 +248,6 @@ std::vector<Shortcut> Candidates::list() const
 }
 
 namespace {
-
-/// The constants of the wedge, for both scans (scan<> and scan_lanes must
-/// compute alike). One wedge, without trigonometry: every constraint's
-/// half-angle widened by `slack` (outside it: surely not proximate; empty:
-/// stop). An end at least 2 x slack inside it is inside every exact
-/// constraint (its neighbourhood of that angle lies in the wedge, so in
-/// every widened arc): with no vertex beyond it, proximate without the exact test.
-struct WedgeConstants {
-    static constexpr double slack = 1e-9; // radians; far above the double error of the rotations
-    explicit WedgeConstants(int128 reps2) : r_eps(std::sqrt(double(reps2))) {}
-    double r_eps; ///< the L2 radius of the metric's ball
-    double cos_s = std::cos(slack), sin_s = std::sin(slack);
-    double deep2 = std::pow(std::sin(2 * slack), 2); ///< squared sine of 2 x slack
-};
 
 /// L1 and Linf: narrows `wide` to the directions from the origin that meet
 /// the metric's ball of radius t around q (its corners' cone, widened by
@@ -737,10 +650,17 @@ Candidates proximate_shortcuts_from(std::span<const GridPoint> pts, const Tolera
         box.extend(p);
     }
     constexpr int64_t limit = int64_t{1} << 31;
+    // Squared lengths exact in doubles: the hull scan and the lanes.
+    constexpr int64_t exact_limit = int64_t{1} << 26;
+    const bool exact_in_doubles = tol.metric == Metric::l2 && !pts.empty() && box.max_x - box.min_x < exact_limit &&
+                                  box.max_y - box.min_y < exact_limit && reps2 < int128{1} << 52;
+    if (exact_in_doubles &&
+        (kernel == ScanKernel::hulls || (kernel == ScanKernel::fastest && hull_scan_pays(pts, reps2)))) {
+        scan_hulls(pts, tol, max_reach, reps2, first, last, out);
+        return out;
+    }
 #if TIGERLOD_SCAN_LANES
-    constexpr int64_t lanes_limit = int64_t{1} << 26;
-    if (kernel == ScanKernel::fastest && has_avx2() && tol.metric == Metric::l2 && !pts.empty() &&
-        box.max_x - box.min_x < lanes_limit && box.max_y - box.min_y < lanes_limit && reps2 < int128{1} << 52) {
+    if ((kernel == ScanKernel::fastest || kernel == ScanKernel::lanes) && has_avx2() && exact_in_doubles) {
         scan_lanes(pts, tol, max_reach, reps2, first, last, out);
         return out;
     }

@@ -8,6 +8,7 @@
 #include "simplification/candidates.hpp"
 #include "simplification/cell_cover.hpp"
 #include "simplification/coloring.hpp"
+#include "simplification/hull_scan.hpp"
 #include "simplification/near_parts.hpp"
 #include "simplification/raster.hpp"
 #include "simplification/simplifier.hpp"
@@ -174,7 +175,7 @@ TEST(Candidates, ChainsGoingOutAndBackMatchBruteForce)
                     }
                 }
             }
-            for (const ScanKernel kernel : {ScanKernel::fastest, ScanKernel::scalar}) {
+            for (const ScanKernel kernel : {ScanKernel::fastest, ScanKernel::scalar, ScanKernel::hulls}) {
                 const auto got = proximate_shortcuts(pts, tol, 0, kernel).list();
                 ASSERT_EQ(got, want) << metric_name(m) << " trial " << trial;
             }
@@ -200,7 +201,7 @@ TEST(Candidates, StartsScannedInPiecesAppendToTheWholeScan)
             const auto n = static_cast<uint32_t>(pts.size());
             const Tolerance tol(double(100 + trial * 60), m);
             const uint32_t reach = trial % 3 == 0 ? 37 : 0;
-            for (const ScanKernel kernel : {ScanKernel::fastest, ScanKernel::scalar}) {
+            for (const ScanKernel kernel : {ScanKernel::fastest, ScanKernel::scalar, ScanKernel::hulls}) {
                 const auto whole = proximate_shortcuts(pts, tol, reach, kernel);
                 std::vector<uint32_t> cuts{0, n};
                 std::uniform_int_distribution<uint32_t> at(1, n - 1);
@@ -280,7 +281,7 @@ TEST(Candidates, TheFastestKernelFindsWhatTheScalarScanFinds)
         }
         const Tolerance tol(double(1 + trial % 9 * 15), Metric::l2);
         const uint32_t reach = trial % 4 == 0 ? static_cast<uint32_t>(2 + trial % 11) : 0;
-        const auto fast = proximate_shortcuts(pts, tol, reach, ScanKernel::fastest);
+        const auto fast = proximate_shortcuts(pts, tol, reach, ScanKernel::lanes);
         const auto slow = proximate_shortcuts(pts, tol, reach, ScanKernel::scalar);
         ASSERT_EQ(fast.runs().size(), slow.runs().size()) << "trial " << trial;
         for (size_t r = 0; r < fast.runs().size(); ++r) {
@@ -297,6 +298,130 @@ TEST(Candidates, TheFastestKernelFindsWhatTheScalarScanFinds)
     // The cases above must have made what they are there for.
     EXPECT_GT(compared, 20000U);
     EXPECT_GT(with_gaps, 50U);
+}
+
+// The hull scan (hull_scan.hpp) decides blocks of ends at once by their
+// convex hulls: every proof it makes must give exactly what testing each
+// shortcut vertex by vertex gives. Chains dense for their tolerance (where
+// blocks serve), with zigzags smaller and larger than eps, spikes and
+// meanders that turn back past an end, repeated points, rings, collinear
+// stretches, and reach caps; against brute force where small, against the
+// scalar scan where long. The blocks must have decided most ends, and each
+// of its three ways must have served.
+TEST(Candidates, TheHullScanFindsWhatTestingEachShortcutFinds)
+{
+    std::mt19937 rng(31);
+    detail::HullScanCounts counts;
+    size_t compared = 0;
+    for (int trial = 0; trial < 400; ++trial) {
+        Pts pts;
+        const int n = trial < 30 ? trial + 1 : 30 + static_cast<int>(rng() % (trial % 10 == 0 ? 1500 : 250));
+        std::uniform_int_distribution<int> jitter(-12, 12), turn(0, 39);
+        const int zig = 1 + trial % 7 * 9; // zigzag amplitude, against eps of 20-400
+        GridPoint p{static_cast<int32_t>(rng() % 5000), static_cast<int32_t>(rng() % 5000)};
+        double heading = 0;
+        for (int i = 0; i < n; ++i) {
+            pts.push_back(p);
+            switch (turn(rng)) {
+            case 0:
+                break; // a repeated point
+            case 1:
+                p = {p.x - 40 * (1 + trial % 5), p.y + jitter(rng)}; // a spike back
+                break;
+            case 2:
+                heading += 2.5; // a sharp turn
+                [[fallthrough]];
+            default: {
+                heading += 0.02 * jitter(rng);
+                const int side = (i % 2 == 0 ? zig : -zig);
+                p = {p.x + static_cast<int32_t>(std::lround(10 * std::cos(heading) - side * std::sin(heading))),
+                     p.y + static_cast<int32_t>(std::lround(10 * std::sin(heading) + side * std::cos(heading)))};
+            }
+            }
+            if (trial % 9 == 4 && i % 50 < 25) {
+                p = {p.x + 7, p.y}; // a straight, collinear stretch
+            }
+        }
+        if (trial % 7 == 0 && n > 3) {
+            pts.push_back(pts.front()); // a ring
+        }
+        const Tolerance tol(double(20 + trial % 8 * 55), Metric::l2);
+        const uint32_t reach = trial % 5 == 0 ? static_cast<uint32_t>(3 + trial % 90) : 0;
+        Candidates hulls;
+        const detail::HullScanCounts c =
+            detail::scan_hulls(pts, tol, reach, tol.threshold, 0, static_cast<uint32_t>(pts.size()), hulls);
+        hulls.finish(static_cast<uint32_t>(pts.size()));
+        counts.block_ends += c.block_ends;
+        counts.outside_ends += c.outside_ends;
+        counts.single_ends += c.single_ends;
+        const auto scalar = proximate_shortcuts(pts, tol, reach, ScanKernel::scalar);
+        ASSERT_EQ(hulls.list(), scalar.list()) << "trial " << trial;
+        ASSERT_EQ(hulls.runs().size(), scalar.runs().size()) << "trial " << trial;
+        EXPECT_EQ(proximate_shortcuts(pts, tol, reach, ScanKernel::hulls).list(), scalar.list()) << "trial " << trial;
+        if (pts.size() <= 120) {
+            std::vector<Shortcut> want;
+            for (uint32_t j = 0; j < pts.size(); ++j) {
+                const uint32_t last = reach ? std::min<uint32_t>(static_cast<uint32_t>(pts.size()) - 1, j + reach)
+                                            : static_cast<uint32_t>(pts.size()) - 1;
+                for (uint32_t k = j + 2; k <= last; ++k) {
+                    bool ok = pts[j] != pts[k];
+                    for (uint32_t i = j + 1; ok && i < k; ++i) {
+                        ok = within(pts[i], pts[j], pts[k], tol);
+                    }
+                    if (ok) {
+                        want.push_back({j, k});
+                    }
+                }
+            }
+            ASSERT_EQ(hulls.list(), want) << "trial " << trial;
+        }
+        compared += scalar.size();
+    }
+    EXPECT_GT(compared, 1000000U);
+    EXPECT_GT(counts.block_ends, counts.single_ends);
+    EXPECT_GT(counts.outside_ends, 10000U);
+    EXPECT_GT(counts.single_ends, 10000U);
+}
+
+// A block whose every vertex is deep in the wedge but lies nearer the start
+// than an earlier vertex by more than eps along the way: the earlier vertex
+// projects past each end of the block and is farther than eps from it, so
+// no end of the block is proximate, and a block must not prove otherwise.
+// Beside it the same chain without the far vertex, whose ends all are.
+TEST(Candidates, TheHullScanRefusesABlockThatAnEarlierVertexOvershoots)
+{
+    const Tolerance tol(100.0, Metric::l2);
+    Pts straight;
+    for (int i = 0; i < 64; ++i) {
+        straight.push_back({i * 10, (i % 2) * 30}); // a zigzag of 30 along x, eps 100
+    }
+    Pts overshoot = straight;
+    overshoot[31] = {31 * 10 + 400, 30}; // 400 past its neighbours, within eps of the line
+    for (const Pts& pts : {straight, overshoot}) {
+        Candidates got;
+        const detail::HullScanCounts c =
+            detail::scan_hulls(pts, tol, 0, tol.threshold, 0, static_cast<uint32_t>(pts.size()), got);
+        got.finish(static_cast<uint32_t>(pts.size()));
+        EXPECT_GT(c.block_ends, 0U);
+        EXPECT_EQ(got.list(), proximate_shortcuts(pts, tol, 0, ScanKernel::scalar).list());
+    }
+    const auto from0 = [&](const Pts& pts) {
+        Candidates got;
+        detail::scan_hulls(pts, tol, 0, tol.threshold, 0, 1, got);
+        got.finish(static_cast<uint32_t>(pts.size()));
+        return got.list();
+    };
+    // From vertex 0 the straight zigzag reaches every end; past vertex 31 of
+    // the other, only the ends within eps of it (x of 610 to 710: 61 to 63) are.
+    EXPECT_EQ(from0(straight).size(), 62U);
+    std::vector<Shortcut> want;
+    for (uint32_t k = 2; k <= 31; ++k) {
+        want.push_back({0, k});
+    }
+    for (uint32_t k = 61; k <= 63; ++k) {
+        want.push_back({0, k});
+    }
+    EXPECT_EQ(from0(overshoot), want);
 }
 
 TEST(Candidates, RunsNumberTheShortcutsInOrder)

@@ -1,0 +1,37 @@
+#pragma once
+/// @file hull_scan.hpp
+/// The candidate scan for coarse tolerances (L2), crossing blocks of
+/// vertices by their convex hulls: a start decides a whole block of ends in
+/// O(hull) when it can prove them, and falls back to one end at a time where
+/// it cannot. Private to the simplification library (candidates.cpp
+/// chooses it); same answers as every other scan, exactly
+/// (simplification/README.md, "Long chains and coarse tolerances").
+
+#include "simplification/candidates.hpp"
+
+#include <cstdint>
+#include <span>
+
+namespace tigerlod::simplify::detail {
+
+/// Whether the hull scan is worth its blocks for `pts` at squared L2
+/// tolerance `reps2`: most blocks of 8 consecutive vertices fit in a box
+/// whose diagonal is within eps (a coarse tolerance for this chain's
+/// spacing). A choice of speed only: every scan gives the same shortcuts.
+bool hull_scan_pays(std::span<const GridPoint> pts, int128 reps2) noexcept;
+
+/// What the hull scan decided how: ends proven proximate by blocks, ends
+/// shown not proximate by blocks (beyond an edge of the wedge), and ends
+/// decided one at a time.
+struct HullScanCounts {
+    uint64_t block_ends = 0, outside_ends = 0, single_ends = 0;
+};
+
+/// The proximate shortcuts (L2, squared tolerance `reps2` = tol.threshold)
+/// from the starts in [starts_lo, starts_hi), appended to `out`, each start's
+/// ends at most `max_reach` ahead (0: no cap). Every coordinate difference
+/// of the chain must be under 2^26 (squared lengths exact in doubles).
+HullScanCounts scan_hulls(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach, int128 reps2,
+                          uint32_t starts_lo, uint32_t starts_hi, Candidates& out);
+
+} // namespace tigerlod::simplify::detail
