@@ -650,12 +650,14 @@ Candidates proximate_shortcuts_from(std::span<const GridPoint> pts, const Tolera
         box.extend(p);
     }
     constexpr int64_t limit = int64_t{1} << 31;
-    // Squared lengths exact in doubles: the hull scan and the lanes.
+    // The hull scan: squared lengths in int64. The lanes: exact in doubles.
+    const bool l2 = tol.metric == Metric::l2 && !pts.empty();
+    const bool in_int64 =
+        l2 && box.max_x - box.min_x < limit && box.max_y - box.min_y < limit && reps2 < int128{1} << 62;
     constexpr int64_t exact_limit = int64_t{1} << 26;
-    const bool exact_in_doubles = tol.metric == Metric::l2 && !pts.empty() && box.max_x - box.min_x < exact_limit &&
-                                  box.max_y - box.min_y < exact_limit && reps2 < int128{1} << 52;
-    if (exact_in_doubles &&
-        (kernel == ScanKernel::hulls || (kernel == ScanKernel::fastest && hull_scan_pays(pts, reps2)))) {
+    const bool exact_in_doubles =
+        l2 && box.max_x - box.min_x < exact_limit && box.max_y - box.min_y < exact_limit && reps2 < int128{1} << 52;
+    if (in_int64 && (kernel == ScanKernel::hulls || (kernel == ScanKernel::fastest && hull_scan_pays(pts, reps2)))) {
         scan_hulls(pts, tol, max_reach, reps2, first, last, out);
         return out;
     }

@@ -90,15 +90,16 @@ class Candidates {
 /// intermediate vertex.
 Candidates proximate_shortcuts(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach);
 
-/// Which code proximate_shortcuts runs. `fastest`, for L2 where every
-/// coordinate difference of the chain is under 2^26: the hull scan where
-/// the tolerance is coarse for the chain's spacing (hull_scan.hpp: blocks
-/// of ends decided at once), else four starts at once on x86-64 processors
-/// with AVX2 (`lanes`); the scalar scan elsewhere. `scalar`, `lanes` and
-/// `hulls` run that scan wherever it can (the scalar one elsewhere), so
-/// tests and benchmarks can compare: all give the same shortcuts, each
-/// exactly (`scalar` and `lanes` with the same IEEE operations in the same
-/// order, `hulls` by its own proofs).
+/// Which code proximate_shortcuts runs. `fastest`, for L2: the hull scan
+/// where the tolerance is coarse for the chain's spacing and every
+/// coordinate difference of the chain is under 2^31 (hull_scan.hpp: blocks
+/// of ends decided at once), else, where the differences are under 2^26,
+/// four starts at once on x86-64 processors with AVX2 (`lanes`); the
+/// scalar scan elsewhere. `scalar`, `lanes` and `hulls` run that scan
+/// wherever it can (the scalar one elsewhere), so tests and benchmarks can
+/// compare: all give the same shortcuts, each exactly (`scalar` and `lanes`
+/// with the same IEEE operations in the same order, `hulls` by its own
+/// proofs).
 enum class ScanKernel { fastest, scalar, lanes, hulls };
 /// What `fastest` runs on this processor where the hull scan does not pay
 /// (hull_scan_pays): "avx2" or "scalar".

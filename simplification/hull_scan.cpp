@@ -11,7 +11,7 @@ namespace tigerlod::simplify::detail {
 
 namespace {
 
-/// Squared length of q - p; exact (differences under 2^26).
+/// Squared length of q - p; exact (differences under 2^31).
 int64_t dist2(GridPoint p, GridPoint q) noexcept
 {
     const int64_t dx = int64_t{q.x} - p.x, dy = int64_t{q.y} - p.y;
@@ -455,7 +455,7 @@ class HullScan {
 
 bool hull_scan_pays(std::span<const GridPoint> pts, int128 reps2) noexcept
 {
-    constexpr size_t block = 32;
+    constexpr size_t block = 16;
     size_t blocks = 0, small = 0;
     for (size_t b = 0; b + block <= pts.size(); b += block) {
         GridBox box;
@@ -466,14 +466,14 @@ bool hull_scan_pays(std::span<const GridPoint> pts, int128 reps2) noexcept
         ++blocks;
         small += w * w + h * h <= reps2;
     }
-    return blocks > 0 && 2 * small >= blocks;
+    return blocks > 0 && 5 * small >= 2 * blocks;
 }
 
 HullScanCounts scan_hulls(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach, int128 reps2,
                           uint32_t starts_lo, uint32_t starts_hi, Candidates& out)
 {
     const auto n = static_cast<uint32_t>(pts.size());
-    const auto r2 = static_cast<int64_t>(reps2); // under 2^52: checked by the caller
+    const auto r2 = static_cast<int64_t>(reps2); // under 2^62: checked by the caller
     const BlockHulls tree(pts, r2);
     HullScan scan(pts, tol, r2, tree);
     for (uint32_t j = starts_lo; j + 2 < n && j < starts_hi; ++j) {

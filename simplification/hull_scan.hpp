@@ -15,9 +15,11 @@
 namespace tigerlod::simplify::detail {
 
 /// Whether the hull scan is worth its blocks for `pts` at squared L2
-/// tolerance `reps2`: most blocks of 8 consecutive vertices fit in a box
-/// whose diagonal is within eps (a coarse tolerance for this chain's
-/// spacing). A choice of speed only: every scan gives the same shortcuts.
+/// tolerance `reps2`: at least 40 % of its blocks of 16 consecutive vertices
+/// fit in a box whose diagonal is within eps (a coarse tolerance for this
+/// chain's spacing; measured on the tract and synthetic levels at 64 m to
+/// 2 km, BENCHMARKS.md). A choice of speed only: every scan gives the same
+/// shortcuts.
 bool hull_scan_pays(std::span<const GridPoint> pts, int128 reps2) noexcept;
 
 /// What the hull scan decided how: ends proven proximate by blocks, ends
@@ -30,7 +32,9 @@ struct HullScanCounts {
 /// The proximate shortcuts (L2, squared tolerance `reps2` = tol.threshold)
 /// from the starts in [starts_lo, starts_hi), appended to `out`, each start's
 /// ends at most `max_reach` ahead (0: no cap). Every coordinate difference
-/// of the chain must be under 2^26 (squared lengths exact in doubles).
+/// of the chain must be under 2^31 and `reps2` under 2^62 (squared lengths
+/// in int64); what is computed in doubles is decided with margins far above
+/// its rounding, as in the scalar scan.
 HullScanCounts scan_hulls(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach, int128 reps2,
                           uint32_t starts_lo, uint32_t starts_hi, Candidates& out);
 
