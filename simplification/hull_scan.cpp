@@ -68,6 +68,11 @@ class BlockHulls {
         const Block& b = m_levels[static_cast<size_t>(level)][m];
         return std::span<const uint32_t>(m_pool).subspan(b.begin, b.end - b.begin);
     }
+    /// Whether block m of `level` exists (level 0: vertex m).
+    bool has(int level, uint32_t m) const noexcept
+    {
+        return level == 0 ? m < m_pts.size() : m < m_levels[static_cast<size_t>(level)].size();
+    }
     /// Whether block m of `level` (>= 1) exists and is within eps across.
     bool usable(int level, uint32_t m, int64_t reps2) const noexcept
     {
@@ -229,7 +234,8 @@ class HullScan {
         int64_t maxr2 = 0; ///< the largest squared distance of its vertices from a
     };
 
-    /// The hull of block m of `level`, the vertex itself at level 0.
+    /// The hull of block m of `level`, the vertex itself at level 0 (a view
+    /// of `m`, which must outlive it).
     std::span<const uint32_t> hull(int level, const uint32_t& m) const noexcept
     {
         return level == 0 ? std::span<const uint32_t>(&m, 1) : m_tree.hull(level, m);
@@ -348,9 +354,8 @@ class HullScan {
             return all;
         }
         for (const uint32_t child : {2 * m, 2 * m + 1}) {
-            if ((level > 1 ? m_tree.usable(level - 1, child, std::numeric_limits<int64_t>::max())
-                           : child < m_pts.size()) &&
-                double(max_r2(level - 1, child)) >= from2 && !unit_near_all(level - 1, child, from2, h)) {
+            if (m_tree.has(level - 1, child) && double(max_r2(level - 1, child)) >= from2 &&
+                !unit_near_all(level - 1, child, from2, h)) {
                 return false;
             }
         }
@@ -427,9 +432,8 @@ class HullScan {
             return within(m_pts[m], m_a, b, m_tol);
         }
         for (const uint32_t child : {2 * m, 2 * m + 1}) {
-            if ((level > 1 ? m_tree.usable(level - 1, child, std::numeric_limits<int64_t>::max())
-                           : child < m_pts.size()) &&
-                max_r2(level - 1, child) >= from2 && !unit_within(level - 1, child, from2, k)) {
+            if (m_tree.has(level - 1, child) && max_r2(level - 1, child) >= from2 &&
+                !unit_within(level - 1, child, from2, k)) {
                 return false;
             }
         }

@@ -96,6 +96,25 @@ Pts douglas_peucker(const Pts& pts, double eps)
     return out;
 }
 
+/// Every proximate shortcut of `pts`, by testing each vertex between
+/// (ends equal to the start left out; at most `reach` vertices ahead, 0: no cap).
+std::vector<Shortcut> brute_force_shortcuts(const Pts& pts, const Tolerance& tol, uint32_t reach)
+{
+    std::vector<Shortcut> want;
+    for (uint32_t j = 0; j < pts.size(); ++j) {
+        for (uint32_t k = j + 2; k < pts.size() && (reach == 0 || k <= j + reach); ++k) {
+            bool ok = pts[j] != pts[k];
+            for (uint32_t i = j + 1; ok && i < k; ++i) {
+                ok = within(pts[i], pts[j], pts[k], tol);
+            }
+            if (ok) {
+                want.push_back({j, k});
+            }
+        }
+    }
+    return want;
+}
+
 } // namespace
 
 TEST(Metric, WithinMatchesTheDistanceOnRandomPoints)
@@ -123,18 +142,7 @@ TEST(Candidates, MatchBruteForceOnRandomChains)
             const Pts pts = random_walk(rng, 40, -60, 100, 2);
             const Tolerance tol(double(50 + trial % 7 * 20), m);
             const uint32_t reach = trial % 3 == 0 ? 5 : 0;
-            std::vector<Shortcut> want;
-            for (uint32_t j = 0; j < pts.size(); ++j) {
-                for (uint32_t k = j + 2; k < pts.size() && (reach == 0 || k <= j + reach); ++k) {
-                    bool ok = pts[j] != pts[k];
-                    for (uint32_t i = j + 1; ok && i < k; ++i) {
-                        ok = within(pts[i], pts[j], pts[k], tol);
-                    }
-                    if (ok) {
-                        want.push_back({j, k});
-                    }
-                }
-            }
+            const std::vector<Shortcut> want = brute_force_shortcuts(pts, tol, reach);
             const auto got = proximate_shortcuts(pts, tol, reach).list();
             ASSERT_EQ(got.size(), want.size()) << metric_name(m) << " trial " << trial;
             for (size_t i = 0; i < got.size(); ++i) {
@@ -163,18 +171,7 @@ TEST(Candidates, ChainsGoingOutAndBackMatchBruteForce)
                                noise(rng) + (trial % 3 == 0 ? k * 7 : 0)});
             }
             const Tolerance tol(double(150 + trial % 5 * 150), m);
-            std::vector<Shortcut> want;
-            for (uint32_t j = 0; j < pts.size(); ++j) {
-                for (uint32_t k = j + 2; k < pts.size(); ++k) {
-                    bool ok = pts[j] != pts[k];
-                    for (uint32_t i = j + 1; ok && i < k; ++i) {
-                        ok = within(pts[i], pts[j], pts[k], tol);
-                    }
-                    if (ok) {
-                        want.push_back({j, k});
-                    }
-                }
-            }
+            const std::vector<Shortcut> want = brute_force_shortcuts(pts, tol, 0);
             for (const ScanKernel kernel : {ScanKernel::fastest, ScanKernel::scalar, ScanKernel::hulls}) {
                 const auto got = proximate_shortcuts(pts, tol, 0, kernel).list();
                 ASSERT_EQ(got, want) << metric_name(m) << " trial " << trial;
@@ -366,21 +363,7 @@ TEST(Candidates, TheHullScanFindsWhatTestingEachShortcutFinds)
         ASSERT_EQ(hulls.runs().size(), scalar.runs().size()) << "trial " << trial;
         EXPECT_EQ(proximate_shortcuts(pts, tol, reach, ScanKernel::hulls).list(), scalar.list()) << "trial " << trial;
         if (pts.size() <= 120) {
-            std::vector<Shortcut> want;
-            for (uint32_t j = 0; j < pts.size(); ++j) {
-                const uint32_t last = reach ? std::min<uint32_t>(static_cast<uint32_t>(pts.size()) - 1, j + reach)
-                                            : static_cast<uint32_t>(pts.size()) - 1;
-                for (uint32_t k = j + 2; k <= last; ++k) {
-                    bool ok = pts[j] != pts[k];
-                    for (uint32_t i = j + 1; ok && i < k; ++i) {
-                        ok = within(pts[i], pts[j], pts[k], tol);
-                    }
-                    if (ok) {
-                        want.push_back({j, k});
-                    }
-                }
-            }
-            ASSERT_EQ(hulls.list(), want) << "trial " << trial;
+            ASSERT_EQ(hulls.list(), brute_force_shortcuts(pts, tol, reach)) << "trial " << trial;
         }
         compared += scalar.size();
     }
