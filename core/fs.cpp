@@ -209,6 +209,37 @@ void write_file(const fs::path& path, std::string_view data)
     write_to(path, path, data);
 }
 
+std::string read_file(const fs::path& path)
+{
+    std::ifstream in(path, std::ios::binary);
+    std::error_code ec;
+    const auto size = fs::file_size(path, ec);
+    if (!in || ec) {
+        throw environment_error(path.string() +
+                                ": cannot read: " + (ec ? ec.message() : std::string(std::strerror(errno))));
+    }
+    std::string data(static_cast<size_t>(size), '\0');
+    in.read(data.data(), static_cast<std::streamsize>(data.size()));
+    if (static_cast<uintmax_t>(in.gcount()) != size || in.peek() != std::char_traits<char>::eof()) {
+        throw environment_error(path.string() + ": cannot read: it changed while being read");
+    }
+    return data;
+}
+
+bool write_file_if_changed(const fs::path& path, std::string_view data)
+{
+    std::error_code ec;
+    if (fs::is_regular_file(path, ec) && fs::file_size(path, ec) == data.size() && !ec) {
+        std::ifstream in(path, std::ios::binary);
+        std::string old(data.size(), '\0');
+        if (in.read(old.data(), static_cast<std::streamsize>(old.size())) && old == data) {
+            return false;
+        }
+    }
+    write_file_atomic_unsynced_folder(path, data);
+    return true;
+}
+
 void refuse_to_replace_inputs(const fs::path& output, const std::vector<fs::path>& inputs)
 {
     // Links resolved where the path can be read; lexically otherwise (an

@@ -53,6 +53,15 @@ void write_file_atomic_unsynced_folder(const std::filesystem::path& path, std::s
 /// began is removed then.
 void write_file(const std::filesystem::path& path, std::string_view data);
 
+/// The bytes of a file. Throws environment_error naming it if it cannot be read.
+std::string read_file(const std::filesystem::path& path);
+
+/// For outputs updated in place that a workflow engine follows by their
+/// times: write `data` to `path` as write_file_atomic_unsynced_folder does,
+/// unless the file already holds exactly these bytes, which then keeps its
+/// modification time. Returns whether it wrote.
+bool write_file_if_changed(const std::filesystem::path& path, std::string_view data);
+
 /// Throws usage_error if writing `output` would replace or remove one of
 /// `inputs`: the same file or folder, or a folder that holds it (symbolic
 /// links and `..` resolved). A stage checks this before anything else, so

@@ -26,6 +26,8 @@ def _name(info):
     wc = info.get("wildcards") or {}
     stage = rule.split("_")[0]
     where = "/".join(str(wc[k]) for k in ("level", "group") if k in wc)
+    if "job" in wc:  # an ingest region's job: `ingest r-44`
+        return f"{stage} {wc['job']}"
     return f"{stage} {where}".strip() if rule.endswith("_group") else rule.replace("_", " ")
 
 

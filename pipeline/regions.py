@@ -4,7 +4,10 @@ CONFIG CODES: the outputs of the jobs a region rebuild forces, one a line:
 the color job of every group of stores holding a store whose partition
 begins with one of the codes (its own stores and those below) or is part of
 one (the stores of its county and state, which hold its boundaries), and
-every level held in a single store (the nation's map); simplify, pack, verify and render follow by dependency. CODES
+every level held in a single store (the nation's map), and the ingest job
+of every region whose codes begin with one of the codes or are part of one
+(its stores rebuilt from the inputs: a store damaged by hand is written
+again); simplify, pack, verify and render follow by dependency. CODES
 is a comma-separated list; empty, the config's `regions` key. The groups
 are the last run's (out/<name>/jobs/groups.json); without one nothing is
 forced (every job runs anyway). A code that matches no store: a message
@@ -12,6 +15,7 @@ and exit 2.
 
 --out CONFIG: out/<name>, the run's folder (empty if the config has no
 usable name; the Snakefile says why)."""
+import glob
 import json
 import os
 import re
@@ -68,8 +72,20 @@ def main():
             target = f"out/{name}/jobs/color/{g['level']}/{g['group']}.json"
             if target not in forced:
                 forced.append(target)
-    print(f"workflow: regions {','.join(regions)}: forcing {len(forced)} group jobs and what depends on them",
-          file=sys.stderr)
+    # The ingest jobs of the regions (their specs name their own codes).
+    ingest = []
+    for spec_path in sorted(glob.glob(f"out/{name}/ingest-jobs/jobs/*.json")):
+        try:
+            with open(spec_path) as f:
+                spec = json.load(f)
+        except (OSError, ValueError):
+            continue
+        own = (spec.get("region") or {}).get("own") or []
+        if any(c.startswith(r) or r.startswith(c) for c in own for r in regions):
+            ingest.append(f"out/{name}/ingest-jobs/shares/{spec['job']}.share")
+    forced = ingest + forced
+    print(f"workflow: regions {','.join(regions)}: forcing {len(ingest)} ingest and {len(forced) - len(ingest)} group "
+          f"jobs and what depends on them", file=sys.stderr)
     print("\n".join(forced))
     return 0
 

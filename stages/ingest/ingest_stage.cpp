@@ -1,6 +1,7 @@
 #include "stages/ingest/ingest_stage.hpp"
 
 #include "core/digest.hpp"
+#include "core/bytes.hpp"
 #include "core/errors.hpp"
 #include "config/schema.hpp"
 #include "core/fs.hpp"
@@ -9,6 +10,7 @@
 #include "formats/chains/chain_store.hpp"
 #include "stages/ingest/config.hpp"
 #include "stages/ingest/map_builder.hpp"
+#include "stages/ingest/region_share.hpp"
 #include "stages/ingest/regions.hpp"
 #include "stages/ingest/sources.hpp"
 
@@ -16,10 +18,17 @@
 #include <nlohmann/json.hpp>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <atomic>
+#include <chrono>
+#include <mutex>
+#include <set>
 #include <cstdlib>
 #include <cstdio>
 #include <future>
+#include <map>
+#include <numeric>
+#include <span>
 #include <sstream>
 #include <thread>
 #ifdef __GLIBC__
@@ -88,6 +97,18 @@ void IngestStage::add_args(ArgSet& args)
              "build a polygons dataset of several files, or a TIGER dataset of several counties, as one\n"
              "      map in memory, not region by region\n"
              "      (the same output; memory then follows the dataset, not its largest region)");
+    args.group("Ingest in jobs (the workflow's: each also runs by hand)");
+    args.add("parts", &m_parts, "the jobs' folder: the parts put aside, the plan, each region's spec and share", "DIR");
+    args.add("plan", &m_plan,
+             "read every input once, put its parts aside in DIR and plan the jobs: DIR/plan.json lists\n"
+             "      them (a region each, or one job `whole`); OUTPUT is not touched");
+    args.add("region", &m_region,
+             "build the stores of one planned job (`r-<code>` or `whole`) into OUTPUT in place, a store\n"
+             "      whose bytes did not change keeping its time; its share goes to DIR/shares/JOB.share",
+             "JOB");
+    args.add("finish", &m_finish,
+             "after every job: the coarse levels from the regions' shares, the report and the manifest;\n"
+             "      stores no job wrote are removed. OUTPUT is then what a whole run writes, byte for byte");
 }
 
 std::vector<std::string> IngestStage::versions() const
@@ -125,6 +146,16 @@ InputFiles input_files_of(const IngestConfig& cfg)
         input_files.emplace_back(p, "input");
     }
     return input_files;
+}
+
+/// SHA-256 of each input file, in input_files order.
+std::vector<std::string> digests_of(const InputFiles& input_files)
+{
+    std::vector<std::string> out;
+    for (const auto& f : input_files) {
+        out.push_back(sha256_file(f.first));
+    }
+    return out;
 }
 
 /// What the build gave, with the points read and when reading ended (the log's clock).
@@ -323,6 +354,641 @@ void print_summary(const IngestConfig& cfg, const Built& built, double seconds, 
 
 } // namespace
 
+struct IngestStage::Resolved {
+    const IngestConfig& cfg;
+    const Projection& projection;
+    unsigned threads;
+};
+
+namespace {
+
+// Ingest in jobs ------------------------------------------------------------
+//
+// DIR (--parts) holds what the jobs hand on: parts/<i>.raw (each input part
+// put aside by --plan, rewritten only when its bytes change), jobs/<job>.json
+// (a job's spec: everything its stores depend on beside the parts, and the
+// parts' digests; rewritten only when it changes, so that a workflow engine
+// following times reruns exactly the jobs whose inputs changed), plan.json
+// (the jobs, rewritten by every plan), index.json (what the finish needs:
+// the shared files and classes, the input digests of the manifest) and
+// shares/<job>.share (a job's counts and coarse edges, region_share.hpp).
+
+constexpr const char* spec_schema = "tigerlod.ingest-job/1";
+constexpr const char* index_schema = "tigerlod.ingest-index/1";
+
+/// Whether the dataset is read part by part (several polygon files, or a
+/// TIGER dataset of several counties whose EDGES and FACES pair).
+bool read_by_parts(const IngestConfig& cfg)
+{
+    const bool tiger = cfg.dataset.kind == DatasetSpec::Kind::tiger;
+    return (cfg.dataset.kind == DatasetSpec::Kind::polygons && cfg.dataset.inputs.size() > 1) ||
+           (tiger && cfg.dataset.faces.size() > 1 && cfg.dataset.faces.size() == cfg.dataset.edges.size());
+}
+
+BuildOptions build_options(const IngestConfig& cfg, unsigned threads, int max_problem_samples, const Log& log)
+{
+    BuildOptions options;
+    options.halo_m = cfg.halo_m;
+    options.line_tile_m = cfg.line_tile_km * 1000.0;
+    options.threads = threads;
+    options.max_problem_samples = static_cast<size_t>(max_problem_samples);
+    options.log = &log;
+    return options;
+}
+
+/// The options a job's stores depend on: a job refuses a plan made with others.
+json job_options_json(const IngestConfig& cfg, const Projection& projection, int max_problem_samples)
+{
+    json levels = json::array();
+    for (const auto& l : cfg.levels) {
+        levels.push_back(level_spec_json(l));
+    }
+    return {{"levels", levels},
+            {"projection", projection.describe()},
+            {"halo_m", cfg.halo_m},
+            {"line_tile_km", cfg.line_tile_km},
+            {"max_problem_samples", max_problem_samples}};
+}
+
+fs::path part_file(const fs::path& dir, size_t i)
+{
+    return dir / "parts" / (std::to_string(i) + ".raw");
+}
+fs::path spec_file(const fs::path& dir, const std::string& job)
+{
+    return dir / "jobs" / (job + ".json");
+}
+fs::path share_file(const fs::path& dir, const std::string& job)
+{
+    return dir / "shares" / (job + ".share");
+}
+
+std::string sha256_of(std::string_view bytes)
+{
+    Sha256 h;
+    h.update(std::as_bytes(std::span(bytes.data(), bytes.size())));
+    return h.hex_digest();
+}
+
+json read_json(const fs::path& path, const char* what, const char* schema)
+{
+    std::error_code ec;
+    if (!fs::is_regular_file(path, ec)) {
+        throw usage_error(path.string() + " is missing: " + what);
+    }
+    json j;
+    try {
+        j = json::parse(read_file(path));
+    } catch (const json::exception& e) {
+        throw input_error(path.string() + ": not JSON: " + e.what());
+    }
+    if (!j.is_object() || j.value("schema", "") != schema) {
+        throw input_error(path.string() + ": not a " + schema + " file");
+    }
+    return j;
+}
+
+/// The plan's shared part as JSON (spec and index), and back.
+void put_meta(json& j, const RegionPlan& plan)
+{
+    j["level"] = plan.level;
+    j["levels"] = plan.meta.level_names;
+    j["kind"] = static_cast<int>(plan.meta.kind);
+    j["files"] = plan.meta.files;
+    j["classes"] = plan.meta.classes;
+    j["nparts"] = plan.boxes.size();
+}
+
+RegionPlan get_meta(const json& j, const fs::path& file)
+{
+    RegionPlan plan;
+    try {
+        plan.level = j.at("level").get<size_t>();
+        plan.meta.level_names = j.at("levels").get<std::vector<std::string>>();
+        plan.meta.kind = static_cast<RawMap::Kind>(j.at("kind").get<int>());
+        plan.meta.files = j.at("files").get<std::vector<std::string>>();
+        plan.meta.classes = j.at("classes").get<std::vector<std::string>>();
+        const auto n = j.at("nparts").get<size_t>();
+        plan.boxes.resize(n);
+        plan.class_of.resize(n);
+    } catch (const json::exception& e) {
+        throw input_error(file.string() + ": " + e.what());
+    }
+    return plan;
+}
+
+/// Stores written into an ingest output in place, each through a temporary
+/// name and only where its bytes changed; the names written.
+class InPlaceStores {
+  public:
+    InPlaceStores(const fs::path& out, const std::vector<fs::path>& reads) : m_out(out)
+    {
+        refuse_to_replace_inputs(out, reads);
+        std::error_code ec;
+        if (fs::exists(out / "manifest.json", ec)) {
+            try {
+                (void)read_manifest(out, "ingest");
+            } catch (const input_error& e) {
+                throw usage_error(std::string(e.what()) +
+                                  "; --region and --finish update a tigerlod-ingest output in place, and nothing else");
+            }
+        }
+        fs::create_directories(out, ec);
+        if (ec) {
+            throw environment_error(out.string() + ": cannot create folder: " + ec.message());
+        }
+    }
+    void write(const chains::ChainStore& s)
+    {
+        const fs::path folder = m_out / s.level_name;
+        {
+            const std::lock_guard lock(m_mutex);
+            if (m_folders.insert(folder).second) {
+                fs::create_directories(folder);
+                (void)remove_dead_leftovers(folder);
+            }
+        }
+        const bool wrote = write_file_if_changed(folder / (file_name(s.partition) + ".tlc"), chains::encode(s));
+        const std::lock_guard lock(m_mutex);
+        m_names.push_back(s.level_name + "/" + s.partition);
+        m_rewritten += wrote ? 1 : 0;
+    }
+    /// The folders written into, synced once each; the names, sorted.
+    std::vector<std::string> close()
+    {
+        for (const auto& f : m_folders) {
+            sync_to_disk(f);
+        }
+        std::sort(m_names.begin(), m_names.end());
+        return m_names;
+    }
+    size_t rewritten() const noexcept { return m_rewritten; }
+
+  private:
+    fs::path m_out;
+    std::mutex m_mutex;
+    std::set<fs::path> m_folders;
+    std::vector<std::string> m_names;
+    size_t m_rewritten = 0;
+};
+
+/// Where a store named "level/partition" lies in an ingest output.
+fs::path store_path(const fs::path& out, const std::string& name)
+{
+    const size_t slash = name.find('/');
+    return out / name.substr(0, slash) / (file_name(name.substr(slash + 1)) + ".tlc");
+}
+
+/// A file's size and modification time (ns); {UINT64_MAX, 0} if it is not there.
+std::pair<uint64_t, int64_t> stamp_of(const fs::path& file)
+{
+    std::error_code ec;
+    const auto size = fs::file_size(file, ec);
+    if (ec) {
+        return {UINT64_MAX, 0};
+    }
+    const auto t = fs::last_write_time(file, ec);
+    if (ec) {
+        return {UINT64_MAX, 0};
+    }
+    return {static_cast<uint64_t>(size),
+            static_cast<int64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(t.time_since_epoch()).count())};
+}
+
+/// The plan: the jobs whose stores were changed or removed since they ran
+/// (by hand, or a disk's fault), each with the store and why.
+std::map<std::string, std::pair<std::string, std::string>> damaged_jobs(const fs::path& dir, const fs::path& out,
+                                                                        const std::vector<std::string>& jobs)
+{
+    std::map<std::string, std::pair<std::string, std::string>> damaged;
+    for (const auto& job : jobs) {
+        const fs::path file = share_file(dir, job);
+        std::error_code ec;
+        if (!fs::is_regular_file(file, ec)) {
+            continue;
+        }
+        std::string store, why;
+        try {
+            const std::string bytes = read_file(file);
+            const RegionJobShare head =
+                decode_share_head(std::as_bytes(std::span(bytes.data(), bytes.size())), file.string());
+            for (size_t i = 0; i < head.stores.size() && why.empty(); ++i) {
+                const auto [size, mtime] = stamp_of(store_path(out, head.stores[i]));
+                if (size != head.store_bytes[i] || mtime != head.store_mtimes[i]) {
+                    store = head.stores[i];
+                    why = size == UINT64_MAX ? "is missing" : "changed since the job wrote it";
+                }
+            }
+        } catch (const Error& e) {
+            why = std::string("its share cannot be read: ") + e.what();
+        }
+        if (!why.empty()) {
+            damaged.emplace(job, std::pair{store, why});
+        }
+    }
+    return damaged;
+}
+
+/// The finish: every `.tlc` under a level folder that no job wrote, and
+/// every folder of a level the config no longer has, removed.
+size_t remove_stale_stores(const fs::path& out, const IngestConfig& cfg, const std::set<std::string>& written)
+{
+    std::set<std::string> levels;
+    for (const auto& l : cfg.levels) {
+        levels.insert(l.name);
+    }
+    std::set<std::string> files; // level/file name
+    for (const auto& w : written) {
+        const size_t slash = w.find('/');
+        files.insert(w.substr(0, slash) + "/" + file_name(w.substr(slash + 1)) + ".tlc");
+    }
+    size_t removed = remove_dead_leftovers(out).size();
+    std::vector<fs::path> entries;
+    for (const auto& e : fs::directory_iterator(out)) {
+        entries.push_back(e.path());
+    }
+    std::sort(entries.begin(), entries.end());
+    for (const fs::path& dir : entries) {
+        const std::string name = dir.filename().string();
+        if (!fs::is_directory(dir) || name.starts_with(".")) {
+            continue;
+        }
+        if (!levels.contains(name)) {
+            fs::remove_all(dir);
+            ++removed;
+            continue;
+        }
+        removed += remove_dead_leftovers(dir).size();
+        for (const auto& e : fs::directory_iterator(dir)) {
+            const std::string file = e.path().filename().string();
+            if (file.ends_with(".tlc") && !files.contains(name + "/" + file)) {
+                fs::remove(e.path());
+                ++removed;
+            }
+        }
+    }
+    return removed;
+}
+
+} // namespace
+
+int IngestStage::run_plan(const StageContext& ctx, const Resolved& r)
+{
+    const IngestConfig& cfg = r.cfg;
+    const fs::path dir(m_parts);
+    const InputFiles input_files = input_files_of(cfg);
+    std::vector<fs::path> reads{m_config};
+    for (const auto& f : input_files) {
+        reads.emplace_back(f.first);
+    }
+    refuse_to_replace_inputs(dir, reads);
+    auto digests = std::async(std::launch::async, [&input_files] {
+        std::vector<std::string> out;
+        for (const auto& f : input_files) {
+            out.push_back(sha256_file(f.first));
+        }
+        return out;
+    });
+    for (const char* sub : {"parts", "jobs", "shares"}) {
+        fs::create_directories(dir / sub);
+        (void)remove_dead_leftovers(dir / sub);
+    }
+    const BuildOptions options = build_options(cfg, r.threads, m_max_problem_samples, ctx.log);
+    const json opts = job_options_json(cfg, r.projection, m_max_problem_samples);
+    std::vector<std::string> level_names;
+    for (const auto& l : cfg.levels) {
+        level_names.push_back(l.name);
+    }
+    const double t0 = ctx.log.elapsed_s();
+    std::vector<std::pair<std::string, json>> specs; // job, spec
+    RegionPlan plan;
+    std::string mode;
+    std::vector<std::string> input_digests;
+    uint64_t points_read = 0;
+    size_t nparts = 0, rewritten = 0;
+    if (read_by_parts(cfg)) {
+        const bool tiger = cfg.dataset.kind == DatasetSpec::Kind::tiger;
+        nparts = tiger ? cfg.dataset.faces.size() : cfg.dataset.inputs.size();
+        std::vector<PartSummary> parts(nparts);
+        std::vector<std::string> sha(nparts);
+        std::atomic<size_t> wrote{0};
+        const auto put_aside = [&](size_t i, RawMap&& part) {
+            parts[i] = summarize_part(part);
+            const std::string bytes = encode_raw(part);
+            part = RawMap();
+            sha[i] = sha256_of(bytes);
+            wrote += write_file_if_changed(part_file(dir, i), bytes) ? 1 : 0;
+        };
+        if (tiger) {
+            read_tiger_parts(cfg, r.threads, ctx.log, put_aside);
+        } else {
+            read_polygon_parts(cfg, r.threads, ctx.log, put_aside);
+        }
+        rewritten = wrote.load();
+        sync_to_disk(dir / "parts");
+        for (const auto& p : parts) {
+            points_read += p.points_read;
+        }
+        plan = plan_regions(parts, level_names, r.projection, options);
+        auto part_json = [&](size_t i) {
+            const GridBox& b = plan.boxes[i];
+            return json{{"part", i},
+                        {"sha256", sha[i]},
+                        {"box", {b.min_x, b.min_y, b.max_x, b.max_y}},
+                        {"classes", plan.class_of[i]}};
+        };
+        auto spec_of = [&](const std::string& job, const std::string& spec_mode, const std::vector<size_t>& take) {
+            json j{{"schema", spec_schema}, {"job", job}, {"mode", spec_mode}, {"options", opts}};
+            put_meta(j, plan);
+            json pj = json::array();
+            for (size_t i : take) {
+                pj.push_back(part_json(i));
+            }
+            j["parts"] = pj;
+            return j;
+        };
+        if (plan.whole) {
+            mode = "whole";
+            std::vector<size_t> all(nparts);
+            std::iota(all.begin(), all.end(), size_t{0});
+            specs.emplace_back("whole", spec_of("whole", "whole", all));
+        } else {
+            mode = "regions";
+            for (const auto& region : plan.regions) {
+                const std::string job = "r-" + file_name(region.own.front());
+                std::vector<size_t> take = region.parts;
+                take.insert(take.end(), region.near.begin(), region.near.end());
+                std::sort(take.begin(), take.end());
+                json j = spec_of(job, "region", take);
+                j["region"] = {{"parts", region.parts}, {"own", region.own}, {"near", region.near}};
+                specs.emplace_back(job, std::move(j));
+            }
+        }
+    } else {
+        // One file (or lines): the whole job reads the inputs itself; its
+        // spec names their digests, so it changes when they do.
+        mode = "direct";
+        plan.meta.level_names = level_names;
+        json j{{"schema", spec_schema}, {"job", "whole"}, {"mode", "direct"}, {"options", opts}};
+        input_digests = digests.get();
+        j["inputs"] = input_digests;
+        specs.emplace_back("whole", std::move(j));
+    }
+    // Parts, specs and shares of what the plan no longer has.
+    std::set<std::string> keep_files;
+    for (size_t i = 0; i < nparts; ++i) {
+        keep_files.insert(part_file(dir, i).filename().string());
+    }
+    for (const auto& [job, spec] : specs) {
+        keep_files.insert(job + ".json");
+        keep_files.insert(job + ".share");
+    }
+    for (const char* sub : {"parts", "jobs", "shares"}) {
+        for (const auto& e : fs::directory_iterator(dir / sub)) {
+            const std::string entry = e.path().filename().string();
+            if (e.is_regular_file() && !keep_files.contains(entry) &&
+                (entry.ends_with(".raw") || entry.ends_with(".json") || entry.ends_with(".share"))) {
+                fs::remove(e.path());
+            }
+        }
+    }
+    // A job whose stores were changed or removed since it ran gets a spec
+    // that says so (`repair`): its new bytes rerun it, and it writes them
+    // again. The spec keeps saying so until something else in it changes.
+    std::vector<std::string> job_names;
+    for (const auto& [job, spec] : specs) {
+        job_names.push_back(job);
+    }
+    const auto damaged = damaged_jobs(dir, m_output, job_names);
+    size_t specs_changed = 0;
+    json jobs = json::array();
+    for (auto& [job, spec] : specs) {
+        const fs::path file = spec_file(dir, job);
+        if (auto it = damaged.find(job); it != damaged.end()) {
+            const auto& [store, why] = it->second;
+            ctx.log.info("job " + job + " runs again: " + (store.empty() ? why : "its store " + store + " " + why));
+            std::string repair = store + " " + why;
+            if (!store.empty()) {
+                const auto [size, mtime] = stamp_of(store_path(m_output, store));
+                repair += " (" + std::to_string(size) + " bytes, time " + std::to_string(mtime) + ")";
+            }
+            spec["repair"] = repair;
+        } else {
+            std::error_code ec;
+            if (fs::is_regular_file(file, ec)) {
+                try {
+                    json old = json::parse(read_file(file));
+                    old.erase("repair");
+                    if (old == spec) {
+                        jobs.push_back(job);
+                        continue; // the same spec, repaired or not: kept as it is
+                    }
+                } catch (const std::exception&) {
+                    // not a spec: written again below
+                }
+            }
+        }
+        specs_changed += write_file_if_changed(file, spec.dump(1) + "\n") ? 1 : 0;
+        jobs.push_back(job);
+    }
+    sync_to_disk(dir / "jobs");
+    json index{{"schema", index_schema}, {"mode", mode}, {"jobs", jobs}, {"options", opts}};
+    put_meta(index, plan);
+    index["empty_geometries"] = plan.empty_geometries;
+    index["points_read"] = points_read;
+    index["inputs"] = mode == "direct" ? input_digests : digests.get();
+    write_file_if_changed(dir / "index.json", index.dump(1) + "\n");
+    write_file_atomic(dir / "plan.json", json{{"schema", "tigerlod.ingest-plan/1"}, {"jobs", jobs}}.dump(1) + "\n");
+    std::printf("ingest plan %s: %zu parts (%zu rewritten), %zu jobs (%zu specs changed, %zu with a store changed "
+                "since)%s, %.2f s, in %s\n",
+                cfg.name.c_str(), nparts, rewritten, specs.size(), specs_changed, damaged.size(),
+                mode == "regions" ? (", regions of level '" + level_names[plan.level] + "'").c_str()
+                                  : (mode == "whole" ? ", one map" : ", read by the job"),
+                ctx.log.elapsed_s() - t0, dir.c_str());
+    return exit_ok;
+}
+
+int IngestStage::run_region(const StageContext& ctx, const Resolved& r)
+{
+    const IngestConfig& cfg = r.cfg;
+    const fs::path dir(m_parts);
+    const std::string& job = m_region;
+    if (job.empty() || !std::all_of(job.begin(), job.end(), [](unsigned char c) {
+            return std::isalnum(c) || c == '-' || c == '_' || c == '%';
+        })) {
+        throw usage_error("--region '" + job + "': a job's name is letters, digits, '-', '_' and '%'");
+    }
+    const fs::path spec_path = spec_file(dir, job);
+    const json spec = read_json(
+        spec_path,
+        ("no job '" + job + "' in the plan: run --plan first (" + (dir / "plan.json").string() + " lists the jobs)")
+            .c_str(),
+        spec_schema);
+    const std::string spec_sha = sha256_of(read_file(spec_path));
+    if (spec.at("options") != job_options_json(cfg, r.projection, m_max_problem_samples)) {
+        throw usage_error(spec_path.string() + ": planned with other options (" + spec.at("options").dump() +
+                          "); run --plan again");
+    }
+    const BuildOptions options = build_options(cfg, r.threads, m_max_problem_samples, ctx.log);
+    std::vector<fs::path> reads{m_config, dir};
+    for (const auto& f : input_files_of(cfg)) {
+        reads.emplace_back(f.first);
+    }
+    InPlaceStores out(m_output, reads);
+    const StoreSink sink = [&](const chains::ChainStore& s) { out.write(s); };
+    const double t0 = ctx.log.elapsed_s();
+    RegionJobShare share;
+    share.job = job;
+    share.spec_sha256 = spec_sha;
+    const std::string mode = spec.value("mode", "");
+    if (mode == "direct") {
+        if (spec.at("inputs") != json(digests_of(input_files_of(cfg)))) {
+            throw usage_error(spec_path.string() + ": the inputs changed since the plan; run --plan again");
+        }
+        RawMap raw = read_dataset(cfg, r.threads, ctx.log);
+        share.points_read = raw.points_read;
+        share.share.result = build_map(std::move(raw), r.projection, options, sink);
+    } else if (mode == "whole" || mode == "region") {
+        RegionPlan plan = get_meta(spec, spec_path);
+        plan.whole = mode == "whole";
+        std::vector<std::string> sha(plan.boxes.size());
+        try {
+            for (const auto& p : spec.at("parts")) {
+                const auto i = p.at("part").get<size_t>();
+                const auto b = p.at("box").get<std::vector<int64_t>>();
+                if (i >= plan.boxes.size() || b.size() != 4) {
+                    throw input_error(spec_path.string() + ": a part out of range");
+                }
+                plan.boxes[i] = GridBox{b[0], b[1], b[2], b[3]};
+                plan.class_of[i] = p.at("classes").get<std::vector<uint32_t>>();
+                sha[i] = p.at("sha256").get<std::string>();
+            }
+            if (!plan.whole) {
+                const json& rj = spec.at("region");
+                RegionPlan::Region region;
+                region.parts = rj.at("parts").get<std::vector<size_t>>();
+                region.own = rj.at("own").get<std::vector<std::string>>();
+                region.near = rj.at("near").get<std::vector<size_t>>();
+                plan.regions.push_back(std::move(region));
+            }
+        } catch (const json::exception& e) {
+            throw input_error(spec_path.string() + ": " + e.what());
+        }
+        const std::function<RawMap(size_t)> load = [&](size_t i) {
+            const fs::path file = part_file(dir, i);
+            if (i >= sha.size() || sha[i].empty()) {
+                throw input_error(spec_path.string() + ": part " + std::to_string(i) + " is not in the job's spec");
+            }
+            const std::string bytes = read_file(file);
+            if (sha256_of(bytes) != sha[i]) {
+                throw usage_error(file.string() + ": the part changed since the plan; run --plan again");
+            }
+            return decode_raw(std::as_bytes(std::span(bytes.data(), bytes.size())), file.string());
+        };
+        if (plan.whole) {
+            share.share.result = build_planned_whole(plan, load, r.projection, options, sink);
+            share.points_read = share.share.result.input_vertices;
+        } else {
+            share.share = build_planned_region(plan, 0, load, r.projection, options, sink);
+        }
+    } else {
+        throw input_error(spec_path.string() + ": unknown mode '" + mode + "'");
+    }
+    share.stores = out.close();
+    for (const auto& store : share.stores) {
+        const auto [size, mtime] = stamp_of(store_path(m_output, store));
+        share.store_bytes.push_back(size);
+        share.store_mtimes.push_back(mtime);
+    }
+    fs::create_directories(dir / "shares");
+    write_file_atomic(share_file(dir, job), encode_share(share));
+    std::printf("ingest %s %s: %zu stores (%zu rewritten) in %.2f s, %s\n", cfg.name.c_str(), job.c_str(),
+                share.stores.size(), out.rewritten(), ctx.log.elapsed_s() - t0, m_output.c_str());
+    return exit_ok;
+}
+
+int IngestStage::run_finish(const StageContext& ctx, const Resolved& r)
+{
+    const IngestConfig& cfg = r.cfg;
+    const fs::path dir(m_parts);
+    const fs::path index_path = dir / "index.json";
+    const json index = read_json(index_path, "run --plan first", index_schema);
+    if (index.at("options") != job_options_json(cfg, r.projection, m_max_problem_samples)) {
+        throw usage_error(index_path.string() + ": planned with other options; run --plan and the jobs again");
+    }
+    const double t0 = ctx.log.elapsed_s();
+    const auto jobs = index.at("jobs").get<std::vector<std::string>>();
+    std::vector<RegionJobShare> shares;
+    std::vector<std::vector<std::string>> written;
+    for (const auto& job : jobs) {
+        const fs::path file = share_file(dir, job);
+        std::error_code ec;
+        if (!fs::is_regular_file(file, ec)) {
+            throw usage_error(file.string() + " is missing: run --region " + job + " first");
+        }
+        const std::string bytes = read_file(file);
+        RegionJobShare share = decode_share(std::as_bytes(std::span(bytes.data(), bytes.size())), file.string());
+        if (share.job != job || share.spec_sha256 != sha256_of(read_file(spec_file(dir, job)))) {
+            throw usage_error(file.string() + ": built from an older plan of the job; run --region " + job + " again");
+        }
+        written.push_back(share.stores);
+        shares.push_back(std::move(share));
+    }
+    const std::string mode = index.at("mode").get<std::string>();
+    RegionPlan plan = get_meta(index, index_path);
+    plan.whole = mode != "regions";
+    plan.empty_geometries = index.at("empty_geometries").get<std::vector<uint64_t>>();
+    check_each_store_once(plan, written, plan.meta.level_names);
+    std::vector<fs::path> reads{m_config, dir};
+    const InputFiles input_files = input_files_of(cfg);
+    for (const auto& f : input_files) {
+        reads.emplace_back(f.first);
+    }
+    InPlaceStores out(m_output, reads);
+    Built built;
+    if (plan.whole) {
+        if (shares.size() != 1) {
+            throw input_error(index_path.string() + ": a whole plan of " + std::to_string(shares.size()) + " jobs");
+        }
+        built.result = std::move(shares.front().share.result);
+        built.points_read = shares.front().points_read;
+    } else {
+        std::vector<RegionShare> parts;
+        for (auto& s : shares) {
+            parts.push_back(std::move(s.share));
+        }
+        const BuildOptions options = build_options(cfg, r.threads, m_max_problem_samples, ctx.log);
+        built.result = finish_planned(plan, std::move(parts), r.projection, options,
+                                      [&](const chains::ChainStore& s) { out.write(s); });
+        built.points_read = built.result.input_vertices;
+    }
+    std::set<std::string> all;
+    for (const auto& w : written) {
+        all.insert(w.begin(), w.end());
+    }
+    const auto coarse = out.close();
+    check_each_store_once(plan, {std::vector<std::string>(all.begin(), all.end()), coarse}, plan.meta.level_names);
+    all.insert(coarse.begin(), coarse.end());
+    const size_t removed = remove_stale_stores(m_output, cfg, all);
+    const auto digests = index.at("inputs").get<std::vector<std::string>>();
+    if (digests.size() != input_files.size()) {
+        throw usage_error(index_path.string() + ": planned for other inputs; run --plan and the jobs again");
+    }
+    const fs::path output(m_output);
+    write_file_atomic(output / "ingest-report.json",
+                      report_json(cfg, r.projection, built.result, all.size()).dump(2) + "\n");
+    write_file_atomic(output / "manifest.json", manifest_text(manifest_json(cfg, r.projection, input_files, digests,
+                                                                            versions(), m_max_problem_samples)));
+    const double t_end = ctx.log.elapsed_s();
+    built.t_read = t0;
+    write_file_atomic(output / "ingest-timings.json", timings_json(built, t0, t_end, r.threads).dump(2) + "\n");
+    if (removed > 0) {
+        ctx.log.info("removed " + std::to_string(removed) + " stores and folders no job wrote");
+    }
+    print_summary(cfg, built, t_end - t0, all.size(), m_output);
+    return exit_ok;
+}
+
 int IngestStage::run(const StageContext& ctx)
 {
     IngestConfig cfg = load_config(m_config);
@@ -357,6 +1023,23 @@ int IngestStage::run(const StageContext& ctx)
         }
         std::printf("; projection %s; halo %g m; %u threads\n", projection.describe().c_str(), cfg.halo_m, threads);
         return exit_ok;
+    }
+    const int modes = (m_plan ? 1 : 0) + (m_region.empty() ? 0 : 1) + (m_finish ? 1 : 0);
+    if (modes > 1) {
+        throw usage_error("--plan, --region and --finish are steps of their own: give one");
+    }
+    if (modes == 1 || !m_parts.empty()) {
+        if (modes == 0) {
+            throw usage_error("--parts goes with --plan, --region or --finish");
+        }
+        if (m_parts.empty()) {
+            throw usage_error("--plan, --region and --finish need --parts DIR");
+        }
+        if (m_whole_map) {
+            throw usage_error("--whole-map builds in one process; the jobs' plan decides by the data");
+        }
+        const Resolved r{cfg, projection, threads};
+        return m_plan ? run_plan(ctx, r) : !m_region.empty() ? run_region(ctx, r) : run_finish(ctx, r);
     }
     // The manifest's input digests are computed beside the work, not after it.
     const InputFiles input_files = input_files_of(cfg);

@@ -21,10 +21,20 @@ class IngestStage final : public Stage {
     std::string help_notes() const override;
 
   private:
+    struct Resolved;
+    int run_plan(const StageContext& ctx, const Resolved& r);
+    int run_region(const StageContext& ctx, const Resolved& r);
+    int run_finish(const StageContext& ctx, const Resolved& r);
+
+  private:
     std::string m_config, m_output;
     bool m_overwrite = false;
     bool m_validate = false;
     bool m_whole_map = false;
+    std::string m_parts;   ///< --parts DIR: the jobs' folder
+    bool m_plan = false;   ///< --plan
+    std::string m_region;  ///< --region JOB
+    bool m_finish = false; ///< --finish
     double m_halo_m = -1.0;
     double m_line_tile_km = -1.0;
     int m_threads = -1;

@@ -1,10 +1,13 @@
 #include "stages/ingest/raw_map.hpp"
 
+#include "core/bytes.hpp"
 #include "core/errors.hpp"
+#include "core/fs.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <memory>
 #include <type_traits>
 
@@ -21,152 +24,185 @@ int32_t round_half_away(double x) noexcept
     return static_cast<int32_t>(t + (f >= 0.5 ? 1 : (f <= -0.5 ? -1 : 0)));
 }
 
-/// A file of plain values: vectors as a count and their bytes.
-class RawFile {
-  public:
-    RawFile(const std::filesystem::path& path, const char* mode)
-        : m_path(path), m_f(std::fopen(path.c_str(), mode), &std::fclose)
-    {
-        if (!m_f) {
-            fail();
-        }
-    }
-    template <class T> void put(const T& v)
-    {
-        static_assert(std::is_trivially_copyable_v<T>);
-        write(&v, sizeof v);
-    }
-    template <class T> void put_vec(const std::vector<T>& v)
-    {
-        put(static_cast<uint64_t>(v.size()));
-        write(v.data(), v.size() * sizeof(T));
-    }
-    void put_str(const std::string& s)
-    {
-        put(static_cast<uint64_t>(s.size()));
-        write(s.data(), s.size());
-    }
-    void put_strs(const std::vector<std::string>& v)
-    {
-        put(static_cast<uint64_t>(v.size()));
-        for (const auto& s : v) {
-            put_str(s);
-        }
-    }
-    template <class T> T get()
-    {
-        T v;
-        read(&v, sizeof v);
-        return v;
-    }
-    template <class T> void get_vec(std::vector<T>& v)
-    {
-        v.resize(get<uint64_t>());
-        read(v.data(), v.size() * sizeof(T));
-    }
-    std::string get_str()
-    {
-        std::string s(get<uint64_t>(), '\0');
-        read(s.data(), s.size());
-        return s;
-    }
-    void get_strs(std::vector<std::string>& v)
-    {
-        v.resize(get<uint64_t>());
-        for (auto& s : v) {
-            s = get_str();
-        }
-    }
-    void close()
-    {
-        if (std::fclose(m_f.release()) != 0) {
-            fail();
-        }
-    }
+} // namespace
 
-  private:
-    [[noreturn]] void fail() const
-    {
-        throw environment_error(m_path.string() + ": cannot write or read a part put aside");
-    }
-    void write(const void* p, size_t n)
-    {
-        if (n > 0 && std::fwrite(p, 1, n, m_f.get()) != n) {
-            fail();
-        }
-    }
-    void read(void* p, size_t n)
-    {
-        if (n > 0 && std::fread(p, 1, n, m_f.get()) != n) {
-            fail();
-        }
-    }
-    std::filesystem::path m_path;
-    std::unique_ptr<std::FILE, int (*)(std::FILE*)> m_f;
-};
+namespace {
+
+constexpr char raw_magic[] = "TLRAWPT1";
+
+template <class T> void put_vec(ByteWriter& w, const std::vector<T>& v)
+{
+    static_assert(std::is_trivially_copyable_v<T> && std::has_unique_object_representations_v<T>);
+    w.put(static_cast<uint64_t>(v.size()));
+    w.put_bytes(std::string_view(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T)));
+}
+
+template <class T> void get_vec(ByteReader& r, std::vector<T>& v, const char* what)
+{
+    const auto n = r.get<uint64_t>(what);
+    r.check_count(n, sizeof(T), what);
+    const auto bytes = r.get_bytes(static_cast<size_t>(n) * sizeof(T), what);
+    v.resize(static_cast<size_t>(n));
+    std::memcpy(v.data(), bytes.data(), bytes.size());
+}
 
 } // namespace
 
+void put_strings(ByteWriter& w, const std::vector<std::string>& v)
+{
+    w.put_varint(v.size());
+    for (const auto& s : v) {
+        w.put_vstr(s);
+    }
+}
+
+std::vector<std::string> get_strings(ByteReader& r, const char* what)
+{
+    const uint64_t n = r.get_varint(what);
+    r.check_count(n, 1, what);
+    std::vector<std::string> v(static_cast<size_t>(n));
+    for (auto& s : v) {
+        s = r.get_vstr(what);
+    }
+    return v;
+}
+
+void put_unit(ByteWriter& w, const RawUnit& u)
+{
+    put_strings(w, u.codes);
+    w.put(static_cast<uint8_t>(u.intpt.has_value()));
+    w.put(u.intpt.value_or(LonLatE6{}).lon);
+    w.put(u.intpt.value_or(LonLatE6{}).lat);
+    w.put(u.weight);
+    w.put(u.source.file);
+    w.put(u.source.feature);
+    w.put(u.sid);
+}
+
+RawUnit get_unit(ByteReader& r)
+{
+    RawUnit u;
+    u.codes = get_strings(r, "a unit's codes");
+    const bool has = r.get<uint8_t>("a unit") != 0;
+    LonLatE6 p;
+    p.lon = r.get<int32_t>("a unit");
+    p.lat = r.get<int32_t>("a unit");
+    if (has) {
+        u.intpt = p;
+    }
+    u.weight = r.get<double>("a unit");
+    u.source.file = r.get<uint32_t>("a unit");
+    u.source.feature = r.get<int64_t>("a unit");
+    u.sid = r.get<uint64_t>("a unit");
+    return u;
+}
+
+std::string encode_raw(const RawMap& raw)
+{
+    ByteWriter w;
+    w.reserve(raw.coords.size() * 8 + raw.polyline_count() * 40 + raw.units.size() * 64 + 1024);
+    w.put_bytes(std::string_view(raw_magic, 8));
+    w.put(static_cast<uint32_t>(raw.kind));
+    put_strings(w, raw.level_names);
+    put_strings(w, raw.files);
+    put_strings(w, raw.classes);
+    w.put(static_cast<uint64_t>(raw.units.size()));
+    for (const auto& u : raw.units) {
+        put_unit(w, u);
+    }
+    put_vec(w, raw.coords);
+    put_vec(w, raw.offsets);
+    put_vec(w, raw.left);
+    put_vec(w, raw.right);
+    put_vec(w, raw.feature_class);
+    put_vec(w, raw.source_id);
+    // SourceRef has padding: its fields one array each, so equal maps give equal bytes.
+    std::vector<uint32_t> files(raw.source.size());
+    std::vector<int64_t> features(raw.source.size());
+    for (size_t i = 0; i < raw.source.size(); ++i) {
+        files[i] = raw.source[i].file;
+        features[i] = raw.source[i].feature;
+    }
+    put_vec(w, files);
+    put_vec(w, features);
+    w.put(static_cast<uint64_t>(raw.foreign.size()));
+    for (const auto& f : raw.foreign) {
+        w.put(f.polyline);
+        w.put(f.right);
+        w.put(f.face);
+    }
+    w.put(raw.points_read);
+    w.put(raw.empty_geometries);
+    return std::move(w.bytes());
+}
+
+RawMap decode_raw(std::span<const std::byte> bytes, const std::string& name)
+{
+    ByteReader r(bytes, name);
+    const auto magic = r.get_bytes(8, "the header");
+    if (std::memcmp(magic.data(), raw_magic, 8) != 0) {
+        r.fail("not a part put aside by this version of tigerlod-ingest");
+    }
+    RawMap raw;
+    const auto kind = r.get<uint32_t>("the kind");
+    if (kind > static_cast<uint32_t>(RawMap::Kind::lines)) {
+        r.fail("unknown kind " + std::to_string(kind));
+    }
+    raw.kind = static_cast<RawMap::Kind>(kind);
+    raw.level_names = get_strings(r, "level names");
+    raw.files = get_strings(r, "files");
+    raw.classes = get_strings(r, "classes");
+    const auto nunits = r.get<uint64_t>("units");
+    r.check_count(nunits, 33, "units");
+    raw.units.resize(static_cast<size_t>(nunits));
+    for (auto& u : raw.units) {
+        u = get_unit(r);
+    }
+    get_vec(r, raw.coords, "points");
+    get_vec(r, raw.offsets, "offsets");
+    get_vec(r, raw.left, "left units");
+    get_vec(r, raw.right, "right units");
+    get_vec(r, raw.feature_class, "classes of polylines");
+    get_vec(r, raw.source_id, "source ids");
+    std::vector<uint32_t> files;
+    std::vector<int64_t> features;
+    get_vec(r, files, "sources");
+    get_vec(r, features, "sources");
+    const size_t np = raw.left.size();
+    if (raw.offsets.size() != np + 1 || raw.right.size() != np || raw.feature_class.size() != np ||
+        raw.source_id.size() != np || files.size() != np || features.size() != np || raw.offsets.front() != 0 ||
+        raw.offsets.back() != raw.coords.size() || !std::is_sorted(raw.offsets.begin(), raw.offsets.end())) {
+        r.fail("polyline arrays of different lengths");
+    }
+    raw.source.resize(np);
+    for (size_t i = 0; i < np; ++i) {
+        raw.source[i] = SourceRef{files[i], features[i]};
+    }
+    const auto nforeign = r.get<uint64_t>("foreign faces");
+    r.check_count(nforeign, 16, "foreign faces");
+    raw.foreign.resize(static_cast<size_t>(nforeign));
+    for (auto& f : raw.foreign) {
+        f.polyline = r.get<uint32_t>("a foreign face");
+        f.right = r.get<uint32_t>("a foreign face");
+        f.face = r.get<uint64_t>("a foreign face");
+    }
+    raw.points_read = r.get<uint64_t>("the counts");
+    raw.empty_geometries = r.get<uint64_t>("the counts");
+    if (r.left() != 0) {
+        r.fail("bytes after the end");
+    }
+    return raw;
+}
+
 void write_raw(const RawMap& raw, const std::filesystem::path& path)
 {
-    RawFile f(path, "wb");
-    f.put(static_cast<uint32_t>(raw.kind));
-    f.put_strs(raw.level_names);
-    f.put_strs(raw.files);
-    f.put_strs(raw.classes);
-    f.put(static_cast<uint64_t>(raw.units.size()));
-    for (const auto& u : raw.units) {
-        f.put_strs(u.codes);
-        f.put(static_cast<uint8_t>(u.intpt.has_value()));
-        f.put(u.intpt.value_or(LonLatE6{}));
-        f.put(u.weight);
-        f.put(u.source);
-        f.put(u.sid);
-    }
-    f.put_vec(raw.coords);
-    f.put_vec(raw.offsets);
-    f.put_vec(raw.left);
-    f.put_vec(raw.right);
-    f.put_vec(raw.feature_class);
-    f.put_vec(raw.source_id);
-    f.put_vec(raw.source);
-    f.put_vec(raw.foreign);
-    f.put(raw.points_read);
-    f.put(raw.empty_geometries);
-    f.close();
+    write_file(path, encode_raw(raw));
 }
 
 RawMap read_raw(const std::filesystem::path& path)
 {
-    RawFile f(path, "rb");
-    RawMap raw;
-    raw.kind = static_cast<RawMap::Kind>(f.get<uint32_t>());
-    f.get_strs(raw.level_names);
-    f.get_strs(raw.files);
-    f.get_strs(raw.classes);
-    raw.units.resize(f.get<uint64_t>());
-    for (auto& u : raw.units) {
-        f.get_strs(u.codes);
-        const bool has = f.get<uint8_t>() != 0;
-        const auto p = f.get<LonLatE6>();
-        if (has) {
-            u.intpt = p;
-        }
-        u.weight = f.get<double>();
-        u.source = f.get<SourceRef>();
-        u.sid = f.get<uint64_t>();
-    }
-    f.get_vec(raw.coords);
-    f.get_vec(raw.offsets);
-    f.get_vec(raw.left);
-    f.get_vec(raw.right);
-    f.get_vec(raw.feature_class);
-    f.get_vec(raw.source_id);
-    f.get_vec(raw.source);
-    f.get_vec(raw.foreign);
-    raw.points_read = f.get<uint64_t>();
-    raw.empty_geometries = f.get<uint64_t>();
-    return raw;
+    const std::string bytes = read_file(path);
+    return decode_raw(std::as_bytes(std::span(bytes.data(), bytes.size())), path.string());
 }
 
 LonLatE6 snap_e6(double lon_deg, double lat_deg) noexcept

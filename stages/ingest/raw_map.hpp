@@ -12,6 +12,11 @@
 #include <string>
 #include <vector>
 
+namespace tigerlod {
+class ByteWriter;
+class ByteReader;
+} // namespace tigerlod
+
 namespace tigerlod::ingest {
 
 /// Marks "no unit": the outside of the map.
@@ -99,9 +104,24 @@ struct RawMap {
     std::string where(SourceRef src) const;
 };
 
-/// Put a RawMap aside in a file of this process's own (native layout, no
-/// version: written and read back by one run), and read it back. Throw
-/// environment_error if the file cannot be written or read.
+/// A unit and a list of strings as bytes and back (the parts and the
+/// regions' shares): fields one by one, little-endian; the reads throw
+/// format_error as ByteReader does.
+void put_strings(ByteWriter& w, const std::vector<std::string>& v);
+std::vector<std::string> get_strings(ByteReader& r, const char* what);
+void put_unit(ByteWriter& w, const RawUnit& u);
+RawUnit get_unit(ByteReader& r);
+
+/// A RawMap as bytes and back: a part put aside by one job and read by
+/// others (the workflow's region jobs). Equal maps give equal bytes (no
+/// padding is written), so a part whose map did not change keeps its file.
+/// decode_raw throws format_error naming `name` and the byte where the bytes
+/// are not a part of this version (truncated, lengths that disagree).
+std::string encode_raw(const RawMap& raw);
+RawMap decode_raw(std::span<const std::byte> bytes, const std::string& name);
+
+/// Put a RawMap aside in a file and read it back. Throw environment_error if
+/// the file cannot be written or read, format_error as decode_raw.
 void write_raw(const RawMap& raw, const std::filesystem::path& path);
 RawMap read_raw(const std::filesystem::path& path);
 

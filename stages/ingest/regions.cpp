@@ -324,250 +324,157 @@ size_t region_level(const std::vector<PartSummary>& parts, size_t nlev)
     return R;
 }
 
-/// A region: parts that share a code of the region level, and those codes.
-struct Region {
+/// Parts that share a code of the region level and those codes (the regions
+/// before their parts near are found).
+struct Group {
     std::vector<size_t> parts;
     std::vector<std::string> own;
 };
 
-/// What build_by_regions does, step by step: the region level and the
-/// regions (parts sharing a code of it), then for each region its map (its
-/// own units, the whole finer units of the parts near that come within
-/// reach, and every unit sharing a point with those) built and written, and
-/// last the region level and the coarser ones from the regions' borders.
-class RegionBuild {
+/// Files that share a region-level code make one region (union-find), when
+/// the parts are separable: TIGER parts whose EDGES are not their FACES'
+/// county's are not. Sets `separable`.
+std::map<size_t, std::vector<size_t>> group_parts(const std::vector<PartSummary>& parts, size_t R, size_t nlev,
+                                                  bool& separable)
+{
+    const size_t nparts = parts.size();
+    std::vector<size_t> parent(nparts);
+    std::iota(parent.begin(), parent.end(), size_t{0});
+    separable = R < nlev && nparts > 1 &&
+                std::all_of(parts.begin(), parts.end(), [](const PartSummary& p) { return p.unpaired_edges == 0; });
+    if (separable) {
+        std::map<std::string, size_t> first_part;
+        for (size_t i = 0; i < nparts && separable; ++i) {
+            separable = parts[i].many[R] == 0;
+            for (const auto& c : parts[i].codes[R]) {
+                auto [it, added] = first_part.try_emplace(c, i);
+                if (!added) {
+                    parent[find_root(parent, i)] = find_root(parent, it->second);
+                }
+            }
+        }
+    }
+    std::map<size_t, std::vector<size_t>> groups;
+    for (size_t i = 0; i < nparts; ++i) {
+        groups[find_root(parent, i)].push_back(i);
+    }
+    return groups;
+}
+
+/// The groups in the order of their codes; a group without a code of the region level is none.
+std::vector<Group> make_groups(const std::vector<PartSummary>& parts,
+                               const std::map<size_t, std::vector<size_t>>& groups, size_t R)
+{
+    std::vector<Group> out;
+    for (const auto& [root, members] : groups) {
+        Group g;
+        g.parts = members;
+        for (size_t i : members) {
+            g.own.insert(g.own.end(), parts[i].codes[R].begin(), parts[i].codes[R].end());
+        }
+        std::sort(g.own.begin(), g.own.end());
+        g.own.erase(std::unique(g.own.begin(), g.own.end()), g.own.end());
+        if (!g.own.empty()) {
+            out.push_back(std::move(g));
+        }
+    }
+    std::sort(out.begin(), out.end(), [](const Group& a, const Group& b) { return a.own < b.own; });
+    return out;
+}
+
+/// How far a region's results can depend on other units, in the input's
+/// 1e-6 degrees (x, y): three halo cells (find_near reaches up to about
+/// two) and a margin, for the smallest scale of the projection over `own_box`.
+std::pair<int64_t, int64_t> reach_of(const GridBox& own_box, const Projection& projection, double halo_m)
+{
+    const double reach_m = 3.0 * std::max(halo_m, 100.0) + 100.0;
+    double kmin = 1.0;
+    double max_lat = 0.0;
+    if (!own_box.empty()) {
+        for (int64_t x : {own_box.min_x, (own_box.min_x + own_box.max_x) / 2, own_box.max_x}) {
+            for (int64_t y : {own_box.min_y, (own_box.min_y + own_box.max_y) / 2, own_box.max_y}) {
+                const double k = projection.scale(static_cast<double>(x) * 1e-6, static_cast<double>(y) * 1e-6);
+                if (k > 0 && std::isfinite(k)) {
+                    kmin = std::min({kmin, k, 1.0 / k});
+                }
+            }
+        }
+        max_lat = static_cast<double>(std::max(std::abs(own_box.min_y), std::abs(own_box.max_y))) * 1e-6;
+    }
+    const double e_lat = 1.25 * reach_m / (110000.0 * kmin);
+    const double e_lon = e_lat / std::max(0.01, std::cos(std::min(89.0, max_lat + e_lat) * std::numbers::pi / 180.0));
+    const auto ex = static_cast<int64_t>(std::ceil(e_lon * 1e6)) + 1;
+    const auto ey = static_cast<int64_t>(std::ceil(e_lat * 1e6)) + 1;
+    return {ex, ey};
+}
+
+/// The box of a region's own parts' points.
+GridBox own_box_of(const RegionPlan& plan, const RegionPlan::Region& region)
+{
+    GridBox own_box;
+    for (size_t i : region.parts) {
+        const GridBox& b = plan.boxes[i];
+        if (!b.empty()) {
+            own_box.min_x = std::min(own_box.min_x, b.min_x);
+            own_box.min_y = std::min(own_box.min_y, b.min_y);
+            own_box.max_x = std::max(own_box.max_x, b.max_x);
+            own_box.max_y = std::max(own_box.max_y, b.max_y);
+        }
+    }
+    return own_box;
+}
+
+/// What a region's map is assembled from: which parts are its own, the
+/// parts near, the own parts already loaded, the points a unit of a part
+/// near could share with one taken (keys) and where those units lie
+/// (key_cells), and per part near its whole finer-level units within reach
+/// (core).
+struct Neighbourhood {
+    std::vector<uint8_t> is_own;
+    std::vector<size_t> near;
+    std::vector<GridBox> near_boxes;
+    std::map<size_t, RawMap> loaded;
+    CellSet key_cells{50'000, 50'000};
+    std::vector<uint64_t> keys;
+    std::map<size_t, std::vector<uint8_t>> core;
+};
+
+/// A region's map: its own units, the whole finer-level units of the parts
+/// near that come within reach, and every unit that shares a point with one
+/// of those, parts in file order.
+class RegionAssembler {
   public:
-    RegionBuild(const std::vector<PartSummary>& parts, const std::function<RawMap(size_t)>& load,
-                const std::vector<std::string>& level_names, const Projection& projection, const BuildOptions& options,
-                const StoreSink& sink)
-        : m_parts(parts), m_load(load), m_level_names(level_names), m_projection(projection), m_options(options),
-          m_sink(sink), m_R(region_level(parts, level_names.size()))
+    RegionAssembler(const RegionPlan& plan, const std::function<RawMap(size_t)>& load, const Projection& projection,
+                    const BuildOptions& options)
+        : m_plan(plan), m_load(load), m_projection(projection), m_options(options)
     {
     }
 
-    BuildResult run()
+    /// Region r's map; `own_points` gets its own parts' input points.
+    RawMap assemble(size_t r, uint64_t& own_points)
     {
-        const auto groups = group_parts();
-        share_files_and_classes();
-        if (!m_separable || groups.size() < 2) {
-            return build_whole();
-        }
-        const auto regions = make_regions(groups);
-        const size_t nlev = m_level_names.size();
-        m_total.levels.resize(nlev);
-        for (size_t L = 0; L < nlev; ++L) {
-            m_total.levels[L].name = m_level_names[L];
-        }
-        const StoreSink checked = [this](const chains::ChainStore& s) { check_and_write(s); };
-        const auto t_start = std::chrono::steady_clock::now();
-        double build_s = 0;
-        for (const Region& region : regions) {
-            RawMap raw = assemble(region);
-            m_total.region_map_units += raw.units.size();
-            RegionScope scope;
-            scope.level = m_R;
-            scope.own = region.own;
-            const auto t0 = std::chrono::steady_clock::now();
-            add_result(m_total, build_region(std::move(raw), scope, m_projection, m_options, checked, m_coarse_in),
-                       m_R + 1, m_options.max_problem_samples);
-            build_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-        }
-        const double regions_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
-        return finish_coarse(checked, regions_s, build_s);
-    }
-
-  private:
-    void log(const std::string& what) const
-    {
-        if (m_options.log != nullptr) {
-            m_options.log->info(what);
-        }
-    }
-
-    /// Files that share a region-level code make one region (union-find),
-    /// when the parts are separable: TIGER parts whose EDGES are not their
-    /// FACES' county's are not.
-    std::map<size_t, std::vector<size_t>> group_parts()
-    {
-        const auto& parts = m_parts;
-        const size_t R = m_R, nlev = m_level_names.size(), nparts = parts.size();
-        std::vector<size_t> parent(nparts);
-        std::iota(parent.begin(), parent.end(), size_t{0});
-        // TIGER parts whose EDGES are not their FACES' county's are not separable.
-        m_separable = R < nlev && nparts > 1 && std::all_of(parts.begin(), parts.end(), [](const PartSummary& p) {
-                          return p.unpaired_edges == 0;
-                      });
-        if (m_separable) {
-            std::map<std::string, size_t> first_part;
-            for (size_t i = 0; i < nparts && m_separable; ++i) {
-                m_separable = parts[i].many[R] == 0;
-                for (const auto& c : parts[i].codes[R]) {
-                    auto [it, added] = first_part.try_emplace(c, i);
-                    if (!added) {
-                        parent[find_root(parent, i)] = find_root(parent, it->second);
-                    }
-                }
-            }
-        }
-        std::map<size_t, std::vector<size_t>> groups;
-        for (size_t i = 0; i < nparts; ++i) {
-            groups[find_root(parent, i)].push_back(i);
-        }
-        return groups;
-    }
-
-    /// What every region's map shares: files and classes, numbered as a
-    /// whole read numbers them (TIGER: every FACES file, then every EDGES file).
-    void share_files_and_classes()
-    {
-        const auto& parts = m_parts;
-        const size_t nparts = parts.size();
-        auto& meta = m_meta;
-        auto& class_of = m_class_of;
-        meta.kind = nparts > 0 ? parts[0].kind : RawMap::Kind::polygon_rings;
-        meta.level_names = m_level_names;
-        class_of.resize(nparts);
-        const size_t files_per_part = nparts > 0 ? parts[0].files.size() : 0;
-        for (size_t f = 0; f < files_per_part; ++f) {
-            for (size_t i = 0; i < nparts; ++i) {
-                meta.files.push_back(f < parts[i].files.size() ? parts[i].files[f] : std::string());
-            }
-        }
-        for (size_t i = 0; i < nparts; ++i) {
-            for (const auto& c : parts[i].classes) {
-                class_of[i].push_back(meta.intern_class(c));
-            }
-        }
-    }
-
-    /// One region: the whole map at once.
-    BuildResult build_whole()
-    {
-        const size_t nparts = m_parts.size();
-        Assembly whole(m_meta, m_class_of);
-        uint64_t empty = 0;
-        for (size_t i = 0; i < nparts; ++i) {
-            RawMap part = m_load(i);
-            empty += part.empty_geometries;
-            const std::vector<uint8_t> all(part.units.size(), 1);
-            whole.add(i, std::move(part), all, true);
-        }
-        RawMap raw = whole.finish();
-        raw.points_read = whole.own_points();
-        raw.empty_geometries = empty;
-        log("building the map whole (one region)");
-        return build_map(std::move(raw), m_projection, m_options, m_sink);
-    }
-
-    /// The regions, in the order of their codes; a group without a code of the region level is none.
-    std::vector<Region> make_regions(const std::map<size_t, std::vector<size_t>>& groups) const
-    {
-        const size_t R = m_R;
-        std::vector<Region> regions;
-        for (auto& [root, members] : groups) {
-            Region r;
-            r.parts = members;
-            for (size_t i : members) {
-                r.own.insert(r.own.end(), m_parts[i].codes[R].begin(), m_parts[i].codes[R].end());
-            }
-            std::sort(r.own.begin(), r.own.end());
-            r.own.erase(std::unique(r.own.begin(), r.own.end()), r.own.end());
-            if (!r.own.empty()) {
-                regions.push_back(std::move(r));
-            }
-        }
-        std::sort(regions.begin(), regions.end(), [](const Region& a, const Region& b) { return a.own < b.own; });
-
-        return regions;
-    }
-
-    /// Every store once: a partition written twice has units under two codes
-    /// of the region level in different files.
-    void check_and_write(const chains::ChainStore& s)
-    {
-        {
-            const std::lock_guard lock(m_written_mutex);
-            if (!m_written.insert(s.level_name + "/" + s.partition).second) {
-                throw input_error("level '" + s.level_name + "': partition '" + s.partition +
-                                  "' has units under two codes of level '" + m_level_names[m_R] +
-                                  "' in different files: the codes do not nest");
-            }
-        }
-        m_sink(s);
-    }
-
-    /// How far a region's results can depend on other units, in the input's
-    /// 1e-6 degrees (x, y): three halo cells (find_near reaches up to about
-    /// two) and a margin, for the smallest scale of the projection over `own_box`.
-    std::pair<int64_t, int64_t> reach_of(const GridBox& own_box) const
-    {
-        const double reach_m = 3.0 * std::max(m_options.halo_m, 100.0) + 100.0;
-        const Projection& projection = m_projection;
-        double kmin = 1.0;
-        double max_lat = 0.0;
-        if (!own_box.empty()) {
-            for (int64_t x : {own_box.min_x, (own_box.min_x + own_box.max_x) / 2, own_box.max_x}) {
-                for (int64_t y : {own_box.min_y, (own_box.min_y + own_box.max_y) / 2, own_box.max_y}) {
-                    const double k = projection.scale(static_cast<double>(x) * 1e-6, static_cast<double>(y) * 1e-6);
-                    if (k > 0 && std::isfinite(k)) {
-                        kmin = std::min({kmin, k, 1.0 / k});
-                    }
-                }
-            }
-            max_lat = static_cast<double>(std::max(std::abs(own_box.min_y), std::abs(own_box.max_y))) * 1e-6;
-        }
-        const double e_lat = 1.25 * reach_m / (110000.0 * kmin);
-        const double e_lon =
-            e_lat / std::max(0.01, std::cos(std::min(89.0, max_lat + e_lat) * std::numbers::pi / 180.0));
-        const auto ex = static_cast<int64_t>(std::ceil(e_lon * 1e6)) + 1;
-        const auto ey = static_cast<int64_t>(std::ceil(e_lat * 1e6)) + 1;
-
-        return {ex, ey};
-    }
-
-    /// What a region's map is assembled from: which parts are its own, the
-    /// parts near, the own parts already loaded, the points a unit of a
-    /// part near could share with one taken (keys) and where those units
-    /// lie (key_cells), and per part near its whole finer-level units within
-    /// reach (core).
-    struct Neighbourhood {
-        std::vector<uint8_t> is_own;
-        std::vector<size_t> near;
-        std::vector<GridBox> near_boxes;
-        std::map<size_t, RawMap> loaded;
-        CellSet key_cells{50'000, 50'000};
-        std::vector<uint64_t> keys;
-        std::map<size_t, std::vector<uint8_t>> core;
-    };
-
-    /// The region's map, parts in file order: its own units, the whole
-    /// finer-level units of the parts near that come within reach, and every
-    /// unit that shares a point with one of those.
-    RawMap assemble(const Region& region)
-    {
-        const auto& parts = m_parts;
+        const RegionPlan::Region& region = m_plan.regions[r];
+        const size_t nparts = m_plan.boxes.size();
         Neighbourhood nb;
-        nb.is_own.assign(parts.size(), 0);
-        GridBox own_box;
+        nb.is_own.assign(nparts, 0);
         for (size_t i : region.parts) {
             nb.is_own[i] = 1;
-            if (parts[i].lo.lon <= parts[i].hi.lon) {
-                own_box.extend(as_point(parts[i].lo));
-                own_box.extend(as_point(parts[i].hi));
-            }
         }
-        const auto [ex, ey] = reach_of(own_box);
-        find_parts_near(nb, grown(own_box, ex, ey));
+        const auto [ex, ey] = reach_of(own_box_of(m_plan, region), m_projection, m_options.halo_m);
+        nb.near = region.near;
+        for (size_t j : nb.near) {
+            nb.near_boxes.push_back(m_plan.boxes[j]);
+        }
         CellSet cells(std::max<int64_t>(ex, 50'000), std::max<int64_t>(ey, 50'000));
         load_own_parts(region, nb, cells, ex, ey);
-        if (m_R + 1 < m_level_names.size()) { // finer levels: halos
+        if (m_plan.level + 1 < m_plan.meta.level_names.size()) { // finer levels: halos
             take_whole_units_near(nb, cells);
         }
         nb.key_cells.seal();
         std::sort(nb.keys.begin(), nb.keys.end());
         nb.keys.erase(std::unique(nb.keys.begin(), nb.keys.end()), nb.keys.end());
 
-        Assembly assembly(m_meta, m_class_of);
+        Assembly assembly(m_plan.meta, m_plan.class_of);
         std::vector<size_t> order = region.parts;
         order.insert(order.end(), nb.near.begin(), nb.near.end());
         std::sort(order.begin(), order.end());
@@ -586,31 +493,23 @@ class RegionBuild {
             }
             assembly.add(i, std::move(part), take, nb.is_own[i] != 0);
         }
-        m_own_points += assembly.own_points();
+        own_points = assembly.own_points();
         RawMap raw = assembly.finish();
         release(nb.keys);
-        log("region " + region.own.front() + (region.own.size() > 1 ? "..." : "") + ": " + std::to_string(own_units) +
-            " own units, " + std::to_string(raw.units.size() - own_units) + " neighbouring, " +
-            std::to_string(raw.coords.size()) + " points");
+        if (m_options.log != nullptr) {
+            m_options.log->info("region " + region.own.front() + (region.own.size() > 1 ? "..." : "") + ": " +
+                                std::to_string(own_units) + " own units, " +
+                                std::to_string(raw.units.size() - own_units) + " neighbouring, " +
+                                std::to_string(raw.coords.size()) + " points");
+        }
         return raw;
     }
 
-    /// The other parts whose box meets `near_box`.
-    void find_parts_near(Neighbourhood& nb, const GridBox& near_box) const
-    {
-        for (size_t j = 0; j < m_parts.size(); ++j) {
-            const auto& p = m_parts[j];
-            const GridBox b{p.lo.lon, p.lo.lat, p.hi.lon, p.hi.lat};
-            if (!nb.is_own[j] && b.intersects(near_box)) {
-                nb.near.push_back(j);
-                nb.near_boxes.push_back(b);
-            }
-        }
-    }
-
+  private:
     /// The own parts, their units' neighbourhood as cells (grown by the
     /// reach), and their points that a unit of a part near could share.
-    void load_own_parts(const Region& region, Neighbourhood& nb, CellSet& cells, int64_t ex, int64_t ey) const
+    void load_own_parts(const RegionPlan::Region& region, Neighbourhood& nb, CellSet& cells, int64_t ex,
+                        int64_t ey) const
     {
         for (size_t i : region.parts) {
             RawMap part = m_load(i);
@@ -639,7 +538,7 @@ class RegionBuild {
     /// within reach (`cells`): taken, their points added to the keys.
     void take_whole_units_near(Neighbourhood& nb, const CellSet& cells) const
     {
-        const size_t R = m_R;
+        const size_t R = m_plan.level;
         for (size_t j : nb.near) {
             const RawMap part = m_load(j);
             const auto boxes = unit_boxes(part);
@@ -676,7 +575,7 @@ class RegionBuild {
     /// The units of part i the region's map takes: all of an own part's;
     /// of a part near, its whole units near and every unit sharing a point
     /// (a key) with one taken.
-    std::vector<uint8_t> units_to_take(size_t i, const RawMap& part, const Neighbourhood& nb) const
+    static std::vector<uint8_t> units_to_take(size_t i, const RawMap& part, const Neighbourhood& nb)
     {
         std::vector<uint8_t> take(part.units.size(), nb.is_own[i]);
         if (auto it = nb.core.find(i); it != nb.core.end()) {
@@ -719,58 +618,189 @@ class RegionBuild {
         return take;
     }
 
-    /// The region level and the coarser ones, from the regions' edges
-    /// between codes; the totals.
-    BuildResult finish_coarse(const StoreSink& checked, double regions_s, double build_s)
-    {
-        const size_t R = m_R, nlev = m_level_names.size();
-        auto& total = m_total;
-        auto& coarse_in = m_coarse_in;
-        const auto& parts = m_parts;
-        std::sort(coarse_in.units.begin(), coarse_in.units.end(), [](const RawUnit& a, const RawUnit& b) {
-            return std::pair{a.source.file, a.source.feature} < std::pair{b.source.file, b.source.feature};
-        });
-        const auto t_coarse = std::chrono::steady_clock::now();
-        BuildResult coarse =
-            build_coarse(m_meta, std::move(coarse_in.units), coarse_in.edges, R, m_projection, m_options, checked);
-        for (size_t L = 0; L <= R; ++L) {
-            total.levels[L] = coarse.levels[L];
-        }
-        add_result(total, std::move(coarse), nlev, m_options.max_problem_samples);
-        total.seconds.emplace_back("coarse_levels",
-                                   std::chrono::duration<double>(std::chrono::steady_clock::now() - t_coarse).count());
-        total.seconds.emplace_back("regions_load", regions_s - build_s);
-        total.input_vertices = m_own_points;
-        for (const auto& p : parts) {
-            total.problems["empty_geometries"] += p.empty_geometries;
-        }
-        return std::move(total);
-    }
-
-    const std::vector<PartSummary>& m_parts;
+    const RegionPlan& m_plan;
     const std::function<RawMap(size_t)>& m_load;
-    const std::vector<std::string>& m_level_names;
     const Projection& m_projection;
     const BuildOptions& m_options;
-    const StoreSink& m_sink;
-    const size_t m_R; ///< the region level
-    bool m_separable = false;
-    RawMap m_meta;                                 ///< files and classes every region's map shares
-    std::vector<std::vector<uint32_t>> m_class_of; ///< per part, its classes' numbers in m_meta
-    BuildResult m_total;
-    std::mutex m_written_mutex;
-    std::set<std::string> m_written; ///< level/partition of every store written
-    RegionOutput m_coarse_in;        ///< the regions' units and edges for the coarse levels
-    uint64_t m_own_points = 0;
-}; // class RegionBuild
+}; // class RegionAssembler
+
+double seconds_since(std::chrono::steady_clock::time_point t0)
+{
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
 
 } // namespace
+
+RegionPlan plan_regions(const std::vector<PartSummary>& parts, const std::vector<std::string>& level_names,
+                        const Projection& projection, const BuildOptions& options)
+{
+    RegionPlan plan;
+    const size_t nlev = level_names.size(), nparts = parts.size();
+    plan.level = region_level(parts, nlev);
+    // What every region's map shares: files and classes, numbered as a whole
+    // read numbers them (TIGER: every FACES file, then every EDGES file).
+    auto& meta = plan.meta;
+    meta.kind = nparts > 0 ? parts[0].kind : RawMap::Kind::polygon_rings;
+    meta.level_names = level_names;
+    plan.class_of.resize(nparts);
+    const size_t files_per_part = nparts > 0 ? parts[0].files.size() : 0;
+    for (size_t f = 0; f < files_per_part; ++f) {
+        for (size_t i = 0; i < nparts; ++i) {
+            meta.files.push_back(f < parts[i].files.size() ? parts[i].files[f] : std::string());
+        }
+    }
+    for (size_t i = 0; i < nparts; ++i) {
+        for (const auto& c : parts[i].classes) {
+            plan.class_of[i].push_back(meta.intern_class(c));
+        }
+        plan.boxes.push_back(GridBox{parts[i].lo.lon, parts[i].lo.lat, parts[i].hi.lon, parts[i].hi.lat});
+        plan.empty_geometries.push_back(parts[i].empty_geometries);
+    }
+    bool separable = false;
+    const auto groups = group_parts(parts, plan.level, nlev, separable);
+    plan.whole = !separable || groups.size() < 2;
+    if (plan.whole) {
+        return plan;
+    }
+    for (Group& g : make_groups(parts, groups, plan.level)) {
+        RegionPlan::Region region;
+        region.parts = std::move(g.parts);
+        region.own = std::move(g.own);
+        // The other parts whose box meets the own parts' box grown by the reach.
+        const GridBox own_box = own_box_of(plan, region);
+        const auto [ex, ey] = reach_of(own_box, projection, options.halo_m);
+        const GridBox near_box = grown(own_box, ex, ey);
+        std::vector<uint8_t> own(nparts, 0);
+        for (size_t i : region.parts) {
+            own[i] = 1;
+        }
+        for (size_t j = 0; j < nparts; ++j) {
+            if (!own[j] && plan.boxes[j].intersects(near_box)) {
+                region.near.push_back(j);
+            }
+        }
+        plan.regions.push_back(std::move(region));
+    }
+    return plan;
+}
+
+RegionShare build_planned_region(const RegionPlan& plan, size_t r, const std::function<RawMap(size_t)>& load,
+                                 const Projection& projection, const BuildOptions& options, const StoreSink& sink)
+{
+    RegionShare share;
+    const auto t0 = std::chrono::steady_clock::now();
+    RawMap raw = RegionAssembler(plan, load, projection, options).assemble(r, share.own_points);
+    const double load_s = seconds_since(t0);
+    share.map_units = raw.units.size();
+    RegionScope scope;
+    scope.level = plan.level;
+    scope.own = plan.regions[r].own;
+    share.result = build_region(std::move(raw), scope, projection, options, sink, share.coarse);
+    share.result.seconds.emplace_back("regions_load", load_s);
+    return share;
+}
+
+BuildResult build_planned_whole(const RegionPlan& plan, const std::function<RawMap(size_t)>& load,
+                                const Projection& projection, const BuildOptions& options, const StoreSink& sink)
+{
+    const size_t nparts = plan.boxes.size();
+    Assembly whole(plan.meta, plan.class_of);
+    uint64_t empty = 0;
+    for (size_t i = 0; i < nparts; ++i) {
+        RawMap part = load(i);
+        empty += part.empty_geometries;
+        const std::vector<uint8_t> all(part.units.size(), 1);
+        whole.add(i, std::move(part), all, true);
+    }
+    RawMap raw = whole.finish();
+    raw.points_read = whole.own_points();
+    raw.empty_geometries = empty;
+    if (options.log != nullptr) {
+        options.log->info("building the map whole (one region)");
+    }
+    return build_map(std::move(raw), projection, options, sink);
+}
+
+BuildResult finish_planned(const RegionPlan& plan, std::vector<RegionShare> shares, const Projection& projection,
+                           const BuildOptions& options, const StoreSink& sink)
+{
+    const size_t R = plan.level, nlev = plan.meta.level_names.size();
+    BuildResult total;
+    total.levels.resize(nlev);
+    for (size_t L = 0; L < nlev; ++L) {
+        total.levels[L].name = plan.meta.level_names[L];
+    }
+    RegionOutput coarse_in;
+    uint64_t own_points = 0;
+    for (RegionShare& share : shares) {
+        total.region_map_units += share.map_units;
+        own_points += share.own_points;
+        add_result(total, std::move(share.result), R + 1, options.max_problem_samples);
+        std::move(share.coarse.units.begin(), share.coarse.units.end(), std::back_inserter(coarse_in.units));
+        std::move(share.coarse.edges.begin(), share.coarse.edges.end(), std::back_inserter(coarse_in.edges));
+        share = RegionShare();
+    }
+    std::sort(coarse_in.units.begin(), coarse_in.units.end(), [](const RawUnit& a, const RawUnit& b) {
+        return std::pair{a.source.file, a.source.feature} < std::pair{b.source.file, b.source.feature};
+    });
+    const auto t_coarse = std::chrono::steady_clock::now();
+    BuildResult coarse =
+        build_coarse(plan.meta, std::move(coarse_in.units), coarse_in.edges, R, projection, options, sink);
+    for (size_t L = 0; L <= R; ++L) {
+        total.levels[L] = coarse.levels[L];
+    }
+    add_result(total, std::move(coarse), nlev, options.max_problem_samples);
+    total.seconds.emplace_back("coarse_levels", seconds_since(t_coarse));
+    total.input_vertices = own_points;
+    for (const uint64_t e : plan.empty_geometries) {
+        total.problems["empty_geometries"] += e;
+    }
+    return total;
+}
+
+void check_each_store_once(const RegionPlan& plan, const std::vector<std::vector<std::string>>& written,
+                           const std::vector<std::string>& level_names)
+{
+    std::set<std::string> seen;
+    for (const auto& stores : written) {
+        for (const std::string& s : stores) {
+            if (!seen.insert(s).second) {
+                const size_t slash = s.find('/');
+                throw input_error("level '" + s.substr(0, slash) + "': partition '" + s.substr(slash + 1) +
+                                  "' has units under two codes of level '" + level_names[plan.level] +
+                                  "' in different files: the codes do not nest");
+            }
+        }
+    }
+}
 
 BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::function<RawMap(size_t)>& load,
                              const std::vector<std::string>& level_names, const Projection& projection,
                              const BuildOptions& options, const StoreSink& sink)
 {
-    return RegionBuild(parts, load, level_names, projection, options, sink).run();
+    const RegionPlan plan = plan_regions(parts, level_names, projection, options);
+    if (plan.whole) {
+        return build_planned_whole(plan, load, projection, options, sink);
+    }
+    // Every store once: a partition written twice has units under two codes
+    // of the region level in different files.
+    std::mutex mutex;
+    std::set<std::string> written;
+    const StoreSink checked = [&](const chains::ChainStore& s) {
+        {
+            const std::lock_guard lock(mutex);
+            const std::string name = s.level_name + "/" + s.partition;
+            if (!written.insert(name).second) {
+                check_each_store_once(plan, {{name}, {name}}, level_names);
+            }
+        }
+        sink(s);
+    };
+    std::vector<RegionShare> shares;
+    for (size_t r = 0; r < plan.regions.size(); ++r) {
+        shares.push_back(build_planned_region(plan, r, load, projection, options, checked));
+    }
+    return finish_planned(plan, std::move(shares), projection, options, checked);
 }
 
 } // namespace tigerlod::ingest

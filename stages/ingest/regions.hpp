@@ -66,6 +66,63 @@ struct PartSummary {
 /// FACES and EDGES files (read_tiger_parts).
 PartSummary summarize_part(const RawMap& part, size_t max_codes = 4096);
 
+/// How a map is built region by region, decided from its parts' summaries
+/// alone: whether it is built whole (one region, or parts that are not
+/// separable), the region level, what every region's map shares (files and
+/// classes, numbered as a whole read numbers them), and per region its own
+/// parts and codes and the parts near it that its map takes units from.
+/// The workflow runs each region as a job of its own from this.
+struct RegionPlan {
+    bool whole = true;
+    size_t level = 0;                            ///< the region level
+    RawMap meta;                                 ///< kind, level names, files and classes; no units or polylines
+    std::vector<std::vector<uint32_t>> class_of; ///< per part, its classes' numbers in meta
+    struct Region {
+        std::vector<size_t> parts;    ///< its own parts, in file order
+        std::vector<std::string> own; ///< its codes of the region level, sorted
+        std::vector<size_t> near;     ///< the other parts within reach, in file order
+    };
+    std::vector<Region> regions; ///< in the order of their codes; empty when whole
+    /// Each part's box of points (micro-degrees lon/lat; empty for a part
+    /// without points) and its features without geometry.
+    std::vector<GridBox> boxes;
+    std::vector<uint64_t> empty_geometries;
+};
+
+RegionPlan plan_regions(const std::vector<PartSummary>& parts, const std::vector<std::string>& level_names,
+                        const Projection& projection, const BuildOptions& options);
+
+/// What a region's build hands to the finish: its counts (the levels finer
+/// than the region level), the edges and units the coarse levels are built
+/// from, its input points, and the units of its map.
+struct RegionShare {
+    BuildResult result;
+    RegionOutput coarse;
+    uint64_t own_points = 0;
+    uint64_t map_units = 0;
+};
+
+/// Region r of the plan (not whole): its map assembled from its own parts
+/// and the parts near (`load(i)` reads part i; only those are read), its
+/// stores to `sink`.
+RegionShare build_planned_region(const RegionPlan& plan, size_t r, const std::function<RawMap(size_t)>& load,
+                                 const Projection& projection, const BuildOptions& options, const StoreSink& sink);
+
+/// A whole plan's map: every part, every level.
+BuildResult build_planned_whole(const RegionPlan& plan, const std::function<RawMap(size_t)>& load,
+                                const Projection& projection, const BuildOptions& options, const StoreSink& sink);
+
+/// The region level and the coarser ones from every region's share (in the
+/// plan's order), and the totals: what build_by_regions returns.
+BuildResult finish_planned(const RegionPlan& plan, std::vector<RegionShare> shares, const Projection& projection,
+                           const BuildOptions& options, const StoreSink& sink);
+
+/// The partitions two regions both wrote ("level/partition"), as an
+/// input_error naming the first: codes that do not nest across regions.
+/// `written` lists each region's stores.
+void check_each_store_once(const RegionPlan& plan, const std::vector<std::vector<std::string>>& written,
+                           const std::vector<std::string>& level_names);
+
 /// Build a map from its parts, region by region when there are two regions or
 /// more, else whole: polygon parts each read from one file (file index 0 in
 /// it), or TIGER parts each from one county's FACES (file 0) and EDGES (file 1),

@@ -38,6 +38,8 @@ fail() {
 }
 # The jobs a run's output says ran, `stage level/group` a line, sorted.
 ran() { sed -n 's/^\[[0-9]*\/[0-9?]*\] \(color\|simplify\|pack\|verify\) \([^:]*\/[^:]*\):.*/\1 \2/p' "$1" | sort | tr '\n' ' '; }
+# The ingest region jobs a run's output says ran (`r-11 r-44 `).
+ingested() { sed -n 's/^\[[0-9]*\/[0-9?]*\] ingest \(r-[^:]*\):.*/\1/p' "$1" | sort | tr '\n' ' '; }
 # Two versions of DC: as published, and with one tract's code changed.
 ogr2ogr -f "ESRI Shapefile" dc_v1.shp.zip "/vsizip/$data/tl_2010_11_tract10.zip/tl_2010_11_tract10.shp" -nln dc
 ogr2ogr -f "ESRI Shapefile" dc_v2.shp.zip "/vsizip/$data/tl_2010_11_tract10.zip/tl_2010_11_tract10.shp" -nln dc \
@@ -73,6 +75,10 @@ all="color county/g11 color county/g44 color nation/gall color state/gUS color t
 all+="color tract/g44003 color tract/g44005 color tract/g44007 color tract/g44009 "
 [ "$(ran r1.out)" = "$all${all//color/pack}${all//color/simplify}${all//color/verify}" ] ||
   fail "the first run's group jobs: $(ran r1.out)"
+# Ingest too: a plan, a job per state (region), a finish; the folder is a whole run's.
+[ "$(ingested r1.out)" = "r-11 r-44 " ] || fail "the first run's ingest jobs: $(ingested r1.out)"
+"$bin/tigerlod-ingest" p.yaml whole-ingest >/dev/null 2>&1 || fail "tigerlod-ingest whole failed"
+diff -r -x '*-timings.json' whole-ingest out/p/ingest >/dev/null || fail "ingest by jobs differs from a whole run"
 "$bin/tigerlod-color" --config p.yaml out/p/ingest whole-color >/dev/null || fail "tigerlod-color whole failed"
 "$bin/tigerlod-simplify" --config p.yaml --colors whole-color out/p/ingest whole-simp >/dev/null ||
   fail "tigerlod-simplify whole failed"
@@ -135,6 +141,7 @@ cp dc_v2.shp.zip dc.shp.zip
 wf >r5.out 2>&1 || fail "the rebuild after a change failed: $(tail -30 r5.out)"
 [ "$(ran r5.out)" = "color tract/g11001 pack tract/g11001 simplify tract/g11001 verify tract/g11001 " ] ||
   fail "a changed DC tract code reran: $(ran r5.out)"
+[ "$(ingested r5.out)" = "r-11 " ] || fail "a changed DC tract code reran the ingest jobs: $(ingested r5.out)"
 # ... and the result is a clean build's, byte for byte.
 mkdir clean && cp p.yaml dc.shp.zip clean/ && (cd clean && "$repo/scripts/workflow" p.yaml >run.out 2>&1) ||
   fail "the clean build failed"
@@ -167,8 +174,11 @@ grep -q "region 99 matches no store" r7.out || fail "no message for an unknown r
 
 # 6. A bad store fails its own jobs, with its message on the terminal; the
 # other stores' jobs finish; the rerun after the fix does the rest.
+# (Rhode Island's other tract groups forced, so that their jobs run beside
+# it: --regions 44 would also run the state's ingest job, which writes the
+# damaged store again.)
 head -c 100 out/p/ingest/tract/44005.tlc >bad && cat bad >out/p/ingest/tract/44005.tlc
-if wf --regions 44 >r8.out 2>&1; then
+if wf --forcerun out/p/jobs/color/tract/g440{01,03,07,09}.json >r8.out 2>&1; then
   fail "a run with a corrupt store succeeded"
 fi
 grep -q "pipeline: color:tract/g44005 failed (exit 1)" r8.out || fail "no failure line for the bad store: $(cat r8.out)"
@@ -176,8 +186,9 @@ grep -q "tigerlod-color: .*44005.tlc" r8.out || fail "the stage's message is not
 for g in 44001 44003 44007 44009; do
   grep -q "\] simplify tract/g$g:" r8.out || fail "tract/g$g did not finish beside the failed store"
 done
-touch dc.shp.zip # the fix: ingest writes the store again
+touch dc.shp.zip # the fix: ingest's plan finds the store changed since its job wrote it; the job writes it again
 wf >r9.out 2>&1 || fail "the rerun after the fix failed: $(tail -30 r9.out)"
+[ "$(ingested r9.out)" = "r-44 " ] || fail "the fix reran the ingest jobs: $(ingested r9.out)"
 want="color tract/g44005 pack tract/g44005 pack tract/g44009 simplify tract/g44005 "
 want+="verify tract/g44001 verify tract/g44003 verify tract/g44005 verify tract/g44009 "
 [ "$(ran r9.out)" = "$want" ] ||
@@ -197,6 +208,34 @@ wf >r11.out 2>&1 || fail "a run after a rezipped input failed: $(tail -30 r11.ou
 grep -q "verify: CLEAN" r11.out || fail "the tree after a rezipped input is not clean"
 wf >r12.out 2>&1 || fail "a run after the rezipped input failed"
 grep -q "Nothing to be done" r12.out || fail "a run after the rezipped input ran jobs again: $(cat r12.out)"
+
+# 8. A bad input in one state fails that state's ingest job, with its
+# message on the terminal; the other state's job finishes and keeps its
+# stores; the rerun after the fix runs the fixed state's job alone. (Here
+# a tract code in two counties: the tract level built from the fields
+# STATEFP10 + TRACTCE10 does not nest in the counties.)
+ogr2ogr -f "ESRI Shapefile" ri_bad.shp.zip "/vsizip/$data/tl_2010_44_tract10.zip/tl_2010_44_tract10.shp" -nln ri \
+  -dialect SQLite -sql "SELECT Geometry, MTFCC10, INTPTLAT10, INTPTLON10, GEOID10, STATEFP10, COUNTYFP10,
+    CASE WHEN GEOID10 = '44005041300' THEN '017800' ELSE TRACTCE10 END AS TRACTCE10 FROM tl_2010_44_tract10"
+ogr2ogr -f "ESRI Shapefile" ri_good.shp.zip "/vsizip/$data/tl_2010_44_tract10.zip/tl_2010_44_tract10.shp" -nln ri
+cp ri_bad.shp.zip ri.shp.zip
+sed -e 's/^name: p/name: q/' -e "s|inputs: \[dc.shp.zip, .*\]|inputs: [$data/tl_2010_11_tract10.zip, ri.shp.zip]|" \
+  -e 's/{name: state, prefix: 2}/{name: state, fields: [STATEFP10]}/' \
+  -e 's/{name: county, prefix: 5}/{name: county, fields: [STATEFP10, COUNTYFP10]}/' \
+  -e 's/{name: tract, prefix: 11}/{name: tract, fields: [STATEFP10, TRACTCE10]}/' p.yaml >q.yaml
+if "$repo/scripts/workflow" q.yaml >q1.out 2>&1; then
+  fail "a run with a tract in two counties succeeded"
+fi
+grep -q "pipeline: ingest:r-44 failed (exit 1)" q1.out || fail "no failure line for the bad state: $(cat q1.out)"
+grep -q "tigerlod-ingest: level 'tract' does not nest in level 'county'.*ri.shp.zip" q1.out ||
+  fail "the ingest job's message is not on the terminal: $(cat q1.out)"
+[ "$(ingested q1.out)" = "r-11 " ] || fail "the other state's ingest job did not finish: $(ingested q1.out)"
+[ -f out/q/ingest/tract/11001.tlc ] || fail "the other state's stores are not there"
+[ -z "$(ran q1.out)" ] || fail "group jobs ran on a failed ingest: $(ran q1.out)"
+cp ri_good.shp.zip ri.shp.zip
+"$repo/scripts/workflow" q.yaml >q2.out 2>&1 || fail "the rerun after the fix failed: $(tail -30 q2.out)"
+[ "$(ingested q2.out)" = "r-44 " ] || fail "the rerun after the fix ran the ingest jobs: $(ingested q2.out)"
+grep -q "verify: CLEAN" q2.out || fail "the tree after the fix is not clean"
 
 if [ "$failures" -gt 0 ]; then
   echo "$failures failure(s)"

@@ -79,7 +79,8 @@ sed "s/^name: wf/name: bad/; s#tl_2020_51063_faces.zip#tl_2020_51063_edges.zip#"
 if "$repo/scripts/workflow" bad.yaml >bad.out 2>&1; then
   fail "a run with EDGES given as FACES succeeded"
 fi
-grep -q "pipeline: ingest failed (exit [0-9]); the last lines of out/bad/logs/ingest.log:" bad.out ||
+# (One county's file: ingest is one job, `whole`, that reads it.)
+grep -q "pipeline: ingest:whole failed (exit [0-9]); the last lines of out/bad/logs/ingest/whole.log:" bad.out ||
   fail "no log tail on the terminal: $(cat bad.out)"
 grep -q "tigerlod-ingest: .*tl_2020_51063_edges.zip" bad.out || fail "the stage's own message is not on the terminal"
 

@@ -1,12 +1,15 @@
-// A polygon map built region by region gives what the whole build gives.
+// A polygon map built region by region gives what the whole build gives,
+// also with each region built alone as a job and handed on as bytes.
 #include "core/errors.hpp"
 #include "stages/ingest/map_builder.hpp"
+#include "stages/ingest/region_share.hpp"
 #include "stages/ingest/regions.hpp"
 
 #include <gtest/gtest.h>
 
 #include <map>
 #include <mutex>
+#include <set>
 #include <span>
 #include <tuple>
 
@@ -218,6 +221,125 @@ TEST(Regions, ACountyUnderTwoStatesIsAnInputError)
         EXPECT_NE(
             std::string(e.what()).find("level 'county' does not nest in level 'state': its unit 100 lies in state 10"),
             std::string::npos)
+            << e.what();
+    }
+}
+
+namespace {
+
+/// Each region built alone, as the workflow's jobs build them: parts read
+/// back from their bytes (and only the region's own and near ones), shares
+/// handed on as bytes, the regions in reverse order; then the finish.
+Out by_region_jobs(const std::vector<RawMap>& parts, const BuildOptions& opt)
+{
+    std::vector<PartSummary> summaries;
+    std::vector<std::string> bytes;
+    for (const auto& p : parts) {
+        summaries.push_back(summarize_part(p));
+        bytes.push_back(encode_raw(p));
+    }
+    const RegionPlan plan = plan_regions(summaries, parts.front().level_names, proj(), opt);
+    EXPECT_FALSE(plan.whole);
+    Out o;
+    std::mutex m;
+    std::vector<RegionShare> shares(plan.regions.size());
+    for (size_t r = plan.regions.size(); r-- > 0;) {
+        const auto& region = plan.regions[r];
+        std::set<size_t> allowed(region.parts.begin(), region.parts.end());
+        allowed.insert(region.near.begin(), region.near.end());
+        const std::function<RawMap(size_t)> load = [&](size_t i) {
+            EXPECT_TRUE(allowed.count(i)) << "region " << r << " read part " << i << ", not in its plan";
+            return decode_raw(std::as_bytes(std::span(bytes[i].data(), bytes[i].size())), "part");
+        };
+        RegionJobShare job;
+        job.share = build_planned_region(plan, r, load, proj(), opt, collect(o, m));
+        const std::string encoded = encode_share(job);
+        RegionJobShare back = decode_share(std::as_bytes(std::span(encoded.data(), encoded.size())), "share");
+        EXPECT_EQ(encode_share(back), encoded);
+        shares[r] = std::move(back.share);
+    }
+    o.result = finish_planned(plan, std::move(shares), proj(), opt, collect(o, m));
+    return o;
+}
+
+} // namespace
+
+TEST(Regions, EachRegionAsAJobOfItsOwnGivesTheWholeBuild)
+{
+    std::vector<RawMap> parts = {state_part(0, 0), state_part(1, 4), state_part(2, 8), state_part(3, 20)};
+    for (double halo : {1000.0, 3000.0}) {
+        BuildOptions opt;
+        opt.halo_m = halo;
+        opt.max_problem_samples = 5;
+        const Out w = whole(parts, opt);
+        const Out j = by_region_jobs(parts, opt);
+        expect_same(w, j);
+        EXPECT_TRUE(built_by_regions(j.result));
+    }
+    // The island state is near no other: its job reads its own part alone.
+    BuildOptions opt;
+    std::vector<PartSummary> summaries;
+    for (const auto& p : parts) {
+        summaries.push_back(summarize_part(p));
+    }
+    const RegionPlan plan = plan_regions(summaries, parts.front().level_names, proj(), opt);
+    ASSERT_EQ(plan.regions.size(), 4U);
+    EXPECT_TRUE(plan.regions[3].near.empty());
+    EXPECT_EQ(plan.regions[1].near, (std::vector<size_t>{0, 2}));
+}
+
+TEST(Regions, APartAndAShareKeepTheirBytesAndRefuseTruncation)
+{
+    const RawMap part = state_part(1, 4);
+    const std::string bytes = encode_raw(part);
+    const RawMap back = decode_raw(std::as_bytes(std::span(bytes.data(), bytes.size())), "p");
+    EXPECT_EQ(encode_raw(back), bytes);
+    EXPECT_EQ(back.coords, part.coords);
+    EXPECT_EQ(back.units.size(), part.units.size());
+    for (size_t n : {size_t{0}, size_t{7}, size_t{8}, bytes.size() / 2, bytes.size() - 1}) {
+        EXPECT_THROW(decode_raw(std::as_bytes(std::span(bytes.data(), n)), "p"), format_error) << n;
+    }
+    const std::string longer = bytes + "x";
+    EXPECT_THROW(decode_raw(std::as_bytes(std::span(longer.data(), longer.size())), "p"), format_error);
+
+    std::vector<RawMap> parts = {state_part(0, 0), state_part(1, 4)};
+    std::vector<PartSummary> summaries;
+    for (const auto& p : parts) {
+        summaries.push_back(summarize_part(p));
+    }
+    const BuildOptions opt;
+    const RegionPlan plan = plan_regions(summaries, parts.front().level_names, proj(), opt);
+    RegionJobShare job;
+    job.job = "r-10";
+    job.stores = {"county/10"};
+    job.store_bytes = {12};
+    job.store_mtimes = {-34};
+    job.share = build_planned_region(
+        plan, 0, [&](size_t i) { return parts.at(i); }, proj(), opt, [](const chains::ChainStore&) {});
+    ASSERT_FALSE(job.share.coarse.edges.empty());
+    const std::string share = encode_share(job);
+    const RegionJobShare head = decode_share_head(std::as_bytes(std::span(share.data(), share.size())), "s");
+    EXPECT_EQ(head.job, "r-10");
+    EXPECT_EQ(head.store_mtimes, std::vector<int64_t>{-34});
+    for (size_t n : {size_t{0}, size_t{9}, share.size() / 2, share.size() - 1}) {
+        EXPECT_THROW(decode_share(std::as_bytes(std::span(share.data(), n)), "s"), format_error) << n;
+    }
+}
+
+TEST(Regions, ACountyUnderTwoStatesIsAnInputErrorOfTheFinishToo)
+{
+    // As ACountyUnderTwoStatesIsAnInputError, with the regions built apart:
+    // two jobs both wrote the tract store of county 100, and the finish names it.
+    std::vector<std::string> a{"county/10", "tract/100"}, b{"county/11", "tract/100"};
+    RegionPlan plan;
+    plan.level = 1;
+    try {
+        check_each_store_once(plan, {a, b}, {"nation", "state", "county", "tract"});
+        FAIL() << "expected an input error";
+    } catch (const input_error& e) {
+        EXPECT_NE(std::string(e.what()).find("level 'tract': partition '100' has units under two codes of level "
+                                             "'state' in different files"),
+                  std::string::npos)
             << e.what();
     }
 }

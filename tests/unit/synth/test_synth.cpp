@@ -331,6 +331,105 @@ TEST_F(SynthCli, IngestFindsItPlanarAndCountsWhatTheManifestSays)
 
 namespace {
 
+/// Every file under `dir` but the timings, by path relative to it: its bytes.
+std::map<std::string, std::string> folder_bytes(const fs::path& dir)
+{
+    std::map<std::string, std::string> out;
+    for (const auto& e : fs::recursive_directory_iterator(dir)) {
+        if (e.is_regular_file() && e.path().filename() != "ingest-timings.json") {
+            out[e.path().lexically_relative(dir).string()] = slurp(e.path());
+        }
+    }
+    return out;
+}
+
+std::vector<std::string> planned_jobs(const fs::path& parts)
+{
+    return read_json(parts / "plan.json")["jobs"].get<std::vector<std::string>>();
+}
+
+} // namespace
+
+TEST_F(SynthCli, IngestInRegionJobsWritesTheWholeRunsBytesAndRepairsADamagedStore)
+{
+    // Three states of three counties as TIGER files, a part per county: the
+    // plan, a job per state (run in reverse order), the finish; the folder is
+    // the one a whole ingest writes, byte for byte.
+    const fs::path synth = m_dir / "synth";
+    ASSERT_EQ(run("synth", synth.string() + " --seed 5 --states 3 --counties-per-state 3 --target-vertices 90000 "
+                                            "--cell-m 200")
+                  .code,
+              0);
+    const std::string cfg = config(synth).string();
+    const fs::path whole = m_dir / "whole", jobs = m_dir / "jobs", parts = m_dir / "parts";
+    ASSERT_EQ(run("ingest", cfg + " " + whole.string()).code, 0);
+    const std::string common = " --parts " + parts.string() + " " + cfg + " " + jobs.string();
+    const Result plan = run("ingest", "--plan" + common);
+    ASSERT_EQ(plan.code, 0) << plan.err;
+    EXPECT_NE(plan.out.find("9 parts (9 rewritten), 3 jobs"), std::string::npos) << plan.out;
+    auto names = planned_jobs(parts);
+    ASSERT_EQ(names, (std::vector<std::string>{"r-01", "r-02", "r-04"})); // FIPS codes: no 03
+    for (auto it = names.rbegin(); it != names.rend(); ++it) {
+        const Result r = run("ingest", "--region " + *it + " --threads 1" + common);
+        ASSERT_EQ(r.code, 0) << r.err;
+    }
+    // The finish refuses a missing share, naming the job to run.
+    fs::rename(parts / "shares" / "r-02.share", m_dir / "r-02.share");
+    const Result missing = run("ingest", "--finish" + common);
+    EXPECT_EQ(missing.code, 2);
+    EXPECT_NE(missing.err.find("r-02.share is missing: run --region r-02 first"), std::string::npos) << missing.err;
+    fs::rename(m_dir / "r-02.share", parts / "shares" / "r-02.share");
+    const Result finish = run("ingest", "--finish" + common);
+    ASSERT_EQ(finish.code, 0) << finish.err;
+    const auto want = folder_bytes(whole);
+    EXPECT_EQ(folder_bytes(jobs), want);
+
+    // Planned again with nothing changed: no part or spec is written.
+    const auto spec_time = fs::last_write_time(parts / "jobs" / "r-01.json");
+    const Result again = run("ingest", "--plan" + common);
+    ASSERT_EQ(again.code, 0) << again.err;
+    EXPECT_NE(again.out.find("9 parts (0 rewritten), 3 jobs (0 specs changed, 0 with a store changed since)"),
+              std::string::npos)
+        << again.out;
+    EXPECT_EQ(fs::last_write_time(parts / "jobs" / "r-01.json"), spec_time);
+
+    // A store damaged by hand: the plan gives its job a new spec (a workflow
+    // engine reruns it), the job writes the store again, and the folder is
+    // the whole run's again. Another state's job, rerun, writes nothing.
+    const fs::path victim = jobs / "tract" / "02001.tlc";
+    ASSERT_TRUE(fs::exists(victim));
+    std::ofstream(victim, std::ios::binary | std::ios::trunc) << "not a store";
+    const Result damaged = run("ingest", "--plan" + common);
+    ASSERT_EQ(damaged.code, 0) << damaged.err;
+    EXPECT_NE(damaged.out.find("(1 specs changed, 1 with a store changed since)"), std::string::npos) << damaged.out;
+    EXPECT_NE(slurp(parts / "jobs" / "r-02.json").find("\"repair\": \"tract/02001 changed since the job wrote it"),
+              std::string::npos);
+    EXPECT_EQ(fs::last_write_time(parts / "jobs" / "r-01.json"), spec_time);
+    const Result repair = run("ingest", "--region r-02" + common);
+    ASSERT_EQ(repair.code, 0) << repair.err;
+    EXPECT_NE(repair.out.find("(1 rewritten)"), std::string::npos) << repair.out;
+    const Result other = run("ingest", "--region r-04" + common);
+    EXPECT_NE(other.out.find("(0 rewritten)"), std::string::npos) << other.out;
+    ASSERT_EQ(run("ingest", "--finish" + common).code, 0);
+    EXPECT_EQ(folder_bytes(jobs), want);
+    // Repaired, the next plan keeps the spec as it is (the job does not run again).
+    const auto repaired_time = fs::last_write_time(parts / "jobs" / "r-02.json");
+    ASSERT_EQ(run("ingest", "--plan" + common).code, 0);
+    EXPECT_EQ(fs::last_write_time(parts / "jobs" / "r-02.json"), repaired_time);
+
+    // A job the plan does not have, and a part changed behind the plan's back.
+    const Result unknown = run("ingest", "--region r-99" + common);
+    EXPECT_EQ(unknown.code, 2);
+    EXPECT_NE(unknown.err.find("no job 'r-99' in the plan"), std::string::npos) << unknown.err;
+    std::ofstream(parts / "parts" / "0.raw", std::ios::binary | std::ios::app) << "x";
+    const Result changed = run("ingest", "--region r-01" + common);
+    EXPECT_EQ(changed.code, 2);
+    EXPECT_NE(changed.err.find("0.raw: the part changed since the plan; run --plan again"), std::string::npos)
+        << changed.err;
+}
+
+namespace {
+
 /// Quantile p of v (sorted in place), as the manifest takes it.
 double quantile(std::vector<double>& v, int p)
 {
