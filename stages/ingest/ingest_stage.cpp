@@ -125,7 +125,13 @@ std::string IngestStage::help_notes() const
            "  manifest.json            inputs with SHA-256, resolved options, version (deterministic)\n"
            "  ingest-timings.json      seconds, vertices per second, peak memory (varies by run)\n"
            "A summary goes to stdout. Problems found in the data (crossings, overlaps, repaired\n"
-           "spikes...) are counted and located in the report; chains involved carry the problem flag.\n";
+           "spikes...) are counted and located in the report; chains involved carry the problem flag.\n"
+           "\nIn jobs (the workflow's), the same OUTPUT, byte for byte:\n"
+           "  tigerlod-ingest --plan --parts DIR CONFIG OUTPUT       once; DIR/plan.json lists the jobs\n"
+           "  tigerlod-ingest --region JOB --parts DIR CONFIG OUTPUT  for each job, in any order\n"
+           "  tigerlod-ingest --finish --parts DIR CONFIG OUTPUT     after every job\n"
+           "DIR holds parts/<i>.raw (the inputs read once), jobs/<job>.json (a region's spec: its parts'\n"
+           "digests; rewritten only when it changes), shares/<job>.share, index.json and plan.json.\n";
 }
 
 namespace {

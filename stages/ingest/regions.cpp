@@ -275,6 +275,12 @@ PartSummary summarize_part(const RawMap& part, size_t max_codes)
             release(codes);
             s.many[L] = 1;
         }
+        if (s.many[L] != 0 || codes.size() > 1) {
+            // The region level is at most this one (this part has two codes
+            // here): the finer levels' codes are never asked for. (The 100 M
+            // synthetic nation's blocks: the plan job's peak 820 -> 628 MiB.)
+            break;
+        }
     }
     for (const auto& p : part.coords) {
         s.lo.lon = std::min(s.lo.lon, p.lon);

@@ -49,7 +49,10 @@ namespace tigerlod::ingest {
 /// What the regions plan needs of one part, gathered when it is read.
 struct PartSummary {
     /// Distinct codes per level, sorted; a level with more than `max_codes`
-    /// codes lists none and sets `many`.
+    /// codes lists none and sets `many`. Only down to the first level where
+    /// the part has more than one code (or many): the region level is never
+    /// below it, and the finer levels' codes would be the summaries' memory
+    /// (those levels list none).
     std::vector<std::vector<std::string>> codes;
     std::vector<uint8_t> many;
     LonLatE6 lo{INT32_MAX, INT32_MAX}, hi{INT32_MIN, INT32_MIN}; ///< box of the points
