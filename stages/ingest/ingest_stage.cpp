@@ -436,7 +436,8 @@ std::string sha256_of(std::string_view bytes)
     return h.hex_digest();
 }
 
-json read_json(const fs::path& path, const char* what, const char* schema)
+/// A job file's JSON; `bytes` (if given) gets the bytes it was parsed from.
+json read_json(const fs::path& path, const char* what, const char* schema, std::string* bytes = nullptr)
 {
     std::error_code ec;
     if (!fs::is_regular_file(path, ec)) {
@@ -444,7 +445,11 @@ json read_json(const fs::path& path, const char* what, const char* schema)
     }
     json j;
     try {
-        j = json::parse(read_file(path));
+        std::string text = read_file(path);
+        j = json::parse(text);
+        if (bytes != nullptr) {
+            *bytes = std::move(text);
+        }
     } catch (const json::exception& e) {
         throw input_error(path.string() + ": not JSON: " + e.what());
     }
@@ -825,12 +830,13 @@ int IngestStage::run_region(const StageContext& ctx, const Resolved& r)
         throw usage_error("--region '" + job + "': a job's name is letters, digits, '-', '_' and '%'");
     }
     const fs::path spec_path = spec_file(dir, job);
+    std::string spec_bytes;
     const json spec = read_json(
         spec_path,
         ("no job '" + job + "' in the plan: run --plan first (" + (dir / "plan.json").string() + " lists the jobs)")
             .c_str(),
-        spec_schema);
-    const std::string spec_sha = sha256_of(read_file(spec_path));
+        spec_schema, &spec_bytes);
+    const std::string spec_sha = sha256_of(spec_bytes);
     if (spec.at("options") != job_options_json(cfg, r.projection, m_max_problem_samples)) {
         throw usage_error(spec_path.string() + ": planned with other options (" + spec.at("options").dump() +
                           "); run --plan again");
@@ -1045,7 +1051,13 @@ int IngestStage::run(const StageContext& ctx)
             throw usage_error("--whole-map builds in one process; the jobs' plan decides by the data");
         }
         const Resolved r{cfg, projection, threads};
-        return m_plan ? run_plan(ctx, r) : !m_region.empty() ? run_region(ctx, r) : run_finish(ctx, r);
+        try {
+            return m_plan ? run_plan(ctx, r) : !m_region.empty() ? run_region(ctx, r) : run_finish(ctx, r);
+        } catch (const json::exception& e) {
+            // A spec, index or plan with a field missing or of another type.
+            throw input_error(m_parts + ": a job file is not what this version of tigerlod-ingest writes (" + e.what() +
+                              "); run --plan again");
+        }
     }
     // The manifest's input digests are computed beside the work, not after it.
     const InputFiles input_files = input_files_of(cfg);

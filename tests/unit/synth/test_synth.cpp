@@ -421,6 +421,13 @@ TEST_F(SynthCli, IngestInRegionJobsWritesTheWholeRunsBytesAndRepairsADamagedStor
     const Result unknown = run("ingest", "--region r-99" + common);
     EXPECT_EQ(unknown.code, 2);
     EXPECT_NE(unknown.err.find("no job 'r-99' in the plan"), std::string::npos) << unknown.err;
+    // A spec without a field it needs: a data error naming the folder, not an internal one.
+    std::ofstream(parts / "jobs" / "r-04.json", std::ios::trunc)
+        << R"({"schema": "tigerlod.ingest-job/1", "job": "r-04", "mode": "region"})";
+    const Result torn = run("ingest", "--region r-04" + common);
+    EXPECT_EQ(torn.code, 1);
+    EXPECT_NE(torn.err.find("a job file is not what this version of tigerlod-ingest writes"), std::string::npos)
+        << torn.err;
     std::ofstream(parts / "parts" / "0.raw", std::ios::binary | std::ios::app) << "x";
     const Result changed = run("ingest", "--region r-01" + common);
     EXPECT_EQ(changed.code, 2);
