@@ -154,6 +154,19 @@ InputFiles input_files_of(const IngestConfig& cfg)
     return input_files;
 }
 
+/// What a run reads, which its outputs must not replace: the config, the
+/// inputs, and `more`.
+std::vector<fs::path> reads_of(const std::string& config, const InputFiles& input_files,
+                               const std::vector<fs::path>& more = {})
+{
+    std::vector<fs::path> reads{config};
+    reads.insert(reads.end(), more.begin(), more.end());
+    for (const auto& f : input_files) {
+        reads.emplace_back(f.first);
+    }
+    return reads;
+}
+
 /// SHA-256 of each input file, in input_files order.
 std::vector<std::string> digests_of(const InputFiles& input_files)
 {
@@ -566,13 +579,16 @@ std::pair<uint64_t, int64_t> stamp_of(const fs::path& file)
             static_cast<int64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(t.time_since_epoch()).count())};
 }
 
+/// A planned job and its spec.
+using JobSpecs = std::vector<std::pair<std::string, json>>;
+
 /// The plan: the jobs whose stores were changed or removed since they ran
 /// (by hand, or a disk's fault), each with the store and why.
 std::map<std::string, std::pair<std::string, std::string>> damaged_jobs(const fs::path& dir, const fs::path& out,
-                                                                        const std::vector<std::string>& jobs)
+                                                                        const JobSpecs& specs)
 {
     std::map<std::string, std::pair<std::string, std::string>> damaged;
-    for (const auto& job : jobs) {
+    for (const auto& [job, spec] : specs) {
         const fs::path file = share_file(dir, job);
         std::error_code ec;
         if (!fs::is_regular_file(file, ec)) {
@@ -641,6 +657,68 @@ size_t remove_stale_stores(const fs::path& out, const IngestConfig& cfg, const s
     return removed;
 }
 
+/// The plan: the part files, specs and shares of jobs it no longer has, removed.
+void remove_unplanned_files(const fs::path& dir, size_t nparts, const JobSpecs& specs)
+{
+    std::set<std::string> keep_files;
+    for (size_t i = 0; i < nparts; ++i) {
+        keep_files.insert(part_file(dir, i).filename().string());
+    }
+    for (const auto& [job, spec] : specs) {
+        keep_files.insert(job + ".json");
+        keep_files.insert(job + ".share");
+    }
+    for (const char* sub : {"parts", "jobs", "shares"}) {
+        for (const auto& e : fs::directory_iterator(dir / sub)) {
+            const std::string entry = e.path().filename().string();
+            if (e.is_regular_file() && !keep_files.contains(entry) &&
+                (entry.ends_with(".raw") || entry.ends_with(".json") || entry.ends_with(".share"))) {
+                fs::remove(e.path());
+            }
+        }
+    }
+}
+
+/// The plan's specs, each written only where its bytes change. A job whose
+/// stores were changed or removed since it ran (`damaged`) gets a spec that
+/// says so (`repair`): its new bytes rerun it, and it writes them again. The
+/// spec keeps saying so until something else in it changes. Returns the
+/// specs written.
+size_t write_specs(const fs::path& dir, const fs::path& out, JobSpecs& specs,
+                   const std::map<std::string, std::pair<std::string, std::string>>& damaged, const Log& log)
+{
+    size_t written = 0;
+    for (auto& [job, spec] : specs) {
+        const fs::path file = spec_file(dir, job);
+        if (auto it = damaged.find(job); it != damaged.end()) {
+            const auto& [store, why] = it->second;
+            log.info("job " + job + " runs again: " + (store.empty() ? why : "its store " + store + " " + why));
+            std::string repair = store + " " + why;
+            if (!store.empty()) {
+                const auto [size, mtime] = stamp_of(store_path(out, store));
+                repair += " (" + std::to_string(size) + " bytes, time " + std::to_string(mtime) + ")";
+            }
+            spec["repair"] = repair;
+        } else {
+            std::error_code ec;
+            if (fs::is_regular_file(file, ec)) {
+                try {
+                    json old = json::parse(read_file(file));
+                    old.erase("repair");
+                    if (old == spec) {
+                        continue; // the same spec, repaired or not: kept as it is
+                    }
+                } catch (const std::exception&) {
+                    // not a spec: written again below
+                }
+            }
+        }
+        written += write_file_if_changed(file, spec.dump(1) + "\n") ? 1 : 0;
+    }
+    sync_to_disk(dir / "jobs");
+    return written;
+}
+
 } // namespace
 
 int IngestStage::run_plan(const StageContext& ctx, const Resolved& r)
@@ -648,18 +726,9 @@ int IngestStage::run_plan(const StageContext& ctx, const Resolved& r)
     const IngestConfig& cfg = r.cfg;
     const fs::path dir(m_parts);
     const InputFiles input_files = input_files_of(cfg);
-    std::vector<fs::path> reads{m_config};
-    for (const auto& f : input_files) {
-        reads.emplace_back(f.first);
-    }
+    const std::vector<fs::path> reads = reads_of(m_config, input_files);
     refuse_to_replace_inputs(dir, reads);
-    auto digests = std::async(std::launch::async, [&input_files] {
-        std::vector<std::string> out;
-        for (const auto& f : input_files) {
-            out.push_back(sha256_file(f.first));
-        }
-        return out;
-    });
+    auto digests = std::async(std::launch::async, [&input_files] { return digests_of(input_files); });
     for (const char* sub : {"parts", "jobs", "shares"}) {
         fs::create_directories(dir / sub);
         (void)remove_dead_leftovers(dir / sub);
@@ -671,7 +740,7 @@ int IngestStage::run_plan(const StageContext& ctx, const Resolved& r)
         level_names.push_back(l.name);
     }
     const double t0 = ctx.log.elapsed_s();
-    std::vector<std::pair<std::string, json>> specs; // job, spec
+    JobSpecs specs;
     RegionPlan plan;
     std::string mode;
     std::vector<std::string> input_digests;
@@ -745,64 +814,13 @@ int IngestStage::run_plan(const StageContext& ctx, const Resolved& r)
         j["inputs"] = input_digests;
         specs.emplace_back("whole", std::move(j));
     }
-    // Parts, specs and shares of what the plan no longer has.
-    std::set<std::string> keep_files;
-    for (size_t i = 0; i < nparts; ++i) {
-        keep_files.insert(part_file(dir, i).filename().string());
-    }
-    for (const auto& [job, spec] : specs) {
-        keep_files.insert(job + ".json");
-        keep_files.insert(job + ".share");
-    }
-    for (const char* sub : {"parts", "jobs", "shares"}) {
-        for (const auto& e : fs::directory_iterator(dir / sub)) {
-            const std::string entry = e.path().filename().string();
-            if (e.is_regular_file() && !keep_files.contains(entry) &&
-                (entry.ends_with(".raw") || entry.ends_with(".json") || entry.ends_with(".share"))) {
-                fs::remove(e.path());
-            }
-        }
-    }
-    // A job whose stores were changed or removed since it ran gets a spec
-    // that says so (`repair`): its new bytes rerun it, and it writes them
-    // again. The spec keeps saying so until something else in it changes.
-    std::vector<std::string> job_names;
-    for (const auto& [job, spec] : specs) {
-        job_names.push_back(job);
-    }
-    const auto damaged = damaged_jobs(dir, m_output, job_names);
-    size_t specs_changed = 0;
+    remove_unplanned_files(dir, nparts, specs);
+    const auto damaged = damaged_jobs(dir, m_output, specs);
+    const size_t specs_changed = write_specs(dir, m_output, specs, damaged, ctx.log);
     json jobs = json::array();
-    for (auto& [job, spec] : specs) {
-        const fs::path file = spec_file(dir, job);
-        if (auto it = damaged.find(job); it != damaged.end()) {
-            const auto& [store, why] = it->second;
-            ctx.log.info("job " + job + " runs again: " + (store.empty() ? why : "its store " + store + " " + why));
-            std::string repair = store + " " + why;
-            if (!store.empty()) {
-                const auto [size, mtime] = stamp_of(store_path(m_output, store));
-                repair += " (" + std::to_string(size) + " bytes, time " + std::to_string(mtime) + ")";
-            }
-            spec["repair"] = repair;
-        } else {
-            std::error_code ec;
-            if (fs::is_regular_file(file, ec)) {
-                try {
-                    json old = json::parse(read_file(file));
-                    old.erase("repair");
-                    if (old == spec) {
-                        jobs.push_back(job);
-                        continue; // the same spec, repaired or not: kept as it is
-                    }
-                } catch (const std::exception&) {
-                    // not a spec: written again below
-                }
-            }
-        }
-        specs_changed += write_file_if_changed(file, spec.dump(1) + "\n") ? 1 : 0;
+    for (const auto& [job, spec] : specs) {
         jobs.push_back(job);
     }
-    sync_to_disk(dir / "jobs");
     json index{{"schema", index_schema}, {"mode", mode}, {"jobs", jobs}, {"options", opts}};
     put_meta(index, plan);
     index["empty_geometries"] = plan.empty_geometries;
@@ -842,11 +860,8 @@ int IngestStage::run_region(const StageContext& ctx, const Resolved& r)
                           "); run --plan again");
     }
     const BuildOptions options = build_options(cfg, r.threads, m_max_problem_samples, ctx.log);
-    std::vector<fs::path> reads{m_config, dir};
-    for (const auto& f : input_files_of(cfg)) {
-        reads.emplace_back(f.first);
-    }
-    InPlaceStores out(m_output, reads);
+    const InputFiles input_files = input_files_of(cfg);
+    InPlaceStores out(m_output, reads_of(m_config, input_files, {dir}));
     const StoreSink sink = [&](const chains::ChainStore& s) { out.write(s); };
     const double t0 = ctx.log.elapsed_s();
     RegionJobShare share;
@@ -854,7 +869,7 @@ int IngestStage::run_region(const StageContext& ctx, const Resolved& r)
     share.spec_sha256 = spec_sha;
     const std::string mode = spec.value("mode", "");
     if (mode == "direct") {
-        if (spec.at("inputs") != json(digests_of(input_files_of(cfg)))) {
+        if (spec.at("inputs") != json(digests_of(input_files))) {
             throw usage_error(spec_path.string() + ": the inputs changed since the plan; run --plan again");
         }
         RawMap raw = read_dataset(cfg, r.threads, ctx.log);
@@ -951,12 +966,8 @@ int IngestStage::run_finish(const StageContext& ctx, const Resolved& r)
     plan.whole = mode != "regions";
     plan.empty_geometries = index.at("empty_geometries").get<std::vector<uint64_t>>();
     check_each_store_once(plan, written, plan.meta.level_names);
-    std::vector<fs::path> reads{m_config, dir};
     const InputFiles input_files = input_files_of(cfg);
-    for (const auto& f : input_files) {
-        reads.emplace_back(f.first);
-    }
-    InPlaceStores out(m_output, reads);
+    InPlaceStores out(m_output, reads_of(m_config, input_files, {dir}));
     Built built;
     if (plan.whole) {
         if (shares.size() != 1) {
@@ -1061,17 +1072,8 @@ int IngestStage::run(const StageContext& ctx)
     }
     // The manifest's input digests are computed beside the work, not after it.
     const InputFiles input_files = input_files_of(cfg);
-    auto digests = std::async(std::launch::async, [&input_files] {
-        std::vector<std::string> out;
-        for (const auto& f : input_files) {
-            out.push_back(sha256_file(f.first));
-        }
-        return out;
-    });
-    std::vector<fs::path> reads{m_config};
-    for (const auto& f : input_files) {
-        reads.emplace_back(f.first);
-    }
+    auto digests = std::async(std::launch::async, [&input_files] { return digests_of(input_files); });
+    const std::vector<fs::path> reads = reads_of(m_config, input_files);
     OutputDir out(m_output, m_overwrite, reads);
     // Stores of unchanged regions keep their times: the engine reruns only the others' jobs.
     out.keep_times_of_unchanged_files(".tlc");

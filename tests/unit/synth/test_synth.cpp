@@ -417,6 +417,19 @@ TEST_F(SynthCli, IngestInRegionJobsWritesTheWholeRunsBytesAndRepairsADamagedStor
     ASSERT_EQ(run("ingest", "--plan" + common).code, 0);
     EXPECT_EQ(fs::last_write_time(parts / "jobs" / "r-02.json"), repaired_time);
 
+    // A job run at other options than the plan's; a share built from another
+    // spec than the job's now.
+    const Result options = run("ingest", "--region r-01 --halo-m 5" + common);
+    EXPECT_EQ(options.code, 2);
+    EXPECT_NE(options.err.find("r-01.json: planned with other options"), std::string::npos) << options.err;
+    std::ofstream(parts / "jobs" / "r-01.json", std::ios::app) << "\n";
+    const Result older = run("ingest", "--finish" + common);
+    EXPECT_EQ(older.code, 2);
+    EXPECT_NE(older.err.find("r-01.share: built from an older plan of the job; run --region r-01 again"),
+              std::string::npos)
+        << older.err;
+    EXPECT_EQ(folder_bytes(jobs), want); // the refused finish wrote nothing
+
     // A job the plan does not have, and a part changed behind the plan's back.
     const Result unknown = run("ingest", "--region r-99" + common);
     EXPECT_EQ(unknown.code, 2);
