@@ -41,7 +41,9 @@ std::vector<Key> input_keys()
         section("workflow", "how `pipeline/Snakefile` cuts the run into jobs"),
         entry("workflow.job_mb", Type::number,
               "color and simplify: a job per group of a level's stores whose names share a prefix, the shortest "
-              "prefix for which no group holds more than this many MB of stores",
+              "prefix for which no group holds more than this many MB of stores (pack and verify follow these "
+              "groups); ingest's read jobs group the input parts (files, or a county's FACES and EDGES) by their "
+              "names and sizes the same way",
               "32", {0, 1e6, true}),
         entry("workflow.job_threads", Type::integer,
               "threads of each simplify, pack and verify job (`--threads`; Snakemake runs fewer where it has fewer "

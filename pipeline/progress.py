@@ -28,6 +28,8 @@ def _name(info):
     where = "/".join(str(wc[k]) for k in ("level", "group") if k in wc)
     if "job" in wc:  # an ingest region's job: `ingest r-44`
         return f"{stage} {wc['job']}"
+    if "read" in wc:  # an ingest read job: `ingest read g0`
+        return f"{stage} read {wc['read']}"
     return f"{stage} {where}".strip() if rule.endswith("_group") else rule.replace("_", " ")
 
 

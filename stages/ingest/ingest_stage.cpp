@@ -99,9 +99,18 @@ void IngestStage::add_args(ArgSet& args)
              "      (the same output; memory then follows the dataset, not its largest region)");
     args.group("Ingest in jobs (the workflow's: each also runs by hand)");
     args.add("parts", &m_parts, "the jobs' folder: the parts put aside, the plan, each region's spec and share", "DIR");
+    args.add("list", &m_list,
+             "list the dataset's parts (a polygon file, or a TIGER county's FACES and EDGES) in\n"
+             "      DIR/reads.json, with their names and sizes, for the read jobs; nothing is read");
+    args.add("read", &m_read,
+             "read the parts of --select and put them aside in DIR, with what the plan needs of them in\n"
+             "      DIR/reads/NAME.sum",
+             "NAME");
+    args.add("select", &m_select, "the parts --read reads, by their numbers in DIR/reads.json: `0-4,7`", "PARTS");
     args.add("plan", &m_plan,
-             "read every input once, put its parts aside in DIR and plan the jobs: DIR/plan.json lists\n"
-             "      them (a region each, or one job `whole`); OUTPUT is not touched");
+             "plan the jobs from the parts: those a read job put aside (while their files have not\n"
+             "      changed since) and the others read here; DIR/plan.json lists the jobs (a region each, or\n"
+             "      one job `whole`); OUTPUT is not touched");
     args.add("region", &m_region,
              "build the stores of one planned job (`r-<code>` or `whole`) into OUTPUT in place, a store\n"
              "      whose bytes did not change keeping its time; its share goes to DIR/shares/JOB.share",
@@ -127,11 +136,15 @@ std::string IngestStage::help_notes() const
            "A summary goes to stdout. Problems found in the data (crossings, overlaps, repaired\n"
            "spikes...) are counted and located in the report; chains involved carry the problem flag.\n"
            "\nIn jobs (the workflow's), the same OUTPUT, byte for byte:\n"
+           "  tigerlod-ingest --list --parts DIR CONFIG OUTPUT       optional: DIR/reads.json lists the parts\n"
+           "  tigerlod-ingest --read NAME --select PARTS --parts DIR CONFIG OUTPUT\n"
+           "                                                         optional, for groups of parts in any order\n"
            "  tigerlod-ingest --plan --parts DIR CONFIG OUTPUT       once; DIR/plan.json lists the jobs\n"
            "  tigerlod-ingest --region JOB --parts DIR CONFIG OUTPUT  for each job, in any order\n"
            "  tigerlod-ingest --finish --parts DIR CONFIG OUTPUT     after every job\n"
-           "DIR holds parts/<i>.raw (the inputs read once), jobs/<job>.json (a region's spec: its parts'\n"
-           "digests; rewritten only when it changes), shares/<job>.share, index.json and plan.json.\n";
+           "DIR holds parts/<sha256>.raw (the inputs' parts read once), reads/<name>.sum, jobs/<job>.json\n"
+           "(a region's spec: its parts' digests; rewritten only when it changes), shares/<job>.share,\n"
+           "index.json and plan.json.\n";
 }
 
 namespace {
@@ -429,9 +442,15 @@ json job_options_json(const IngestConfig& cfg, const Projection& projection, int
             {"max_problem_samples", max_problem_samples}};
 }
 
-fs::path part_file(const fs::path& dir, size_t i)
+/// A part put aside, named by the digest of its bytes: a read job and the
+/// plan write the same name for the same part, whatever its number.
+fs::path part_file(const fs::path& dir, const std::string& sha256)
 {
-    return dir / "parts" / (std::to_string(i) + ".raw");
+    return dir / "parts" / (sha256 + ".raw");
+}
+fs::path reads_file(const fs::path& dir, const std::string& name)
+{
+    return dir / "reads" / (name + ".sum");
 }
 fs::path spec_file(const fs::path& dir, const std::string& job)
 {
@@ -657,12 +676,13 @@ size_t remove_stale_stores(const fs::path& out, const IngestConfig& cfg, const s
     return removed;
 }
 
-/// The plan: the part files, specs and shares of jobs it no longer has, removed.
-void remove_unplanned_files(const fs::path& dir, size_t nparts, const JobSpecs& specs)
+/// The plan: the part files of other parts, and the specs and shares of jobs
+/// it no longer has, removed.
+void remove_unplanned_files(const fs::path& dir, const std::vector<std::string>& part_sha, const JobSpecs& specs)
 {
     std::set<std::string> keep_files;
-    for (size_t i = 0; i < nparts; ++i) {
-        keep_files.insert(part_file(dir, i).filename().string());
+    for (const auto& sha : part_sha) {
+        keep_files.insert(part_file(dir, sha).filename().string());
     }
     for (const auto& [job, spec] : specs) {
         keep_files.insert(job + ".json");
@@ -719,7 +739,254 @@ size_t write_specs(const fs::path& dir, const fs::path& out, JobSpecs& specs,
     return written;
 }
 
+/// The number of parts a dataset is read in (0: it is read by its one job).
+size_t part_count(const IngestConfig& cfg)
+{
+    if (!read_by_parts(cfg)) {
+        return 0;
+    }
+    return cfg.dataset.kind == DatasetSpec::Kind::tiger ? cfg.dataset.faces.size() : cfg.dataset.inputs.size();
+}
+
+/// The files of part i: a TIGER county's FACES and EDGES, or a polygon file.
+std::vector<fs::path> files_of_part(const IngestConfig& cfg, size_t i)
+{
+    if (cfg.dataset.kind == DatasetSpec::Kind::tiger) {
+        return {cfg.dataset.faces[i], cfg.dataset.edges[i]};
+    }
+    return {cfg.dataset.inputs[i]};
+}
+
+/// --select: part numbers and ranges, `0-4,7`, each below `nparts`; sorted, once each.
+std::vector<size_t> parse_selection(const std::string& text, size_t nparts)
+{
+    std::vector<size_t> out;
+    auto fail = [&](const std::string& why) { throw usage_error("--select '" + text + "': " + why); };
+    auto number = [&](std::string_view t) {
+        size_t v = 0;
+        if (t.empty() || t.size() > 18 ||
+            !std::all_of(t.begin(), t.end(), [](char c) { return c >= '0' && c <= '9'; })) {
+            fail("'" + std::string(t) + "' is not a part number");
+        }
+        for (const char c : t) {
+            v = v * 10 + static_cast<size_t>(c - '0');
+        }
+        if (v >= nparts) {
+            fail("part " + std::to_string(v) + " is not in this dataset (it has " + std::to_string(nparts) +
+                 " parts, from 0)");
+        }
+        return v;
+    };
+    std::string_view rest(text);
+    while (!rest.empty()) {
+        const size_t comma = rest.find(',');
+        const std::string_view item = rest.substr(0, comma);
+        rest = comma == std::string_view::npos ? std::string_view{} : rest.substr(comma + 1);
+        const size_t dash = item.find('-');
+        const size_t lo = number(item.substr(0, dash));
+        const size_t hi = dash == std::string_view::npos ? lo : number(item.substr(dash + 1));
+        if (hi < lo) {
+            fail("the range " + std::string(item) + " runs backwards");
+        }
+        for (size_t i = lo; i <= hi; ++i) {
+            out.push_back(i);
+        }
+    }
+    if (out.empty()) {
+        fail("no parts");
+    }
+    std::sort(out.begin(), out.end());
+    out.erase(std::unique(out.begin(), out.end()), out.end());
+    return out;
+}
+
+/// Read the parts `only` (part numbers) and put each aside under its digest
+/// (written only where it is new), with its summary and its files' stamps,
+/// taken before the read (so that a file changed while it was read does not
+/// match them). `rewritten` counts the part files written.
+std::vector<PartRead> read_parts(const IngestConfig& cfg, const fs::path& dir, unsigned threads, const Log& log,
+                                 std::span<const size_t> only, size_t& rewritten)
+{
+    std::vector<PartRead> got(only.size());
+    std::vector<size_t> slot(part_count(cfg), SIZE_MAX);
+    for (size_t k = 0; k < only.size(); ++k) {
+        slot[only[k]] = k;
+        got[k].part = only[k];
+        for (const fs::path& f : files_of_part(cfg, only[k])) {
+            const auto [size, mtime] = stamp_of(f);
+            got[k].files.push_back(FileStamp{f.string(), size, mtime, {}});
+        }
+    }
+    std::atomic<size_t> wrote{0};
+    const auto put_aside = [&](size_t i, RawMap&& part) {
+        PartRead& p = got[slot[i]];
+        p.summary = summarize_part(part);
+        const std::string bytes = encode_raw(part);
+        part = RawMap();
+        p.sha256 = sha256_of(bytes);
+        wrote += write_file_if_changed(part_file(dir, p.sha256), bytes) ? 1 : 0;
+        for (auto& f : p.files) {
+            f.sha256 = sha256_file(f.path);
+        }
+    };
+    if (cfg.dataset.kind == DatasetSpec::Kind::tiger) {
+        read_tiger_parts(cfg, threads, log, put_aside, only);
+    } else {
+        read_polygon_parts(cfg, threads, log, put_aside, only);
+    }
+    sync_to_disk(dir / "parts");
+    rewritten += wrote.load();
+    return got;
+}
+
+/// The plan: the parts that read jobs put aside (DIR/reads/*.sum), each
+/// where its files still have the stamps the job saw and its part file is
+/// there; `have[i]` says which were found. A file that is not a read job's
+/// of this version, and one none of whose parts is still current, is
+/// removed (a read job writes it again). Returns the parts taken.
+size_t take_reads(const IngestConfig& cfg, const fs::path& dir, std::vector<PartRead>& got, std::vector<uint8_t>& have,
+                  const Log& log)
+{
+    const fs::path folder = dir / "reads";
+    std::error_code ec;
+    if (!fs::is_directory(folder, ec)) {
+        return 0;
+    }
+    std::map<std::vector<std::string>, size_t> part_of;
+    for (size_t i = 0; i < got.size(); ++i) {
+        std::vector<std::string> key;
+        for (const fs::path& f : files_of_part(cfg, i)) {
+            key.push_back(f.string());
+        }
+        part_of.emplace(std::move(key), i);
+    }
+    std::vector<fs::path> files;
+    for (const auto& e : fs::directory_iterator(folder)) {
+        if (e.is_regular_file() && e.path().extension() == ".sum") {
+            files.push_back(e.path());
+        }
+    }
+    std::sort(files.begin(), files.end());
+    size_t taken = 0;
+    for (const fs::path& file : files) {
+        std::vector<PartRead> reads;
+        try {
+            const std::string bytes = read_file(file);
+            reads = decode_reads(std::as_bytes(std::span(bytes.data(), bytes.size())), file.string());
+        } catch (const Error& e) {
+            log.info(file.string() + " removed: " + e.what());
+            fs::remove(file, ec);
+            continue;
+        }
+        bool current = false;
+        for (auto& p : reads) {
+            std::vector<std::string> key;
+            for (const auto& f : p.files) {
+                key.push_back(f.path);
+            }
+            const auto it = part_of.find(key);
+            if (it == part_of.end() || have[it->second] != 0 || !fs::is_regular_file(part_file(dir, p.sha256), ec) ||
+                !std::all_of(p.files.begin(), p.files.end(), [](const FileStamp& f) {
+                    return stamp_of(f.path) == std::pair{f.bytes, f.mtime_ns};
+                })) {
+                continue;
+            }
+            current = true;
+            p.part = it->second;
+            got[it->second] = std::move(p);
+            have[it->second] = 1;
+            ++taken;
+        }
+        if (!current) {
+            log.info(file.string() + " removed: none of its parts is current");
+            fs::remove(file, ec);
+        }
+    }
+    return taken;
+}
+
 } // namespace
+
+int IngestStage::run_list(const StageContext& ctx, const Resolved& r)
+{
+    const IngestConfig& cfg = r.cfg;
+    const fs::path dir(m_parts);
+    const InputFiles input_files = input_files_of(cfg);
+    refuse_to_replace_inputs(dir, reads_of(m_config, input_files));
+    fs::create_directories(dir);
+    const size_t nparts = part_count(cfg);
+    json parts = json::array();
+    uint64_t total = 0;
+    for (size_t i = 0; i < nparts; ++i) {
+        const std::vector<fs::path> files = files_of_part(cfg, i);
+        uint64_t bytes = 0;
+        json names = json::array();
+        for (const fs::path& f : files) {
+            std::error_code ec;
+            const auto size = fs::file_size(f, ec);
+            if (ec) {
+                throw input_error(f.string() + ": cannot be read: " + ec.message());
+            }
+            bytes += size;
+            names.push_back(f.string());
+        }
+        total += bytes;
+        // The name: the first file's name up to its first dot (dc.shp.zip: dc).
+        const std::string base = files.front().filename().string();
+        parts.push_back(
+            json{{"part", i}, {"name", file_name(base.substr(0, base.find('.')))}, {"bytes", bytes}, {"files", names}});
+    }
+    json inputs = json::array();
+    for (size_t k = 1; k < input_files.size(); ++k) {
+        inputs.push_back(input_files[k].first.string());
+    }
+    const json listing{{"schema", "tigerlod.ingest-reads/1"},
+                       {"mode", nparts > 0 ? "parts" : "direct"},
+                       {"inputs", inputs},
+                       {"parts", parts}};
+    write_file_atomic(dir / "reads.json", listing.dump(1) + "\n");
+    ctx.log.info("listed " + std::to_string(nparts) + " parts");
+    std::printf("ingest list %s: %zu parts, %.1f MB%s, in %s\n", cfg.name.c_str(), nparts,
+                static_cast<double>(total) / 1e6, nparts > 0 ? "" : " (the dataset is read by its one job)",
+                (dir / "reads.json").c_str());
+    return exit_ok;
+}
+
+int IngestStage::run_read(const StageContext& ctx, const Resolved& r)
+{
+    const IngestConfig& cfg = r.cfg;
+    const fs::path dir(m_parts);
+    if (!std::all_of(m_read.begin(), m_read.end(),
+                     [](unsigned char c) { return std::isalnum(c) || c == '-' || c == '_' || c == '%'; })) {
+        throw usage_error("--read '" + m_read + "': a read job's name is letters, digits, '-', '_' and '%'");
+    }
+    const size_t nparts = part_count(cfg);
+    if (nparts == 0) {
+        throw usage_error("--read: " + cfg.file.string() +
+                          "'s dataset is one file, or a line layer: its one job reads it, there are no parts to read");
+    }
+    if (m_select.empty()) {
+        throw usage_error("--read needs --select PARTS (the part numbers in --list's reads.json)");
+    }
+    const std::vector<size_t> only = parse_selection(m_select, nparts);
+    refuse_to_replace_inputs(dir, reads_of(m_config, input_files_of(cfg)));
+    for (const char* sub : {"parts", "reads"}) {
+        fs::create_directories(dir / sub);
+        (void)remove_dead_leftovers(dir / sub);
+    }
+    const double t0 = ctx.log.elapsed_s();
+    size_t rewritten = 0;
+    const std::vector<PartRead> got = read_parts(cfg, dir, r.threads, ctx.log, only, rewritten);
+    uint64_t points = 0;
+    for (const auto& p : got) {
+        points += p.summary.points_read;
+    }
+    write_file_atomic(reads_file(dir, m_read), encode_reads(got));
+    std::printf("ingest read %s %s: %zu parts (%zu rewritten), %llu points, %.2f s, in %s\n", cfg.name.c_str(),
+                m_read.c_str(), got.size(), rewritten, static_cast<unsigned long long>(points),
+                ctx.log.elapsed_s() - t0, reads_file(dir, m_read).c_str());
+    return exit_ok;
+}
 
 int IngestStage::run_plan(const StageContext& ctx, const Resolved& r)
 {
@@ -728,7 +995,6 @@ int IngestStage::run_plan(const StageContext& ctx, const Resolved& r)
     const InputFiles input_files = input_files_of(cfg);
     const std::vector<fs::path> reads = reads_of(m_config, input_files);
     refuse_to_replace_inputs(dir, reads);
-    auto digests = std::async(std::launch::async, [&input_files] { return digests_of(input_files); });
     for (const char* sub : {"parts", "jobs", "shares"}) {
         fs::create_directories(dir / sub);
         (void)remove_dead_leftovers(dir / sub);
@@ -743,32 +1009,43 @@ int IngestStage::run_plan(const StageContext& ctx, const Resolved& r)
     JobSpecs specs;
     RegionPlan plan;
     std::string mode;
-    std::vector<std::string> input_digests;
+    std::vector<std::string> input_digests, sha;
     uint64_t points_read = 0;
-    size_t nparts = 0, rewritten = 0;
-    if (read_by_parts(cfg)) {
-        const bool tiger = cfg.dataset.kind == DatasetSpec::Kind::tiger;
-        nparts = tiger ? cfg.dataset.faces.size() : cfg.dataset.inputs.size();
+    const size_t nparts = part_count(cfg);
+    size_t rewritten = 0, from_reads = 0;
+    if (nparts > 0) {
+        // The parts the read jobs put aside, and the others read here.
+        std::vector<PartRead> got(nparts);
+        std::vector<uint8_t> have(nparts, 0);
+        from_reads = take_reads(cfg, dir, got, have, ctx.log);
+        std::vector<size_t> rest;
+        for (size_t i = 0; i < nparts; ++i) {
+            if (have[i] == 0) {
+                rest.push_back(i);
+            }
+        }
+        if (!rest.empty()) {
+            std::vector<PartRead> here = read_parts(cfg, dir, r.threads, ctx.log, rest, rewritten);
+            for (auto& p : here) {
+                got[p.part] = std::move(p);
+            }
+        }
+        // The manifest's digests in input_files order: the config, then each
+        // part's first file (FACES, or the polygon file), then TIGER's EDGES.
+        input_digests.push_back(sha256_file(cfg.file));
+        for (size_t f = 0; f < got.front().files.size(); ++f) {
+            for (const auto& p : got) {
+                input_digests.push_back(p.files[f].sha256);
+            }
+        }
         std::vector<PartSummary> parts(nparts);
-        std::vector<std::string> sha(nparts);
-        std::atomic<size_t> wrote{0};
-        const auto put_aside = [&](size_t i, RawMap&& part) {
-            parts[i] = summarize_part(part);
-            const std::string bytes = encode_raw(part);
-            part = RawMap();
-            sha[i] = sha256_of(bytes);
-            wrote += write_file_if_changed(part_file(dir, i), bytes) ? 1 : 0;
-        };
-        if (tiger) {
-            read_tiger_parts(cfg, r.threads, ctx.log, put_aside);
-        } else {
-            read_polygon_parts(cfg, r.threads, ctx.log, put_aside);
+        sha.resize(nparts);
+        for (size_t i = 0; i < nparts; ++i) {
+            parts[i] = std::move(got[i].summary);
+            sha[i] = std::move(got[i].sha256);
+            points_read += parts[i].points_read;
         }
-        rewritten = wrote.load();
-        sync_to_disk(dir / "parts");
-        for (const auto& p : parts) {
-            points_read += p.points_read;
-        }
+        got.clear();
         plan = plan_regions(parts, level_names, r.projection, options);
         auto part_json = [&](size_t i) {
             const GridBox& b = plan.boxes[i];
@@ -810,11 +1087,11 @@ int IngestStage::run_plan(const StageContext& ctx, const Resolved& r)
         mode = "direct";
         plan.meta.level_names = level_names;
         json j{{"schema", spec_schema}, {"job", "whole"}, {"mode", "direct"}, {"options", opts}};
-        input_digests = digests.get();
+        input_digests = digests_of(input_files);
         j["inputs"] = input_digests;
         specs.emplace_back("whole", std::move(j));
     }
-    remove_unplanned_files(dir, nparts, specs);
+    remove_unplanned_files(dir, sha, specs);
     const auto damaged = damaged_jobs(dir, m_output, specs);
     const size_t specs_changed = write_specs(dir, m_output, specs, damaged, ctx.log);
     json jobs = json::array();
@@ -825,12 +1102,13 @@ int IngestStage::run_plan(const StageContext& ctx, const Resolved& r)
     put_meta(index, plan);
     index["empty_geometries"] = plan.empty_geometries;
     index["points_read"] = points_read;
-    index["inputs"] = mode == "direct" ? input_digests : digests.get();
+    index["inputs"] = input_digests;
     write_file_if_changed(dir / "index.json", index.dump(1) + "\n");
     write_file_atomic(dir / "plan.json", json{{"schema", "tigerlod.ingest-plan/1"}, {"jobs", jobs}}.dump(1) + "\n");
-    std::printf("ingest plan %s: %zu parts (%zu rewritten), %zu jobs (%zu specs changed, %zu with a store changed "
-                "since)%s, %.2f s, in %s\n",
-                cfg.name.c_str(), nparts, rewritten, specs.size(), specs_changed, damaged.size(),
+    std::printf("ingest plan %s: %zu parts (%zu from read jobs, %zu read here, %zu rewritten), %zu jobs (%zu specs "
+                "changed, %zu with a store changed since)%s, %.2f s, in %s\n",
+                cfg.name.c_str(), nparts, from_reads, nparts - from_reads, rewritten, specs.size(), specs_changed,
+                damaged.size(),
                 mode == "regions" ? (", regions of level '" + level_names[plan.level] + "'").c_str()
                                   : (mode == "whole" ? ", one map" : ", read by the job"),
                 ctx.log.elapsed_s() - t0, dir.c_str());
@@ -889,6 +1167,10 @@ int IngestStage::run_region(const StageContext& ctx, const Resolved& r)
                 plan.boxes[i] = GridBox{b[0], b[1], b[2], b[3]};
                 plan.class_of[i] = p.at("classes").get<std::vector<uint32_t>>();
                 sha[i] = p.at("sha256").get<std::string>();
+                if (sha[i].size() != 64 ||
+                    !std::all_of(sha[i].begin(), sha[i].end(), [](unsigned char c) { return std::isxdigit(c) != 0; })) {
+                    throw input_error(spec_path.string() + ": part " + std::to_string(i) + "'s digest is not SHA-256");
+                }
             }
             if (!plan.whole) {
                 const json& rj = spec.at("region");
@@ -902,10 +1184,10 @@ int IngestStage::run_region(const StageContext& ctx, const Resolved& r)
             throw input_error(spec_path.string() + ": " + e.what());
         }
         const std::function<RawMap(size_t)> load = [&](size_t i) {
-            const fs::path file = part_file(dir, i);
             if (i >= sha.size() || sha[i].empty()) {
                 throw input_error(spec_path.string() + ": part " + std::to_string(i) + " is not in the job's spec");
             }
+            const fs::path file = part_file(dir, sha[i]);
             const std::string bytes = read_file(file);
             if (sha256_of(bytes) != sha[i]) {
                 throw usage_error(file.string() + ": the part changed since the plan; run --plan again");
@@ -1047,23 +1329,31 @@ int IngestStage::run(const StageContext& ctx)
         std::printf("; projection %s; halo %g m; %u threads\n", projection.describe().c_str(), cfg.halo_m, threads);
         return exit_ok;
     }
-    const int modes = (m_plan ? 1 : 0) + (m_region.empty() ? 0 : 1) + (m_finish ? 1 : 0);
+    const int modes = (m_list ? 1 : 0) + (m_read.empty() ? 0 : 1) + (m_plan ? 1 : 0) + (m_region.empty() ? 0 : 1) +
+                      (m_finish ? 1 : 0);
     if (modes > 1) {
-        throw usage_error("--plan, --region and --finish are steps of their own: give one");
+        throw usage_error("--list, --read, --plan, --region and --finish are steps of their own: give one");
+    }
+    if (!m_select.empty() && m_read.empty()) {
+        throw usage_error("--select goes with --read");
     }
     if (modes == 1 || !m_parts.empty()) {
         if (modes == 0) {
-            throw usage_error("--parts goes with --plan, --region or --finish");
+            throw usage_error("--parts goes with --list, --read, --plan, --region or --finish");
         }
         if (m_parts.empty()) {
-            throw usage_error("--plan, --region and --finish need --parts DIR");
+            throw usage_error("--list, --read, --plan, --region and --finish need --parts DIR");
         }
         if (m_whole_map) {
             throw usage_error("--whole-map builds in one process; the jobs' plan decides by the data");
         }
         const Resolved r{cfg, projection, threads};
         try {
-            return m_plan ? run_plan(ctx, r) : !m_region.empty() ? run_region(ctx, r) : run_finish(ctx, r);
+            return m_list              ? run_list(ctx, r)
+                   : !m_read.empty()   ? run_read(ctx, r)
+                   : m_plan            ? run_plan(ctx, r)
+                   : !m_region.empty() ? run_region(ctx, r)
+                                       : run_finish(ctx, r);
         } catch (const json::exception& e) {
             // A spec, index or plan with a field missing or of another type.
             throw input_error(m_parts + ": a job file is not what this version of tigerlod-ingest writes (" + e.what() +

@@ -22,6 +22,8 @@ class IngestStage final : public Stage {
 
   private:
     struct Resolved;
+    int run_list(const StageContext& ctx, const Resolved& r);
+    int run_read(const StageContext& ctx, const Resolved& r);
     int run_plan(const StageContext& ctx, const Resolved& r);
     int run_region(const StageContext& ctx, const Resolved& r);
     int run_finish(const StageContext& ctx, const Resolved& r);
@@ -32,6 +34,9 @@ class IngestStage final : public Stage {
     bool m_validate = false;
     bool m_whole_map = false;
     std::string m_parts;   ///< --parts DIR: the jobs' folder
+    bool m_list = false;   ///< --list
+    std::string m_read;    ///< --read NAME
+    std::string m_select;  ///< --select PARTS
     bool m_plan = false;   ///< --plan
     std::string m_region;  ///< --region JOB
     bool m_finish = false; ///< --finish

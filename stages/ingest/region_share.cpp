@@ -9,6 +9,7 @@ namespace tigerlod::ingest {
 namespace {
 
 constexpr char share_magic[] = "TLSHARE1";
+constexpr char reads_magic[] = "TLREADS1";
 
 void put_source(ByteWriter& w, const SourceRef& s)
 {
@@ -200,6 +201,90 @@ RegionJobShare decode_share(std::span<const std::byte> bytes, const std::string&
         r.fail("bytes after the end");
     }
     return s;
+}
+
+std::string encode_reads(const std::vector<PartRead>& reads)
+{
+    ByteWriter w;
+    w.put_bytes(std::string_view(reads_magic, 8));
+    w.put_varint(reads.size());
+    for (const auto& p : reads) {
+        w.put_varint(p.part);
+        w.put_varint(p.files.size());
+        for (const auto& f : p.files) {
+            w.put_vstr(f.path);
+            w.put_varint(f.bytes);
+            w.put(f.mtime_ns);
+            w.put_vstr(f.sha256);
+        }
+        w.put_vstr(p.sha256);
+        const PartSummary& s = p.summary;
+        w.put_varint(s.codes.size());
+        for (const auto& level : s.codes) {
+            put_strings(w, level);
+        }
+        w.put_varint(s.many.size());
+        for (const uint8_t m : s.many) {
+            w.put(m);
+        }
+        for (const int32_t v : {s.lo.lon, s.lo.lat, s.hi.lon, s.hi.lat}) {
+            w.put(v);
+        }
+        w.put_varint(s.points_read);
+        w.put_varint(s.empty_geometries);
+        w.put(static_cast<uint8_t>(s.kind));
+        put_strings(w, s.files);
+        put_strings(w, s.classes);
+        w.put_varint(s.unpaired_edges);
+    }
+    return std::move(w.bytes());
+}
+
+std::vector<PartRead> decode_reads(std::span<const std::byte> bytes, const std::string& name)
+{
+    ByteReader r(bytes, name);
+    const auto magic = r.get_bytes(8, "the header");
+    if (std::memcmp(magic.data(), reads_magic, 8) != 0) {
+        r.fail("not a read job's parts of this version of tigerlod-ingest");
+    }
+    std::vector<PartRead> reads(static_cast<size_t>(get_count(r, 40, "parts")));
+    for (auto& p : reads) {
+        p.part = r.get_varint("a part");
+        p.files.resize(static_cast<size_t>(get_count(r, 12, "a part's files")));
+        for (auto& f : p.files) {
+            f.path = r.get_vstr("a file");
+            f.bytes = r.get_varint("a file's size");
+            f.mtime_ns = r.get<int64_t>("a file's time");
+            f.sha256 = r.get_vstr("a file's digest");
+        }
+        p.sha256 = r.get_vstr("a part's digest");
+        PartSummary& s = p.summary;
+        s.codes.resize(static_cast<size_t>(get_count(r, 1, "levels")));
+        for (auto& level : s.codes) {
+            level = get_strings(r, "a level's codes");
+        }
+        s.many.resize(static_cast<size_t>(get_count(r, 1, "levels")));
+        for (auto& m : s.many) {
+            m = r.get<uint8_t>("a level");
+        }
+        for (int32_t* v : {&s.lo.lon, &s.lo.lat, &s.hi.lon, &s.hi.lat}) {
+            *v = r.get<int32_t>("a part's box");
+        }
+        s.points_read = r.get_varint("a part's counts");
+        s.empty_geometries = r.get_varint("a part's counts");
+        const auto kind = r.get<uint8_t>("a part's kind");
+        if (kind > static_cast<uint8_t>(RawMap::Kind::lines)) {
+            r.fail("a part of unknown kind");
+        }
+        s.kind = static_cast<RawMap::Kind>(kind);
+        s.files = get_strings(r, "a part's files");
+        s.classes = get_strings(r, "a part's classes");
+        s.unpaired_edges = r.get_varint("a part's counts");
+    }
+    if (r.left() != 0) {
+        r.fail("bytes after the end");
+    }
+    return reads;
 }
 
 } // namespace tigerlod::ingest

@@ -13,6 +13,29 @@
 
 namespace tigerlod::ingest {
 
+/// An input file as a read job found it: the plan takes the job's part only
+/// while the file still has this size and time.
+struct FileStamp {
+    std::string path;
+    uint64_t bytes = 0;
+    int64_t mtime_ns = 0;
+    std::string sha256; ///< of the file, for the manifest
+};
+
+/// One part as a read job (`tigerlod-ingest --read`) hands it to the plan:
+/// its files, the digest of its bytes (the part file's name) and its summary.
+struct PartRead {
+    uint64_t part = 0;            ///< its number among the dataset's parts when it was read
+    std::vector<FileStamp> files; ///< a TIGER county's FACES and EDGES, or the polygon file
+    std::string sha256;           ///< of the part's bytes
+    PartSummary summary;
+};
+
+/// A read job's parts as bytes and back (format_error naming `name` and the
+/// byte where the bytes are not a read job's of this version).
+std::string encode_reads(const std::vector<PartRead>& reads);
+std::vector<PartRead> decode_reads(std::span<const std::byte> bytes, const std::string& name);
+
 struct RegionJobShare {
     std::string job;                 ///< the job's name (`r-<code>`, `whole`)
     std::string spec_sha256;         ///< of the region's spec the job ran on

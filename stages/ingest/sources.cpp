@@ -16,6 +16,8 @@
 #include <cstring>
 #include <memory>
 #include <mutex>
+#include <numeric>
+#include <stdexcept>
 #include <unordered_map>
 
 namespace fs = std::filesystem;
@@ -615,13 +617,24 @@ RawMap empty_map(const IngestConfig& cfg, RawMap::Kind kind)
 /// first error in file order is the one thrown, whatever the thread count.
 template <class F>
 void read_each(const std::vector<fs::path>& files, unsigned threads, const Log& log, F&& read_one,
-               const std::function<void(size_t, RawMap&&)>& take)
+               const std::function<void(size_t, RawMap&&)>& take, std::span<const size_t> only = {})
 {
+    std::vector<size_t> all;
+    if (only.empty()) {
+        all.resize(files.size());
+        std::iota(all.begin(), all.end(), size_t{0});
+        only = all;
+    }
     std::vector<std::exception_ptr> errors(files.size());
     std::atomic<size_t> next{0};
     auto work = [&] {
-        for (size_t i = next++; i < files.size(); i = next++) {
+        for (size_t k = next++; k < only.size(); k = next++) {
+            const size_t i = only[k];
             try {
+                if (i >= files.size()) {
+                    throw std::out_of_range("read_each: part " + std::to_string(i) + " of " +
+                                            std::to_string(files.size()));
+                }
                 RawMap part;
                 read_one(i, part);
                 log.info("read " + files[i].string() + ": " + std::to_string(part.units.size()) + " units, " +
@@ -633,7 +646,7 @@ void read_each(const std::vector<fs::path>& files, unsigned threads, const Log& 
         }
     };
     std::vector<std::thread> pool;
-    for (unsigned t = 1; t < std::min<size_t>(threads, files.size()); ++t) {
+    for (unsigned t = 1; t < std::min<size_t>(threads, only.size()); ++t) {
         pool.emplace_back(work);
     }
     work();
@@ -691,7 +704,7 @@ RawMap read_dataset(const IngestConfig& cfg, unsigned threads, const Log& log)
 }
 
 void read_polygon_parts(const IngestConfig& cfg, unsigned threads, const Log& log,
-                        const std::function<void(size_t, RawMap&&)>& take)
+                        const std::function<void(size_t, RawMap&&)>& take, std::span<const size_t> only)
 {
     read_each(
         cfg.dataset.inputs, threads, log,
@@ -699,11 +712,11 @@ void read_polygon_parts(const IngestConfig& cfg, unsigned threads, const Log& lo
             part = empty_map(cfg, RawMap::Kind::polygon_rings);
             read_polygon_file(cfg, cfg.dataset.inputs[i], part);
         },
-        take);
+        take, only);
 }
 
 void read_tiger_parts(const IngestConfig& cfg, unsigned threads, const Log& log,
-                      const std::function<void(size_t, RawMap&&)>& take)
+                      const std::function<void(size_t, RawMap&&)>& take, std::span<const size_t> only)
 {
     if (cfg.dataset.faces.size() != cfg.dataset.edges.size()) {
         throw std::logic_error("read_tiger_parts: FACES and EDGES files do not pair");
@@ -716,7 +729,7 @@ void read_tiger_parts(const IngestConfig& cfg, unsigned threads, const Log& log,
             read_faces_file(cfg, cfg.dataset.faces[i], part, face_unit);
             read_edges_file(cfg, cfg.dataset.edges[i], part, face_unit, seen_tlid, true, "");
         },
-        take);
+        take, only);
 }
 
 void validate_dataset(const IngestConfig& cfg)

@@ -9,6 +9,7 @@
 #include "stages/ingest/raw_map.hpp"
 
 #include <functional>
+#include <span>
 
 namespace tigerlod::ingest {
 
@@ -19,17 +20,19 @@ RawMap read_dataset(const IngestConfig& cfg, unsigned threads, const Log& log);
 
 /// Read a polygons dataset file by file on up to `threads` threads, handing
 /// each file's part (file index 0 in it) to `take` on the thread that read it,
-/// in no particular order. Throws the first error in file order.
+/// in no particular order. Throws the first error in file order. `only`, if
+/// not empty, lists the files to read (the others are not opened).
 void read_polygon_parts(const IngestConfig& cfg, unsigned threads, const Log& log,
-                        const std::function<void(size_t, RawMap&&)>& take);
+                        const std::function<void(size_t, RawMap&&)>& take, std::span<const size_t> only = {});
 
 /// Read a TIGER dataset county by county on up to `threads` threads: part i
 /// holds FACES file i (file index 0 in it) and EDGES file i (file index 1),
 /// the sides whose faces it does not hold listed in RawMap::foreign. Handed to
 /// `take` as read_polygon_parts does. The config must list as many FACES
-/// files as EDGES files (the region build checks that they pair).
+/// files as EDGES files (the region build checks that they pair). `only` as
+/// read_polygon_parts.
 void read_tiger_parts(const IngestConfig& cfg, unsigned threads, const Log& log,
-                      const std::function<void(size_t, RawMap&&)>& take);
+                      const std::function<void(size_t, RawMap&&)>& take, std::span<const size_t> only = {});
 
 /// Open every input of `cfg` and check its layer, geometry type and fields,
 /// reading no features. Throws input_error as read_dataset would.

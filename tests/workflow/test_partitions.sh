@@ -40,6 +40,8 @@ fail() {
 ran() { sed -n 's/^\[[0-9]*\/[0-9?]*\] \(color\|simplify\|pack\|verify\) \([^:]*\/[^:]*\):.*/\1 \2/p' "$1" | sort | tr '\n' ' '; }
 # The ingest region jobs a run's output says ran (`r-11 r-44 `).
 ingested() { sed -n 's/^\[[0-9]*\/[0-9?]*\] ingest \(r-[^:]*\):.*/\1/p' "$1" | sort | tr '\n' ' '; }
+# The ingest read jobs a run's output says ran (`gdc gtl_2010_44_tract10 `).
+readjobs() { sed -n 's/^\[[0-9]*\/[0-9?]*\] ingest read \([^:]*\):.*/\1/p' "$1" | sort | tr '\n' ' '; }
 # Two versions of DC: as published, and with one tract's code changed.
 ogr2ogr -f "ESRI Shapefile" dc_v1.shp.zip "/vsizip/$data/tl_2010_11_tract10.zip/tl_2010_11_tract10.shp" -nln dc
 ogr2ogr -f "ESRI Shapefile" dc_v2.shp.zip "/vsizip/$data/tl_2010_11_tract10.zip/tl_2010_11_tract10.shp" -nln dc \
@@ -77,6 +79,8 @@ all+="color tract/g44003 color tract/g44005 color tract/g44007 color tract/g4400
   fail "the first run's group jobs: $(ran r1.out)"
 # Ingest too: a plan, a job per state (region), a finish; the folder is a whole run's.
 [ "$(ingested r1.out)" = "r-11 r-44 " ] || fail "the first run's ingest jobs: $(ingested r1.out)"
+# ... and a read job per input file here (job_mb is tiny).
+[ "$(readjobs r1.out)" = "gdc gtl_2010_44_tract10 " ] || fail "the first run's read jobs: $(readjobs r1.out)"
 "$bin/tigerlod-ingest" p.yaml whole-ingest >/dev/null 2>&1 || fail "tigerlod-ingest whole failed"
 diff -r -x '*-timings.json' whole-ingest out/p/ingest >/dev/null || fail "ingest by jobs differs from a whole run"
 "$bin/tigerlod-color" --config p.yaml out/p/ingest whole-color >/dev/null || fail "tigerlod-color whole failed"
@@ -142,6 +146,7 @@ wf >r5.out 2>&1 || fail "the rebuild after a change failed: $(tail -30 r5.out)"
 [ "$(ran r5.out)" = "color tract/g11001 pack tract/g11001 simplify tract/g11001 verify tract/g11001 " ] ||
   fail "a changed DC tract code reran: $(ran r5.out)"
 [ "$(ingested r5.out)" = "r-11 " ] || fail "a changed DC tract code reran the ingest jobs: $(ingested r5.out)"
+[ "$(readjobs r5.out)" = "gdc " ] || fail "a changed DC tract code reran the read jobs: $(readjobs r5.out)"
 # ... and the result is a clean build's, byte for byte.
 mkdir clean && cp p.yaml dc.shp.zip clean/ && (cd clean && "$repo/scripts/workflow" p.yaml >run.out 2>&1) ||
   fail "the clean build failed"
@@ -236,6 +241,23 @@ cp ri_good.shp.zip ri.shp.zip
 "$repo/scripts/workflow" q.yaml >q2.out 2>&1 || fail "the rerun after the fix failed: $(tail -30 q2.out)"
 [ "$(ingested q2.out)" = "r-44 " ] || fail "the rerun after the fix ran the ingest jobs: $(ingested q2.out)"
 grep -q "verify: CLEAN" q2.out || fail "the tree after the fix is not clean"
+
+# 9. An input that cannot be read fails its read job, with its message on
+# the terminal, and nothing after it runs: the last run's outputs stay as
+# they were. The rerun after the fix reads that file alone; its part's
+# bytes are the ones planned before, so no region job runs.
+yes "not a zip" | head -c 20000 >ri.shp.zip
+if "$repo/scripts/workflow" q.yaml >q3.out 2>&1; then
+  fail "a run with an unreadable input succeeded"
+fi
+grep -q "pipeline: ingest:read:gri failed (exit 1)" q3.out || fail "no failure line for the unreadable file: $(cat q3.out)"
+grep -q "tigerlod-ingest: .*ri.shp.zip" q3.out || fail "the read job's message does not name the file: $(cat q3.out)"
+[ -z "$(ingested q3.out)$(ran q3.out)" ] || fail "jobs ran after a failed read: $(ingested q3.out)$(ran q3.out)"
+[ -f out/q/ingest/tract/44001.tlc ] && [ -f out/q/ingest/tract/11001.tlc ] || fail "the last run's stores are gone"
+cp ri_good.shp.zip ri.shp.zip
+"$repo/scripts/workflow" q.yaml >q4.out 2>&1 || fail "the rerun after the unreadable file failed: $(tail -30 q4.out)"
+[ "$(readjobs q4.out)" = "gri " ] || fail "the rerun after the unreadable file read: $(readjobs q4.out)"
+[ -z "$(ingested q4.out)$(ran q4.out)" ] || fail "the same part ran jobs again: $(ingested q4.out)$(ran q4.out)"
 
 if [ "$failures" -gt 0 ]; then
   echo "$failures failure(s)"

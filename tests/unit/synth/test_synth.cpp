@@ -17,6 +17,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <map>
 #include <numbers>
@@ -366,7 +367,8 @@ TEST_F(SynthCli, IngestInRegionJobsWritesTheWholeRunsBytesAndRepairsADamagedStor
     const std::string common = " --parts " + parts.string() + " " + cfg + " " + jobs.string();
     const Result plan = run("ingest", "--plan" + common);
     ASSERT_EQ(plan.code, 0) << plan.err;
-    EXPECT_NE(plan.out.find("9 parts (9 rewritten), 3 jobs"), std::string::npos) << plan.out;
+    EXPECT_NE(plan.out.find("9 parts (0 from read jobs, 9 read here, 9 rewritten), 3 jobs"), std::string::npos)
+        << plan.out;
     auto names = planned_jobs(parts);
     ASSERT_EQ(names, (std::vector<std::string>{"r-01", "r-02", "r-04"})); // FIPS codes: no 03
     for (auto it = names.rbegin(); it != names.rend(); ++it) {
@@ -388,7 +390,8 @@ TEST_F(SynthCli, IngestInRegionJobsWritesTheWholeRunsBytesAndRepairsADamagedStor
     const auto spec_time = fs::last_write_time(parts / "jobs" / "r-01.json");
     const Result again = run("ingest", "--plan" + common);
     ASSERT_EQ(again.code, 0) << again.err;
-    EXPECT_NE(again.out.find("9 parts (0 rewritten), 3 jobs (0 specs changed, 0 with a store changed since)"),
+    EXPECT_NE(again.out.find("9 parts (0 from read jobs, 9 read here, 0 rewritten), 3 jobs (0 specs changed, 0 with a "
+                             "store changed since)"),
               std::string::npos)
         << again.out;
     EXPECT_EQ(fs::last_write_time(parts / "jobs" / "r-01.json"), spec_time);
@@ -441,11 +444,78 @@ TEST_F(SynthCli, IngestInRegionJobsWritesTheWholeRunsBytesAndRepairsADamagedStor
     EXPECT_EQ(torn.code, 1);
     EXPECT_NE(torn.err.find("a job file is not what this version of tigerlod-ingest writes"), std::string::npos)
         << torn.err;
-    std::ofstream(parts / "parts" / "0.raw", std::ios::binary | std::ios::app) << "x";
+    const std::string first = nlohmann::json::parse(slurp(parts / "jobs" / "r-01.json"))["parts"][0]["sha256"];
+    std::ofstream(parts / "parts" / (first + ".raw"), std::ios::binary | std::ios::app) << "x";
     const Result changed = run("ingest", "--region r-01" + common);
     EXPECT_EQ(changed.code, 2);
-    EXPECT_NE(changed.err.find("0.raw: the part changed since the plan; run --plan again"), std::string::npos)
+    EXPECT_NE(changed.err.find(first + ".raw: the part changed since the plan; run --plan again"), std::string::npos)
         << changed.err;
+}
+
+TEST_F(SynthCli, ReadJobsGiveThePlanTheSpecsOfAPlanThatReadsAlone)
+{
+    // Nine counties listed, read by two jobs (the workflow's read groups),
+    // planned from what they put aside: the specs and the index are those of
+    // a plan that reads every input itself.
+    const fs::path synth = m_dir / "synth";
+    ASSERT_EQ(run("synth", synth.string() + " --seed 5 --states 3 --counties-per-state 3 --target-vertices 90000 "
+                                            "--cell-m 200")
+                  .code,
+              0);
+    const std::string cfg = config(synth).string();
+    const fs::path alone = m_dir / "alone", parts = m_dir / "parts", out = m_dir / "out";
+    ASSERT_EQ(run("ingest", "--plan --parts " + alone.string() + " " + cfg + " " + out.string()).code, 0);
+    const std::string common = " --parts " + parts.string() + " " + cfg + " " + out.string();
+    const Result list = run("ingest", "--list" + common);
+    ASSERT_EQ(list.code, 0) << list.err;
+    const auto listing = nlohmann::json::parse(slurp(parts / "reads.json"));
+    ASSERT_EQ(listing["parts"].size(), 9U);
+    EXPECT_EQ(listing["mode"], "parts");
+    EXPECT_EQ(listing["parts"][0]["files"].size(), 2U); // a county's FACES and EDGES
+    const Result a = run("ingest", "--read a --select 5-8" + common);
+    ASSERT_EQ(a.code, 0) << a.err;
+    const Result b = run("ingest", "--read b --select 0-2,4,3" + common);
+    ASSERT_EQ(b.code, 0) << b.err;
+    EXPECT_NE(b.out.find("5 parts (5 rewritten)"), std::string::npos) << b.out;
+    const Result plan = run("ingest", "--plan" + common);
+    ASSERT_EQ(plan.code, 0) << plan.err;
+    EXPECT_NE(plan.out.find("9 parts (9 from read jobs, 0 read here, 0 rewritten), 3 jobs"), std::string::npos)
+        << plan.out;
+    const auto same_plan = [&] {
+        EXPECT_EQ(folder_bytes(parts / "jobs"), folder_bytes(alone / "jobs"));
+        EXPECT_EQ(slurp(parts / "index.json"), slurp(alone / "index.json"));
+        EXPECT_EQ(folder_bytes(parts / "parts"), folder_bytes(alone / "parts"));
+    };
+    same_plan();
+
+    // A county's file touched since its read job: the plan reads that part itself.
+    const fs::path touched = listing["parts"][7]["files"][1].get<std::string>();
+    fs::last_write_time(touched, fs::last_write_time(touched) + std::chrono::seconds(2));
+    const Result stale = run("ingest", "--plan" + common);
+    ASSERT_EQ(stale.code, 0) << stale.err;
+    EXPECT_NE(stale.out.find("9 parts (8 from read jobs, 1 read here, 0 rewritten)"), std::string::npos) << stale.out;
+    same_plan();
+    // A read job's file that is not one: removed, and its parts read by the plan.
+    std::ofstream(parts / "reads" / "b.sum", std::ios::binary | std::ios::app) << "x";
+    const Result torn = run("ingest", "--plan" + common);
+    ASSERT_EQ(torn.code, 0) << torn.err;
+    EXPECT_NE(torn.out.find("9 parts (3 from read jobs, 6 read here, 0 rewritten)"), std::string::npos) << torn.out;
+    EXPECT_FALSE(fs::exists(parts / "reads" / "b.sum"));
+    same_plan();
+
+    // Selections that are not parts of this dataset, and steps mixed.
+    for (const auto& [args, message] : std::vector<std::pair<std::string, std::string>>{
+             {"--read c --select 9", "--select '9': part 9 is not in this dataset (it has 9 parts, from 0)"},
+             {"--read c --select 3-1", "the range 3-1 runs backwards"},
+             {"--read c --select 1,x", "'x' is not a part number"},
+             {"--read c", "--read needs --select PARTS"},
+             {"--read c/d --select 1", "a read job's name is letters, digits"},
+             {"--plan --select 1", "--select goes with --read"},
+             {"--list --plan", "are steps of their own: give one"}}) {
+        const Result r = run("ingest", args + common);
+        EXPECT_EQ(r.code, 2) << args;
+        EXPECT_NE(r.err.find(message), std::string::npos) << args << ": " << r.err;
+    }
 }
 
 namespace {
