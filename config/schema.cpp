@@ -43,7 +43,8 @@ std::vector<Key> input_keys()
               "color and simplify: a job per group of a level's stores whose names share a prefix, the shortest "
               "prefix for which no group holds more than this many MB of stores (pack and verify follow these "
               "groups); ingest's read jobs group the input parts (files, or a county's FACES and EDGES) by their "
-              "names and sizes the same way",
+              "names the same way, up to 8 times this many MB of input files (reading is that much faster a "
+              "byte)",
               "32", {0, 1e6, true}),
         entry("workflow.job_threads", Type::integer,
               "threads of each simplify, pack and verify job (`--threads`; Snakemake runs fewer where it has fewer "
