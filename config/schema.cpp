@@ -54,9 +54,15 @@ std::vector<Key> input_keys()
               "shortens the few long jobs of a level held in one store, which a cluster waits on",
               "1", integer(1, 1024)),
         entry("workflow.render", Type::boolean,
-              "run the render job (the overview PNG and the frame-time experiment over the whole tree) after "
-              "verify; `false` for rebuilds that need the tree verified and nothing drawn",
+              "run the render jobs after pack: the previews (`out/<name>/render/`: the whole tree and the "
+              "path's closest view, drawn again for every new tree) and the frame-time experiment "
+              "(`out/<name>/frame-times/`); `false` for rebuilds that need the tree verified and nothing drawn",
               "`true`"),
+        entry("workflow.frame_times", Type::choice,
+              "when the frame-time experiment runs again: `renderer` (when tigerlod-render or the config's "
+              "`render` section changed, or its output is missing: it measures the renderer, and takes the same "
+              "seconds whatever a rebuild changed) or `tree` (after every new tree too)",
+              "`renderer`", {}, {"renderer", "tree"}),
         section("dataset", "what to read"),
         entry("dataset.kind", Type::choice,
               "`tiger` (EDGES + FACES), `polygons` (any polygon layer: tracts, TopoJSON) or `lines` (any line "
@@ -204,8 +210,10 @@ std::vector<Key> stage_keys()
               "`zoom`", {}, {}, "path", "render"),
         entry("render.frames", Type::integer, "frames of a built-in path", "240", integer(2, 100000), {}, "frames",
               "render"),
-        entry("render.mode", Type::choice, "which renderers run the path, one after the other", "`all`", {},
-              {"all", "incore", "ooc-noprefetch", "ooc-prefetch"}, "mode", "render"),
+        entry("render.mode", Type::choice,
+              "which renderers run the path, one after the other (`none`: the two previews alone; the workflow's "
+              "frame-time job is then left out)",
+              "`all`", {}, {"all", "incore", "ooc-noprefetch", "ooc-prefetch", "none"}, "mode", "render"),
         entry("render.budget_mb", Type::number,
               "out of core: a hard limit on every byte the reader holds, the skeleton included (MiB)", "25",
               {0, 1e6, true}, {}, "budget-mb", "render"),

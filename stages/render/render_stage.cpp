@@ -1,5 +1,7 @@
 #include "stages/render/render_stage.hpp"
 
+#include "core/digest.hpp"
+
 #include "config/config_file.hpp"
 #include "config/schema.hpp"
 #include "core/errors.hpp"
@@ -442,7 +444,7 @@ int RenderStage::run(const StageContext& ctx)
                  std::to_string(m_width) + "x" + std::to_string(m_height) + " on " + context->describe());
 
     std::vector<ModeRun> runs;
-    for (const auto& mode : all_modes) {
+    for (const auto& mode : all_modes) { // none: the previews alone
         if (m_mode != "all" && m_mode != mode) {
             continue;
         }
@@ -467,6 +469,10 @@ int RenderStage::run(const StageContext& ctx)
     json summary;
     summary["schema"] = "tigerlod.render-summary/1";
     summary["tree"] = m_tree;
+    // Which tree it drew: a workflow reruns the experiment for a new renderer, not for every new tree.
+    if (std::error_code ec; fs::is_regular_file(fs::path(m_tree) / "manifest.json", ec)) {
+        summary["tree_manifest_sha256"] = sha256_file(fs::path(m_tree) / "manifest.json");
+    }
     summary["path"] = m_path;
     summary["frames"] = views.size();
     summary["viewport"] = {m_width, m_height};

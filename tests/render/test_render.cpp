@@ -7,6 +7,7 @@
 // absent. TIGERLOD_UPDATE_RENDER_REFERENCE=1 rewrites the references.
 #include "../support/run_tool.hpp"
 #include "../support/synthetic_tree.hpp"
+#include "core/digest.hpp"
 
 #include <gdal.h>
 #include <gtest/gtest.h>
@@ -262,6 +263,27 @@ TEST(Render, SyntheticTreeWithinTheBudgetInEveryModeAndPath)
         EXPECT_TRUE(fs::exists(out / "overview.png"));
         EXPECT_TRUE(fs::exists(out / "zoom.png"));
     }
+    fs::remove_all(d);
+}
+
+TEST(Render, ModeNoneDrawsThePreviewsAloneAndNamesTheTree)
+{
+    // The workflow's render job after every new tree: the two previews, no
+    // renderer along the path; the summary names the tree's manifest.
+    const fs::path d = temp_dir("none");
+    tigerlod::testing::make_synthetic_tree(2).write(d / "tree");
+    std::ofstream(d / "tree" / "manifest.json") << "{\"tree\": 1}\n";
+    const fs::path out = d / "out";
+    ASSERT_EQ(run("render", "--mode none --size 320x200 " + (d / "tree").string() + " " + out.string(), d / "log"), 0)
+        << slurp(d / "log");
+    EXPECT_TRUE(fs::exists(out / "overview.png"));
+    EXPECT_TRUE(fs::exists(out / "zoom.png"));
+    for (const auto& e : fs::directory_iterator(out)) {
+        EXPECT_FALSE(e.path().filename().string().starts_with("frames-")) << e.path();
+    }
+    const auto summary = nlohmann::json::parse(slurp(out / "summary.json"));
+    EXPECT_TRUE(summary["modes"].empty());
+    EXPECT_EQ(summary["tree_manifest_sha256"], tigerlod::sha256_file(d / "tree" / "manifest.json"));
     fs::remove_all(d);
 }
 

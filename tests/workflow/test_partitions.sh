@@ -5,8 +5,9 @@
 # a verify job after the pack jobs of the groups whose nodes it reads); a
 # changed county reruns only the jobs of the stores that hold it, and the
 # result is byte for byte a clean build's; a new description reruns
-# nothing and a new pack.tile_mb only pack and what reads the tree (render
-# too, unless workflow.render is false);
+# nothing and a new pack.tile_mb only pack and what reads the tree (render's
+# previews too, unless workflow.render is false; not the frame-time
+# experiment, which follows the renderer);
 # --regions forces a region's jobs; a bad store fails its own jobs with its
 # message on the terminal while the others finish, and the rerun after the
 # fix does only what is left. Needs the 2010 tracts of DC and Rhode Island
@@ -123,6 +124,17 @@ wf >r4.out 2>&1 || fail "a rerun with a new tile_mb failed"
 [ -z "$(ran r4.out)" ] || fail "a new tile_mb ran group jobs: $(ran r4.out)"
 grep -q "\] ingest:" r4.out && fail "a new tile_mb ran ingest"
 grep -q "\] pack:" r4.out || fail "a new tile_mb did not run pack: $(cat r4.out)"
+# The new tree's previews are drawn again; the frame-time experiment, which
+# measures the renderer, is not: its summary names the tree it drew.
+grep -q "\] render:" r4.out || fail "a new tree did not draw its previews: $(cat r4.out)"
+grep -q "\] frame times:" r4.out && fail "a new tree reran the frame-time experiment"
+grep -q "frame times at the p95 (an earlier tree)" r4.out || fail "the summary does not say the experiment's tree is older"
+[ -f out/p/render/overview.png ] && [ -f out/p/frame-times/frame-times.png ] || fail "no previews or frame-time plot"
+# A new render section reruns both.
+sed -i 's/^render: {frames: 6}/render: {frames: 8}/' p.yaml
+wf >r4r.out 2>&1 || fail "a rerun with new render settings failed: $(tail -30 r4r.out)"
+grep -q "\] frame times:" r4r.out && grep -q "\] render:" r4r.out || fail "new render settings ran: $(cat r4r.out)"
+grep -q "frame times at the p95: " r4r.out || fail "the summary does not give the frame times: $(cat r4r.out)"
 
 # workflow.render: false, for rebuilds that need the tree verified and
 # nothing drawn: turning it off runs nothing; a new tile_mb then runs pack
