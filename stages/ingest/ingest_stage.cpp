@@ -739,6 +739,25 @@ size_t write_specs(const fs::path& dir, const fs::path& out, JobSpecs& specs,
     return written;
 }
 
+/// How a dataset's parts are read: what a part's units and codes depend on
+/// beside its files (a read job's parts serve a plan only under the same).
+std::string reading_of(const IngestConfig& cfg)
+{
+    json levels = json::array();
+    for (const auto& l : cfg.levels) {
+        levels.push_back(level_spec_json(l));
+    }
+    const DatasetSpec& d = cfg.dataset;
+    return json{{"kind", static_cast<int>(d.kind)},
+                {"layer", d.layer},
+                {"code_field", d.code_field},
+                {"class_field", d.class_field},
+                {"intpt_lat_field", d.intpt_lat_field},
+                {"intpt_lon_field", d.intpt_lon_field},
+                {"levels", levels}}
+        .dump();
+}
+
 /// The number of parts a dataset is read in (0: it is read by its one job).
 size_t part_count(const IngestConfig& cfg)
 {
@@ -867,19 +886,25 @@ size_t take_reads(const IngestConfig& cfg, const fs::path& dir, std::vector<Part
         }
     }
     std::sort(files.begin(), files.end());
+    const std::string reading = reading_of(cfg);
     size_t taken = 0;
     for (const fs::path& file : files) {
-        std::vector<PartRead> reads;
+        ReadJob job;
         try {
             const std::string bytes = read_file(file);
-            reads = decode_reads(std::as_bytes(std::span(bytes.data(), bytes.size())), file.string());
+            job = decode_reads(std::as_bytes(std::span(bytes.data(), bytes.size())), file.string());
         } catch (const Error& e) {
             log.info(file.string() + " removed: " + e.what());
             fs::remove(file, ec);
             continue;
         }
+        if (job.reading != reading) {
+            log.info(file.string() + " removed: read with other dataset fields or levels");
+            fs::remove(file, ec);
+            continue;
+        }
         bool current = false;
-        for (auto& p : reads) {
+        for (auto& p : job.parts) {
             std::vector<std::string> key;
             for (const auto& f : p.files) {
                 key.push_back(f.path);
@@ -976,15 +1001,16 @@ int IngestStage::run_read(const StageContext& ctx, const Resolved& r)
     }
     const double t0 = ctx.log.elapsed_s();
     size_t rewritten = 0;
-    const std::vector<PartRead> got = read_parts(cfg, dir, r.threads, ctx.log, only, rewritten);
+    std::vector<PartRead> got = read_parts(cfg, dir, r.threads, ctx.log, only, rewritten);
     uint64_t points = 0;
     for (const auto& p : got) {
         points += p.summary.points_read;
     }
-    write_file_atomic(reads_file(dir, m_read), encode_reads(got));
+    const size_t count = got.size();
+    write_file_atomic(reads_file(dir, m_read), encode_reads(ReadJob{reading_of(cfg), std::move(got)}));
     std::printf("ingest read %s %s: %zu parts (%zu rewritten), %llu points, %.2f s, in %s\n", cfg.name.c_str(),
-                m_read.c_str(), got.size(), rewritten, static_cast<unsigned long long>(points),
-                ctx.log.elapsed_s() - t0, reads_file(dir, m_read).c_str());
+                m_read.c_str(), count, rewritten, static_cast<unsigned long long>(points), ctx.log.elapsed_s() - t0,
+                reads_file(dir, m_read).c_str());
     return exit_ok;
 }
 

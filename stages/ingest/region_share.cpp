@@ -203,12 +203,13 @@ RegionJobShare decode_share(std::span<const std::byte> bytes, const std::string&
     return s;
 }
 
-std::string encode_reads(const std::vector<PartRead>& reads)
+std::string encode_reads(const ReadJob& job)
 {
     ByteWriter w;
     w.put_bytes(std::string_view(reads_magic, 8));
-    w.put_varint(reads.size());
-    for (const auto& p : reads) {
+    w.put_vstr(job.reading);
+    w.put_varint(job.parts.size());
+    for (const auto& p : job.parts) {
         w.put_varint(p.part);
         w.put_varint(p.files.size());
         for (const auto& f : p.files) {
@@ -240,15 +241,17 @@ std::string encode_reads(const std::vector<PartRead>& reads)
     return std::move(w.bytes());
 }
 
-std::vector<PartRead> decode_reads(std::span<const std::byte> bytes, const std::string& name)
+ReadJob decode_reads(std::span<const std::byte> bytes, const std::string& name)
 {
     ByteReader r(bytes, name);
     const auto magic = r.get_bytes(8, "the header");
     if (std::memcmp(magic.data(), reads_magic, 8) != 0) {
         r.fail("not a read job's parts of this version of tigerlod-ingest");
     }
-    std::vector<PartRead> reads(static_cast<size_t>(get_count(r, 40, "parts")));
-    for (auto& p : reads) {
+    ReadJob job;
+    job.reading = r.get_vstr("how the parts were read");
+    job.parts.resize(static_cast<size_t>(get_count(r, 40, "parts")));
+    for (auto& p : job.parts) {
         p.part = r.get_varint("a part");
         p.files.resize(static_cast<size_t>(get_count(r, 12, "a part's files")));
         for (auto& f : p.files) {
@@ -284,7 +287,7 @@ std::vector<PartRead> decode_reads(std::span<const std::byte> bytes, const std::
     if (r.left() != 0) {
         r.fail("bytes after the end");
     }
-    return reads;
+    return job;
 }
 
 } // namespace tigerlod::ingest

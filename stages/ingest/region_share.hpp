@@ -31,10 +31,18 @@ struct PartRead {
     PartSummary summary;
 };
 
+/// What a read job hands on: how it read (the config's dataset fields and
+/// levels, which a part's codes come from: the plan takes its parts only
+/// under the same) and its parts.
+struct ReadJob {
+    std::string reading;
+    std::vector<PartRead> parts;
+};
+
 /// A read job's parts as bytes and back (format_error naming `name` and the
 /// byte where the bytes are not a read job's of this version).
-std::string encode_reads(const std::vector<PartRead>& reads);
-std::vector<PartRead> decode_reads(std::span<const std::byte> bytes, const std::string& name);
+std::string encode_reads(const ReadJob& job);
+ReadJob decode_reads(std::span<const std::byte> bytes, const std::string& name);
 
 struct RegionJobShare {
     std::string job;                 ///< the job's name (`r-<code>`, `whole`)

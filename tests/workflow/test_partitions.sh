@@ -151,6 +151,11 @@ sed 's/render: false/render: sometimes/' p.yaml >badrender.yaml
 [ $? = 2 ] || fail "a word for workflow.render did not exit 2"
 grep -q "'workflow.render' must be true or false, not 'sometimes'" badrender.out ||
   fail "no message for workflow.render: $(cat badrender.out)"
+sed 's/render: false/frame_times: nightly/' p.yaml >badframes.yaml
+"$repo/scripts/workflow" badframes.yaml >badframes.out 2>&1
+[ $? = 2 ] || fail "a word for workflow.frame_times did not exit 2"
+grep -q "'workflow.frame_times' must be renderer or tree, not 'nightly'" badframes.out ||
+  fail "no message for workflow.frame_times: $(cat badframes.out)"
 
 # 4. One county's input changed: ingest, then only that county's jobs.
 cp dc_v2.shp.zip dc.shp.zip

@@ -502,6 +502,16 @@ TEST_F(SynthCli, ReadJobsGiveThePlanTheSpecsOfAPlanThatReadsAlone)
     EXPECT_NE(torn.out.find("9 parts (3 from read jobs, 6 read here, 0 rewritten)"), std::string::npos) << torn.out;
     EXPECT_FALSE(fs::exists(parts / "reads" / "b.sum"));
     same_plan();
+    // Planned under other levels: a part's codes come from them, so the read
+    // jobs' parts do not serve, and their file goes.
+    const fs::path other = m_dir / "other.yaml";
+    std::ofstream(other) << slurp(cfg)
+                         << "levels:\n  - {name: state, fields: [STATEFP20]}\n"
+                            "  - {name: county, fields: [STATEFP20, COUNTYFP20]}\n";
+    const Result levels = run("ingest", "--plan --parts " + parts.string() + " " + other.string() + " " + out.string());
+    ASSERT_EQ(levels.code, 0) << levels.err;
+    EXPECT_NE(levels.out.find("9 parts (0 from read jobs, 9 read here"), std::string::npos) << levels.out;
+    EXPECT_FALSE(fs::exists(parts / "reads" / "a.sum"));
 
     // Selections that are not parts of this dataset, and steps mixed.
     for (const auto& [args, message] : std::vector<std::pair<std::string, std::string>>{
