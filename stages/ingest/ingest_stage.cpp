@@ -74,6 +74,16 @@ json level_spec_json(const LevelSpec& l)
     return j;
 }
 
+/// Every level's spec, in order.
+json levels_json(const IngestConfig& cfg)
+{
+    json levels = json::array();
+    for (const auto& l : cfg.levels) {
+        levels.push_back(level_spec_json(l));
+    }
+    return levels;
+}
+
 } // namespace
 
 void IngestStage::add_args(ArgSet& args)
@@ -321,11 +331,7 @@ json manifest_json(const IngestConfig& cfg, const Projection& projection, const 
                           {"sha256", sha[i]}});
     }
     manifest["inputs"] = inputs;
-    json levels_spec = json::array();
-    for (const auto& l : cfg.levels) {
-        levels_spec.push_back(level_spec_json(l));
-    }
-    manifest["options"] = {{"levels", levels_spec},
+    manifest["options"] = {{"levels", levels_json(cfg)},
                            {"projection", projection.describe()},
                            {"halo_m", cfg.halo_m},
                            {"max_problem_samples", max_problem_samples}};
@@ -431,11 +437,7 @@ BuildOptions build_options(const IngestConfig& cfg, unsigned threads, int max_pr
 /// The options a job's stores depend on: a job refuses a plan made with others.
 json job_options_json(const IngestConfig& cfg, const Projection& projection, int max_problem_samples)
 {
-    json levels = json::array();
-    for (const auto& l : cfg.levels) {
-        levels.push_back(level_spec_json(l));
-    }
-    return {{"levels", levels},
+    return {{"levels", levels_json(cfg)},
             {"projection", projection.describe()},
             {"halo_m", cfg.halo_m},
             {"line_tile_km", cfg.line_tile_km},
@@ -743,10 +745,6 @@ size_t write_specs(const fs::path& dir, const fs::path& out, JobSpecs& specs,
 /// beside its files (a read job's parts serve a plan only under the same).
 std::string reading_of(const IngestConfig& cfg)
 {
-    json levels = json::array();
-    for (const auto& l : cfg.levels) {
-        levels.push_back(level_spec_json(l));
-    }
     const DatasetSpec& d = cfg.dataset;
     return json{{"kind", static_cast<int>(d.kind)},
                 {"layer", d.layer},
@@ -754,7 +752,7 @@ std::string reading_of(const IngestConfig& cfg)
                 {"class_field", d.class_field},
                 {"intpt_lat_field", d.intpt_lat_field},
                 {"intpt_lon_field", d.intpt_lon_field},
-                {"levels", levels}}
+                {"levels", levels_json(cfg)}}
         .dump();
 }
 
@@ -961,14 +959,8 @@ int IngestStage::run_list(const StageContext& ctx, const Resolved& r)
         parts.push_back(
             json{{"part", i}, {"name", file_name(base.substr(0, base.find('.')))}, {"bytes", bytes}, {"files", names}});
     }
-    json inputs = json::array();
-    for (size_t k = 1; k < input_files.size(); ++k) {
-        inputs.push_back(input_files[k].first.string());
-    }
-    const json listing{{"schema", "tigerlod.ingest-reads/1"},
-                       {"mode", nparts > 0 ? "parts" : "direct"},
-                       {"inputs", inputs},
-                       {"parts", parts}};
+    const json listing{
+        {"schema", "tigerlod.ingest-reads/1"}, {"mode", nparts > 0 ? "parts" : "direct"}, {"parts", parts}};
     write_file_atomic(dir / "reads.json", listing.dump(1) + "\n");
     ctx.log.info("listed " + std::to_string(nparts) + " parts");
     std::printf("ingest list %s: %zu parts, %.1f MB%s, in %s\n", cfg.name.c_str(), nparts,

@@ -48,6 +48,14 @@ template <class T> void get_vec(ByteReader& r, std::vector<T>& v, const char* wh
 
 } // namespace
 
+void get_magic(ByteReader& r, const char (&magic)[9], const char* what)
+{
+    const auto tag = r.get_bytes(8, "the header");
+    if (std::memcmp(tag.data(), magic, 8) != 0) {
+        r.fail(std::string("not ") + what + " this version of tigerlod-ingest");
+    }
+}
+
 void put_strings(ByteWriter& w, const std::vector<std::string>& v)
 {
     w.put_varint(v.size());
@@ -139,10 +147,7 @@ std::string encode_raw(const RawMap& raw)
 RawMap decode_raw(std::span<const std::byte> bytes, const std::string& name)
 {
     ByteReader r(bytes, name);
-    const auto magic = r.get_bytes(8, "the header");
-    if (std::memcmp(magic.data(), raw_magic, 8) != 0) {
-        r.fail("not a part put aside by this version of tigerlod-ingest");
-    }
+    get_magic(r, raw_magic, "a part put aside by");
     RawMap raw;
     const auto kind = r.get<uint32_t>("the kind");
     if (kind > static_cast<uint32_t>(RawMap::Kind::lines)) {

@@ -111,6 +111,10 @@ void put_strings(ByteWriter& w, const std::vector<std::string>& v);
 std::vector<std::string> get_strings(ByteReader& r, const char* what);
 void put_unit(ByteWriter& w, const RawUnit& u);
 RawUnit get_unit(ByteReader& r);
+/// The 8-byte tag that opens each of ingest's job files (a part, a share, a
+/// read job's parts); a file without it fails as "not `what` this version
+/// of tigerlod-ingest" (`what`: "a region share of").
+void get_magic(ByteReader& r, const char (&magic)[9], const char* what);
 
 /// A RawMap as bytes and back: a part put aside by one job and read by
 /// others (the workflow's region jobs). Equal maps give equal bytes (no

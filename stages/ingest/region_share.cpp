@@ -2,8 +2,6 @@
 
 #include "core/bytes.hpp"
 
-#include <cstring>
-
 namespace tigerlod::ingest {
 
 namespace {
@@ -142,10 +140,7 @@ namespace {
 
 RegionJobShare decode_head(ByteReader& r)
 {
-    const auto magic = r.get_bytes(8, "the header");
-    if (std::memcmp(magic.data(), share_magic, 8) != 0) {
-        r.fail("not a region share of this version of tigerlod-ingest");
-    }
+    get_magic(r, share_magic, "a region share of");
     RegionJobShare s;
     s.job = r.get_vstr("the job");
     s.spec_sha256 = r.get_vstr("the spec's digest");
@@ -244,10 +239,7 @@ std::string encode_reads(const ReadJob& job)
 ReadJob decode_reads(std::span<const std::byte> bytes, const std::string& name)
 {
     ByteReader r(bytes, name);
-    const auto magic = r.get_bytes(8, "the header");
-    if (std::memcmp(magic.data(), reads_magic, 8) != 0) {
-        r.fail("not a read job's parts of this version of tigerlod-ingest");
-    }
+    get_magic(r, reads_magic, "a read job's parts of");
     ReadJob job;
     job.reading = r.get_vstr("how the parts were read");
     job.parts.resize(static_cast<size_t>(get_count(r, 40, "parts")));

@@ -125,6 +125,16 @@ class SynthCli : public ::testing::Test {
         const int status = std::system(cmd.c_str());
         return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(m_dir / "out.txt"), slurp(m_dir / "err.txt")};
     }
+    /// Three states of three counties as TIGER files (synth), and the config
+    /// reading them.
+    void nine_counties(std::string& cfg)
+    {
+        const fs::path synth = m_dir / "synth";
+        const Result r = run("synth", synth.string() + " --seed 5 --states 3 --counties-per-state 3 "
+                                                       "--target-vertices 90000 --cell-m 200");
+        ASSERT_EQ(r.code, 0) << r.err;
+        cfg = config(synth).string();
+    }
     /// A pipeline config reading `folder`'s files as a tiger dataset.
     fs::path config(const fs::path& folder)
     {
@@ -356,12 +366,8 @@ TEST_F(SynthCli, IngestInRegionJobsWritesTheWholeRunsBytesAndRepairsADamagedStor
     // Three states of three counties as TIGER files, a part per county: the
     // plan, a job per state (run in reverse order), the finish; the folder is
     // the one a whole ingest writes, byte for byte.
-    const fs::path synth = m_dir / "synth";
-    ASSERT_EQ(run("synth", synth.string() + " --seed 5 --states 3 --counties-per-state 3 --target-vertices 90000 "
-                                            "--cell-m 200")
-                  .code,
-              0);
-    const std::string cfg = config(synth).string();
+    std::string cfg;
+    ASSERT_NO_FATAL_FAILURE(nine_counties(cfg));
     const fs::path whole = m_dir / "whole", jobs = m_dir / "jobs", parts = m_dir / "parts";
     ASSERT_EQ(run("ingest", cfg + " " + whole.string()).code, 0);
     const std::string common = " --parts " + parts.string() + " " + cfg + " " + jobs.string();
@@ -457,12 +463,8 @@ TEST_F(SynthCli, ReadJobsGiveThePlanTheSpecsOfAPlanThatReadsAlone)
     // Nine counties listed, read by two jobs (the workflow's read groups),
     // planned from what they put aside: the specs and the index are those of
     // a plan that reads every input itself.
-    const fs::path synth = m_dir / "synth";
-    ASSERT_EQ(run("synth", synth.string() + " --seed 5 --states 3 --counties-per-state 3 --target-vertices 90000 "
-                                            "--cell-m 200")
-                  .code,
-              0);
-    const std::string cfg = config(synth).string();
+    std::string cfg;
+    ASSERT_NO_FATAL_FAILURE(nine_counties(cfg));
     const fs::path alone = m_dir / "alone", parts = m_dir / "parts", out = m_dir / "out";
     ASSERT_EQ(run("ingest", "--plan --parts " + alone.string() + " " + cfg + " " + out.string()).code, 0);
     const std::string common = " --parts " + parts.string() + " " + cfg + " " + out.string();
