@@ -153,6 +153,12 @@ std::vector<Key> stage_keys()
               "draw every shortcut the far rule cannot settle in one round, not round by round only those from "
               "vertices of the current shortest paths (the same result, more segments drawn)",
               "`true`", {}, {}, "exhaustive", "simplify", false),
+        entry("simplify.shortcut_test", Type::choice,
+              "which shortcuts a chain may take: `voronoi` those inside its own eps-Voronoi region, drawn with "
+              "OpenGL (the paper), then the exact rules; `exact` the exact rules alone, on the CPU, with no OpenGL "
+              "and no colouring: every shortcut that keeps the map planar and the points on their side, at every "
+              "LOD and across partitions (fewer vertices, faster; `simplification/README.md`)",
+              "`voronoi`", {}, {"voronoi", "exact"}, "shortcut-test", "simplify"),
         entry("simplify.compliance", Type::choice,
               "how the shortcuts' compliance is read back: `ssbo` sets a flag per shortcut in a storage buffer in one "
               "pass, `readback` is the paper's unique-colour loop (Algorithm 5.1); the same result",

@@ -1,7 +1,8 @@
 """pipeline/regions.py CONFIG CODES | --out CONFIG: for scripts/workflow.
 
 CONFIG CODES: the outputs of the jobs a region rebuild forces, one a line:
-the color job of every group of stores holding a store whose partition
+the color job (the simplify job where simplify.shortcut_test is exact) of
+every group of stores holding a store whose partition
 begins with one of the codes (its own stores and those below) or is part of
 one (the stores of its county and state, which hold its boundaries), and
 every level held in a single store (the nation's map), and the ingest job
@@ -60,6 +61,10 @@ def main():
     stores_of_level = {}
     for g in groups:
         stores_of_level[g["level"]] = stores_of_level.get(g["level"], 0) + len(g["partitions"])
+    # The first job of a group: its colouring, or its simplify where
+    # simplify.shortcut_test is exact (no colouring).
+    simplify = cfg.get("simplify") if isinstance(cfg.get("simplify"), dict) else {}
+    first = "simplify" if simplify.get("shortcut_test") == "exact" else "color"
     forced = []
     for region in regions:
         own = [g for g in groups if any(p.startswith(region) or region.startswith(p) for p in g["partitions"])]
@@ -69,7 +74,7 @@ def main():
                   f"their units' parents, e.g. a county's tracts by its 5-digit code)", file=sys.stderr)
             return 2
         for g in hits:
-            target = f"out/{name}/jobs/color/{g['level']}/{g['group']}.json"
+            target = f"out/{name}/jobs/{first}/{g['level']}/{g['group']}.json"
             if target not in forced:
                 forced.append(target)
     # The ingest jobs of the regions (their specs name their own codes).

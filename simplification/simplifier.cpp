@@ -220,9 +220,9 @@ using TestPair = std::pair<uint32_t, uint32_t>;
 /// check bans what the raster let through, until nothing meets.
 class StoreSimplifier {
   public:
-    StoreSimplifier(const ChainStore& store, double eps_m, const SimplifyOptions& opt, Raster& raster,
+    StoreSimplifier(const ChainStore& store, double eps_m, const SimplifyOptions& opt, Raster* raster,
                     const ColorResult* colors, ToleranceStats& st)
-        : m_store(store), m_eps_m(eps_m), m_opt(opt), m_raster(raster), m_colors(colors), m_st(st),
+        : m_store(store), m_eps_m(eps_m), m_opt(opt), m_raster(raster), m_colors(raster ? colors : nullptr), m_st(st),
           m_eps(chain_tolerances(store, eps_m, opt))
     {
         m_st.eps_m = eps_m;
@@ -235,9 +235,11 @@ class StoreSimplifier {
         find_candidates();
         cull_by_point_constraints();
         build_far_rule();
-        finish_colouring();
-        if (!m_opt.lazy) {
-            test_every_candidate();
+        if (m_raster) {
+            finish_colouring();
+            if (!m_opt.lazy) {
+                test_every_candidate();
+            }
         }
         do {
             settle_paths();
@@ -256,7 +258,7 @@ class StoreSimplifier {
     {
         const auto t0 = Clock::now();
         m_keep = segments_in_reach(m_store, halo_reach(m_eps, m_opt));
-        if (!m_colors) {
+        if (m_raster && !m_colors) {
             auto colour = [this] {
                 const auto c0 = Clock::now();
                 auto result = color_chains(m_store, m_eps, m_keep, m_opt);
@@ -498,8 +500,8 @@ class StoreSimplifier {
         m_blocked_at.resize(m_work.size());
         parallel_each(m_work.size(), m_opt.threads, [&](size_t wi) {
             const Work& w = m_work[wi];
-            if (w.cand.empty() || !m_opt.far_rule) {
-                return;
+            if (w.cand.empty() || !m_opt.far_rule || !m_raster) {
+                return; // (no raster: nothing to spare it)
             }
             const auto pts = points_of(w);
             if (!testable_chain(pts, m_pixel)) {
@@ -707,17 +709,17 @@ class StoreSimplifier {
                 const auto& c = m_store.chains[tile.chains[m]];
                 tents[m] = {m_store.chain_points(c), m_eps[tile.chains[m]], tile.classes[m], keep_of(m_keep, c)};
             }
-            prepared[i] = m_raster.prepare(tile.spec, tents, per_tile[drawn_tiles[i]]);
+            prepared[i] = m_raster->prepare(tile.spec, tents, per_tile[drawn_tiles[i]]);
         });
         RasterStats before, after;
         auto gl_work = [&] {
-            before = m_raster.stats();
-            m_raster.begin_batch(parts_in_all);
+            before = m_raster->stats();
+            m_raster->begin_batch(parts_in_all);
             for (const auto& p : prepared) {
-                m_raster.draw(p, fails);
+                m_raster->draw(p, fails);
             }
-            m_raster.end_batch(fails);
-            after = m_raster.stats();
+            m_raster->end_batch(fails);
+            after = m_raster->stats();
         };
         if (m_opt.gl_thread) {
             m_opt.gl_thread(gl_work);
@@ -776,7 +778,9 @@ class StoreSimplifier {
             for (auto redo = ban_by_region(changed); !redo.empty(); redo = ban_by_region(redo)) {
                 shortest_paths(&redo);
             }
-            const auto tests = lazy_tests();
+            // Without the raster every path is now clear under the exact
+            // rules, which is all the guarantee needs.
+            const auto tests = m_raster ? lazy_tests() : std::vector<TestPair>{};
             if (tests.empty()) {
                 for (Work& w : m_work) {
                     w.dirty = false;
@@ -1132,7 +1136,7 @@ class StoreSimplifier {
     const ChainStore& m_store;
     const double m_eps_m;
     const SimplifyOptions& m_opt;
-    Raster& m_raster;
+    Raster* const m_raster;      ///< null: the exact rules alone (no eps-Voronoi test)
     const ColorResult* m_colors; ///< given, or m_own_colors once finish_colouring has it
     ToleranceStats& m_st;
     const std::vector<double> m_eps; ///< per chain, grid units (chain_tolerances)
@@ -1155,7 +1159,7 @@ class StoreSimplifier {
 
 } // namespace
 
-ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyOptions& opt, Raster& raster,
+ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyOptions& opt, Raster* raster,
                           const ColorResult* colors, ToleranceStats& st)
 {
     return StoreSimplifier(store, eps_m, opt, raster, colors, st).run();

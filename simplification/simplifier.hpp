@@ -53,7 +53,11 @@ struct ToleranceStats {
 /// Simplify the owned chains of `store` at `eps_m`. `colors`, if given, must
 /// come from color_store with the same options. The result holds the owned
 /// chains only, simplified, with the store's junctions and constraints.
+/// With `raster` null the eps-Voronoi test is not made (`--shortcut-test
+/// exact`): the exact rules alone choose the shortcuts, no OpenGL is used
+/// and `colors` is ignored (README.md beside this file, "The exact rules
+/// alone").
 chains::ChainStore simplify_store(const chains::ChainStore& store, double eps_m, const SimplifyOptions& opt,
-                                  Raster& raster, const ColorResult* colors, ToleranceStats& stats);
+                                  Raster* raster, const ColorResult* colors, ToleranceStats& stats);
 
 } // namespace tigerlod::simplify

@@ -44,6 +44,7 @@ void SimplifyStage::add_args(ArgSet& args)
     config::add_option(args, "simplify.points", &m_points);
     args.add("lazy", &m_lazy, "the default, said explicitly: see --exhaustive");
     config::add_option(args, "simplify.lazy", &m_exhaustive);
+    config::add_option(args, "simplify.shortcut_test", &m_shortcut_test);
     config::add_option(args, "simplify.compliance", &m_compliance);
     config::add_option(args, "simplify.gl", &m_gl);
     config::add_option(args, "simplify.window_pixels", &m_window_pixels);
@@ -61,6 +62,10 @@ void SimplifyStage::initialize()
         throw usage_error("simplify: options '--lazy' and '--exhaustive' exclude each other");
     }
     o.lazy = !m_exhaustive;
+    if (m_shortcut_test == "exact" && !m_colors.empty()) {
+        throw usage_error("simplify: '--colors' gives the eps-Voronoi test its classes, and '--shortcut-test exact' "
+                          "makes no such test");
+    }
 }
 
 std::vector<std::string> SimplifyStage::config_args(const fs::path& file) const
@@ -125,36 +130,44 @@ int SimplifyStage::run(const StageContext& ctx)
     // 5.2-5.3 s without). So with more than one store and a worker per core,
     // llvmpipe draws on the GL thread itself, unless the user set LP_NUM_THREADS.
     // Results do not depend on it (the same pixels either way).
-    const bool llvmpipe_inline = stores.size() > 1 && o.threads >= std::thread::hardware_concurrency() &&
+    const bool raster_test = m_shortcut_test == "voronoi";
+    const bool llvmpipe_inline = raster_test && stores.size() > 1 && o.threads >= std::thread::hardware_concurrency() &&
                                  std::getenv("LP_NUM_THREADS") == nullptr;
     if (llvmpipe_inline) {
         ::setenv("LP_NUM_THREADS", "0", 0);
     }
-    std::string why;
-    auto context = m_gl == "auto" ? gl::Context::create_auto(why) : gl::Context::create(*gl::parse_backend(m_gl));
-    if (!why.empty()) {
-        ctx.log.info("simplify: --gl auto: " + why);
+    // --shortcut-test exact draws nothing: no OpenGL context is made.
+    std::unique_ptr<gl::Context> context;
+    std::optional<Raster> raster;
+    std::string gl_name = "none (--shortcut-test exact)";
+    if (raster_test) {
+        std::string why;
+        context = m_gl == "auto" ? gl::Context::create_auto(why) : gl::Context::create(*gl::parse_backend(m_gl));
+        if (!why.empty()) {
+            ctx.log.info("simplify: --gl auto: " + why);
+        }
+        RasterOptions ropt;
+        ropt.metric = o.metric;
+        ropt.compliance = m_compliance == "ssbo" ? Compliance::ssbo : Compliance::readback;
+        ropt.window_pixels = static_cast<uint32_t>(m_window_pixels);
+        ropt.max_tile_pixels = o.color.tile_pixels;
+        raster.emplace(*context, ropt);
+        gl_name = context->describe();
     }
-    RasterOptions ropt;
-    ropt.metric = o.metric;
-    ropt.compliance = m_compliance == "ssbo" ? Compliance::ssbo : Compliance::readback;
-    ropt.window_pixels = static_cast<uint32_t>(m_window_pixels);
-    ropt.max_tile_pixels = o.color.tile_pixels;
-    Raster raster(*context, ropt);
-    ctx.log.info("simplify: " + std::to_string(stores.size()) + " stores, " + context->describe() +
+    ctx.log.info("simplify: " + std::to_string(stores.size()) + " stores, " + gl_name +
                  (llvmpipe_inline ? " (LP_NUM_THREADS=0: every core has a worker)" : ""));
 
     const auto t_start = std::chrono::steady_clock::now();
-    const auto totals = simplify_stores(stores, out, raster, llvmpipe_inline, ctx);
+    const auto totals = simplify_stores(stores, out, raster ? &*raster : nullptr, llvmpipe_inline, ctx);
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
-    out.write_report(report_json(stores.size(), context->describe(), totals, seconds).dump(2) + "\n");
+    out.write_report(report_json(stores.size(), gl_name, totals, seconds).dump(2) + "\n");
     out.commit(manifest);
     log_removed_leftovers(ctx.log, out.removed_leftovers());
-    print_summary(stores.size(), context->describe(), totals, seconds);
+    print_summary(stores.size(), gl_name, totals, seconds);
     return exit_ok;
 }
 
-std::vector<ToleranceStats> SimplifyStage::simplify_one(const StoreFile& sf, const SimplifyOptions& so, Raster& raster,
+std::vector<ToleranceStats> SimplifyStage::simplify_one(const StoreFile& sf, const SimplifyOptions& so, Raster* raster,
                                                         const StageOutput& out) const
 {
     double max_scale = 1.0;
@@ -200,7 +213,7 @@ std::vector<ToleranceStats> SimplifyStage::simplify_one(const StoreFile& sf, con
 }
 
 std::vector<ToleranceStats> SimplifyStage::simplify_stores(const std::vector<StoreFile>& stores, const StageOutput& out,
-                                                           Raster& raster, bool llvmpipe_inline,
+                                                           Raster* raster, bool llvmpipe_inline,
                                                            const StageContext& ctx) const
 {
     const auto& o = m_common.options;
@@ -277,6 +290,7 @@ json SimplifyStage::report_json(size_t stores, const std::string& gl, const std:
                          {"max_reach", o.max_reach},
                          {"point_constraints", o.point_constraints},
                          {"user_points", o.user_points.size()},
+                         {"shortcut_test", m_shortcut_test},
                          {"lazy", o.lazy},
                          {"compliance", m_compliance},
                          {"pixel_fraction", o.color.pixel_fraction},
@@ -345,6 +359,7 @@ json SimplifyStage::manifest_json(const Manifest& ingest, const std::optional<Ma
     options["max_reach"] = o.max_reach;
     options["point_constraints"] = o.point_constraints;
     options["points"] = {{"file", m_points}, {"sha256", points_sha256}, {"lonlat", std::move(lonlat)}};
+    options["shortcut_test"] = m_shortcut_test;
     options["lazy"] = o.lazy;
     options["compliance"] = m_compliance;
     options["window_pixels"] = m_window_pixels;

@@ -29,13 +29,13 @@ class SimplifyStage final : public Stage {
   private:
     /// One store at every tolerance of the ladder, written to `out`; its
     /// statistics per tolerance.
-    std::vector<ToleranceStats> simplify_one(const StoreFile& sf, const SimplifyOptions& so, Raster& raster,
+    std::vector<ToleranceStats> simplify_one(const StoreFile& sf, const SimplifyOptions& so, Raster* raster,
                                              const StageOutput& out) const;
     /// Every store, several at once, each on a worker with its share of the
     /// threads, the GL work on this thread; the statistics summed per
     /// tolerance in store order (the same whatever the threads).
     std::vector<ToleranceStats> simplify_stores(const std::vector<StoreFile>& stores, const StageOutput& out,
-                                                Raster& raster, bool llvmpipe_inline, const StageContext& ctx) const;
+                                                Raster* raster, bool llvmpipe_inline, const StageContext& ctx) const;
     /// simplify-report.json.
     nlohmann::ordered_json report_json(size_t stores, const std::string& gl, const std::vector<ToleranceStats>& totals,
                                        double seconds) const;
@@ -48,6 +48,7 @@ class SimplifyStage final : public Stage {
 
     CommonOptions m_common;
     std::string m_points;
+    std::string m_shortcut_test = "voronoi";
     std::string m_compliance = "ssbo";
     std::string m_gl = "auto";
     std::string m_colors;

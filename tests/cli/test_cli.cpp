@@ -722,6 +722,64 @@ TEST_F(Cli, ColorAndSimplifyRunTheLadderDeterministically)
               slurp(m_dir / "simp2" / "manifest.json").substr(0, 200));
 }
 
+TEST_F(Cli, SimplifyWithTheExactRulesAloneDrawsNothingAndVerifiesClean)
+{
+    using json = nlohmann::json;
+    make_tiger();
+    ASSERT_EQ(run("ingest", tiger_config().string() + " " + (m_dir / "in").string()).code, 0);
+    const std::string in = (m_dir / "in").string();
+    const std::string exact = (m_dir / "exact").string(), voronoi = (m_dir / "voronoi").string();
+    const Result e = run("simplify", in + " " + exact + " --tolerances 1,8 --shortcut-test exact --threads 1");
+    ASSERT_EQ(e.code, 0) << e.err;
+    EXPECT_TRUE(e.err.empty()) << e.err;
+    EXPECT_NE(e.out.find("on none (--shortcut-test exact)"), std::string::npos) << e.out;
+    const Result v = run("simplify", in + " " + voronoi + " --tolerances 1,8 --threads 1");
+    ASSERT_EQ(v.code, 0) << v.err;
+    const json re = json::parse(slurp(m_dir / "exact" / "simplify-report.json"));
+    const json rv = json::parse(slurp(m_dir / "voronoi" / "simplify-report.json"));
+    EXPECT_EQ(re["gl"], "none (--shortcut-test exact)");
+    EXPECT_EQ(re["options"]["shortcut_test"], "exact");
+    EXPECT_EQ(rv["options"]["shortcut_test"], "voronoi");
+    EXPECT_EQ(json::parse(slurp(m_dir / "exact" / "manifest.json"))["options"]["shortcut_test"], "exact");
+    for (size_t t = 0; t < 2; ++t) {
+        const json& a = re["tolerances"][t];
+        EXPECT_EQ(a["drawn_segments"], 0) << "nothing is drawn";
+        EXPECT_EQ(a["tiles"], 0) << "nothing is coloured";
+        EXPECT_EQ(a["banned"]["raster"], 0);
+        // This small map gives the raster nothing to turn down, so the
+        // stores are the eps-Voronoi test's, byte for byte (where it does,
+        // the exact rules keep fewer vertices: tests/maps, test_simplify_real).
+        EXPECT_EQ(rv["tolerances"][t]["banned"]["raster"], 0);
+    }
+    // Two threads, the same bytes; and the tree verifies clean, every LOD
+    // against every other.
+    const Result e2 =
+        run("simplify", in + " " + (m_dir / "exact2").string() + " --tolerances 1,8 --shortcut-test exact --threads 2");
+    ASSERT_EQ(e2.code, 0) << e2.err;
+    size_t stores = 0;
+    for (const auto& f : fs::recursive_directory_iterator(m_dir / "exact")) {
+        if (f.is_regular_file() && f.path().extension() == ".tlc") {
+            const auto rel = fs::relative(f.path(), m_dir / "exact");
+            EXPECT_EQ(slurp(f.path()), slurp(m_dir / "exact2" / rel)) << rel;
+            EXPECT_EQ(slurp(f.path()), slurp(m_dir / "voronoi" / rel)) << rel;
+            ++stores;
+        }
+    }
+    EXPECT_GT(stores, 2U);
+    const std::string tree = (m_dir / "tree").string();
+    ASSERT_EQ(run("pack", in + " " + exact + " " + tree).code, 0);
+    const Result vf = run("verify", tree + " " + in + " " + (m_dir / "verify").string());
+    EXPECT_EQ(vf.code, 0) << vf.out << vf.err;
+    // The test is a choice of two, and the colours are the raster's.
+    expect_failure(run("simplify", in + " " + (m_dir / "bad").string() + " --shortcut-test exactly"), 2,
+                   "must be voronoi or exact");
+    ASSERT_EQ(run("color", in + " " + (m_dir / "colors").string() + " --tolerances 8").code, 0);
+    expect_failure(run("simplify", in + " " + (m_dir / "bad").string() + " --tolerances 8 --shortcut-test exact " +
+                                       "--colors " + (m_dir / "colors").string()),
+                   2, "'--shortcut-test exact' makes no such test");
+    EXPECT_FALSE(fs::exists(m_dir / "bad"));
+}
+
 TEST_F(Cli, ColorAndSimplifyByPartitionsWriteTheWholeRunsBytes)
 {
     // The workflow's jobs: each stage on some stores, updating OUTPUT in

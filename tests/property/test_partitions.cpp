@@ -2,8 +2,9 @@
 // tests/support/adversarial_map.hpp): each seed's map, partitioned three ways,
 // goes through tigerlod-ingest -> color -> simplify -> pack -> verify at a fine
 // and a coarse ladder (the coarse one with the coarsest pixel allowed, so that
-// the gaps between strips are narrower than a pixel), and verify must find
-// nothing. Seeds 1-3 by default; TIGERLOD_PROPERTY_SEEDS=A-B sweeps others
+// the gaps between strips are narrower than a pixel), and through ingest ->
+// simplify --shortcut-test exact -> pack -> verify at both together, and
+// verify must find nothing. Seeds 1-3 by default; TIGERLOD_PROPERTY_SEEDS=A-B sweeps others
 // (scripts/property-sweep).
 #include "../support/adversarial_lines.hpp"
 #include "../support/adversarial_map.hpp"
@@ -19,6 +20,7 @@
 #include <sstream>
 #include <string>
 #include <unistd.h>
+#include <vector>
 
 namespace fs = std::filesystem;
 using tigerlod::testing::AdversarialLines;
@@ -51,27 +53,38 @@ std::pair<uint64_t, uint64_t> seed_range()
 struct Ladder {
     const char* name;
     const char* options; ///< for color and simplify
+    bool exact = false;  ///< simplify --shortcut-test exact: no colouring, the exact rules alone
 };
 
-const Ladder ladders[] = {{"fine", "--tolerances 1,4"}, {"coarse", "--tolerances 16,64 --pixel-fraction 0.5"}};
+// The fine and the coarse ladder with the eps-Voronoi test, and the whole
+// ladder with the exact rules alone, where the region rule is all that
+// keeps the partitions apart.
+const Ladder ladders[] = {{"fine", "--tolerances 1,4"},
+                          {"coarse", "--tolerances 16,64 --pixel-fraction 0.5"},
+                          {"exact", "--tolerances 1,4,16,64", true}};
 
 const std::pair<AdversarialMap::Partitioning, const char*> partitionings[] = {
     {AdversarialMap::Partitioning::whole, "whole"},
     {AdversarialMap::Partitioning::blocks, "blocks"},
     {AdversarialMap::Partitioning::scattered, "scattered"}};
 
-/// DIR/ingest through color, simplify (with the colours), pack and verify at
-/// `ladder`: verify's exit code, or -2 after a test failure naming the stage
-/// that failed before it. `region_bans` gets the region rule's bans.
+/// DIR/ingest through color, simplify (with the colours; the exact rules
+/// alone without them, for an exact ladder), pack and verify at `ladder`: verify's exit code, or -2 after a test
+/// failure naming the stage that failed before it. `region_bans` gets the region rule's bans.
 int color_to_verify(const fs::path& dir, const Ladder& ladder, size_t& region_bans)
 {
     const std::string d = dir.string();
     const fs::path log = dir / "log";
     const std::string opts = ladder.options;
-    for (const auto& [tool, args] :
-         {std::pair<std::string, std::string>{"color", opts + " " + d + "/ingest " + d + "/color"},
-          {"simplify", opts + " --threads 2 --colors " + d + "/color " + d + "/ingest " + d + "/simp"},
-          {"pack", d + "/ingest " + d + "/simp " + d + "/tree"}}) {
+    std::vector<std::pair<std::string, std::string>> steps;
+    if (ladder.exact) {
+        steps = {{"simplify", opts + " --threads 2 --shortcut-test exact " + d + "/ingest " + d + "/simp"}};
+    } else {
+        steps = {{"color", opts + " " + d + "/ingest " + d + "/color"},
+                 {"simplify", opts + " --threads 2 --colors " + d + "/color " + d + "/ingest " + d + "/simp"}};
+    }
+    steps.emplace_back("pack", d + "/ingest " + d + "/simp " + d + "/tree");
+    for (const auto& [tool, args] : steps) {
         if (run(tool, args, log) != 0) {
             ADD_FAILURE() << tool << " failed: " << slurp(log);
             return -2;

@@ -99,7 +99,19 @@ inline ChainStore run(const ChainStore& in, double eps_m, SimplifyOptions o = pl
                       Compliance mode = Compliance::ssbo)
 {
     ToleranceStats st;
-    auto out = simplify_store(in, eps_m, o, raster(mode, o.metric), nullptr, st);
+    auto out = simplify_store(in, eps_m, o, &raster(mode, o.metric), nullptr, st);
+    if (stats) {
+        *stats = st;
+    }
+    return out;
+}
+
+/// As run, without the eps-Voronoi test: the exact rules alone (`--shortcut-test exact`), no OpenGL.
+inline ChainStore run_exact(const ChainStore& in, double eps_m, SimplifyOptions o = plain(),
+                            ToleranceStats* stats = nullptr)
+{
+    ToleranceStats st;
+    auto out = simplify_store(in, eps_m, o, nullptr, nullptr, st);
     if (stats) {
         *stats = st;
     }
@@ -131,6 +143,36 @@ inline size_t count_intersections(const std::vector<const ChainStore*>& stores)
         }
     }
     return find_intersections(segs, 1).size();
+}
+
+/// Meetings, other than at shared end points, between each chain of `out`
+/// (simplified) and every chain of `in` with another id (the originals,
+/// halo included): what a view drawing one chain at this LOD beside its
+/// neighbours at LOD 0 would show.
+inline size_t count_lod_meetings(const ChainStore& out, const ChainStore& in)
+{
+    size_t n = 0;
+    for (const auto& c : out.chains) {
+        std::vector<Segment> segs;
+        const auto own = out.chain_points(c);
+        for (size_t i = 0; i + 1 < own.size(); ++i) {
+            segs.push_back({own[i], own[i + 1], 0});
+        }
+        const size_t own_segments = segs.size();
+        for (const auto& o : in.chains) {
+            if (o.id == c.id) {
+                continue;
+            }
+            const auto p = in.chain_points(o);
+            for (size_t i = 0; i + 1 < p.size(); ++i) {
+                segs.push_back({p[i], p[i + 1], 1});
+            }
+        }
+        for (const auto& x : find_intersections(segs, 1)) {
+            n += (x.first < own_segments) != (x.second < own_segments) ? 1 : 0;
+        }
+    }
+    return n;
 }
 
 } // namespace tigerlod::simplify::testing

@@ -74,6 +74,28 @@ assert tree["class_scale"] == {"S1400": 0.5}, tree["class_scale"]
 assert report["clean"] and report["contract"]["class_scale"] == {"S1400": 0.5}, report["contract"]
 PY
 
+# 2c. simplify.shortcut_test: exact reruns simplify and what follows with the
+# exact rules alone: no color job runs, the tree verifies clean, and a
+# region rebuild forces the groups' simplify jobs (there are no colour jobs).
+rm -rf out/wf/jobs/color
+sed -i 's/tolerances_m: \[2, 8, 32\]/tolerances_m: [2, 8, 32]\n  shortcut_test: exact/' wf.yaml
+"$repo/scripts/workflow" wf.yaml >run5.out 2>&1 || fail "a rerun with the exact rules failed: $(cat run5.out)"
+[ "$(stat -c %Y out/wf/ingest/manifest.json)" = "$before" ] || fail "the exact rules reran ingest"
+[ -e out/wf/jobs/color ] && fail "color jobs ran for the exact rules"
+python3 - out/wf/tree/manifest.json out/wf/reports/verify-report.json out/wf/reports/simplify-report.json <<'PY' ||
+import json, sys
+tree = json.load(open(sys.argv[1]))["simplify"]
+report = json.load(open(sys.argv[2]))
+simp = json.load(open(sys.argv[3]))
+assert tree["shortcut_test"] == "exact", tree
+assert report["clean"], report["violations"]
+assert all(t["drawn_segments"] == 0 for t in simp["tolerances"]), simp["tolerances"]
+PY
+  fail "the exact rules' tree is not what the config asked for"
+python3 "$repo/pipeline/regions.py" wf.yaml 51063 >forced.out 2>/dev/null || fail "regions.py failed"
+grep -q '^out/wf/jobs/simplify/' forced.out || fail "a region rebuild forces no simplify job: $(cat forced.out)"
+grep -q '/jobs/color/' forced.out && fail "a region rebuild forces color jobs that do not exist: $(cat forced.out)"
+
 # 3. A failing stage: its message on the terminal, not only in its log.
 sed "s/^name: wf/name: bad/; s#tl_2020_51063_faces.zip#tl_2020_51063_edges.zip#" wf.yaml >bad.yaml
 if "$repo/scripts/workflow" bad.yaml >bad.out 2>&1; then

@@ -123,9 +123,8 @@ MapCase read_case(const fs::path& dir)
     return c;
 }
 
-} // namespace
-
-TEST(MapCases, EachGivesItsExpectedChainsAndNoneMeet)
+/// The case folders, in order.
+std::vector<fs::path> case_dirs()
 {
     const fs::path root = fs::path(TIGERLOD_SOURCE_DIR) / "tests" / "maps";
     std::vector<fs::path> dirs;
@@ -135,39 +134,71 @@ TEST(MapCases, EachGivesItsExpectedChainsAndNoneMeet)
         }
     }
     std::sort(dirs.begin(), dirs.end());
-    ASSERT_GE(dirs.size(), 10U);
+    return dirs;
+}
+
+/// `out`'s chains against `file` (expected.txt or expected-exact.txt), or
+/// written into it, below its comments, with TIGERLOD_UPDATE_GOLDEN=1.
+void compare_or_update(const ChainStore& out, const fs::path& file)
+{
+    std::vector<std::pair<uint64_t, std::string>> got;
+    for (const auto& chain : out.chains) {
+        const auto p = out.chain_points(chain);
+        got.emplace_back(chain.id, std::to_string(chain.id) + " " + wkt_of(Pts(p.begin(), p.end())));
+    }
+    std::sort(got.begin(), got.end());
+    std::vector<std::string> lines;
+    for (const auto& [id, line] : got) {
+        lines.push_back(line);
+    }
     const char* update = std::getenv("TIGERLOD_UPDATE_GOLDEN");
+    if (update != nullptr && std::string(update) == "1") {
+        std::ifstream old(file);
+        std::string head;
+        for (std::string line; std::getline(old, line) && line.rfind('#', 0) == 0;) {
+            head += line + "\n";
+        }
+        std::ofstream f(file);
+        f << head;
+        for (const auto& line : lines) {
+            f << line << "\n";
+        }
+        return;
+    }
+    ASSERT_TRUE(fs::exists(file)) << file;
+    EXPECT_EQ(lines, content_lines(file));
+}
+
+} // namespace
+
+TEST(MapCases, EachGivesItsExpectedChainsAndNoneMeet)
+{
+    const auto dirs = case_dirs();
+    ASSERT_GE(dirs.size(), 10U);
     for (const auto& dir : dirs) {
         SCOPED_TRACE(dir.filename().string());
         const MapCase c = read_case(dir);
         const ChainStore out = run(c.map.s, c.eps_m, c.options);
-        std::vector<std::pair<uint64_t, std::string>> got;
-        for (const auto& chain : out.chains) {
-            const auto p = out.chain_points(chain);
-            got.emplace_back(chain.id, std::to_string(chain.id) + " " + wkt_of(Pts(p.begin(), p.end())));
-        }
-        std::sort(got.begin(), got.end());
-        std::vector<std::string> lines;
-        for (const auto& [id, line] : got) {
-            lines.push_back(line);
-        }
-        // No two chains meet where they did not in the input (case 008's
-        // chain touches itself there; simplify leaves input problems be).
         EXPECT_LE(count_intersections({&out}), count_intersections({&c.map.s}));
-        if (update != nullptr && std::string(update) == "1") {
-            // Keep the file's comment lines at its head.
-            std::ifstream old(dir / "expected.txt");
-            std::string head;
-            for (std::string line; std::getline(old, line) && line.rfind('#', 0) == 0;) {
-                head += line + "\n";
-            }
-            std::ofstream f(dir / "expected.txt");
-            f << head;
-            for (const auto& line : lines) {
-                f << line << "\n";
-            }
-            continue;
-        }
-        EXPECT_EQ(lines, content_lines(dir / "expected.txt"));
+        EXPECT_EQ(count_lod_meetings(out, c.map.s), 0U);
+        compare_or_update(out, dir / "expected.txt");
+    }
+}
+
+// The same maps with the exact rules alone (`--shortcut-test exact`): the
+// chains of expected-exact.txt, none meeting, and each simplified chain
+// clear of every other chain's original (the LODs mix). The cases where the
+// eps-Voronoi test alone kept a vertex take the shortcut here.
+TEST(MapCases, TheExactRulesAloneGiveTheirExpectedChainsAndNoneMeetAtAnyLod)
+{
+    const auto dirs = case_dirs();
+    ASSERT_GE(dirs.size(), 10U);
+    for (const auto& dir : dirs) {
+        SCOPED_TRACE(dir.filename().string());
+        const MapCase c = read_case(dir);
+        const ChainStore out = run_exact(c.map.s, c.eps_m, c.options);
+        EXPECT_LE(count_intersections({&out}), count_intersections({&c.map.s}));
+        EXPECT_EQ(count_lod_meetings(out, c.map.s), 0U);
+        compare_or_update(out, dir / "expected-exact.txt");
     }
 }

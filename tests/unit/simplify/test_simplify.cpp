@@ -917,9 +917,9 @@ TEST(Simplify, DrawingInPiecesChangesNothing)
     for (const auto& map : {star_map(), wiggly_map()}) {
         for (double eps : {0.3, 0.6, 1.2}) {
             ToleranceStats sa, sb, sc;
-            const auto a = simplify_store(map, eps, plain(), large, nullptr, sa);
-            const auto b = simplify_store(map, eps, plain(), small, nullptr, sb);
-            const auto c = simplify_store(map, eps, plain(), small_readback, nullptr, sc);
+            const auto a = simplify_store(map, eps, plain(), &large, nullptr, sa);
+            const auto b = simplify_store(map, eps, plain(), &small, nullptr, sb);
+            const auto c = simplify_store(map, eps, plain(), &small_readback, nullptr, sc);
             EXPECT_EQ(chains::to_text(a), chains::to_text(b)) << "eps " << eps;
             EXPECT_EQ(chains::to_text(a), chains::to_text(c)) << "read back, eps " << eps;
             EXPECT_EQ(sa.banned_raster, sb.banned_raster) << "eps " << eps;
