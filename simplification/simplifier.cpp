@@ -266,7 +266,9 @@ class StoreSimplifier {
             };
             m_colouring = std::async(m_opt.threads > 1 ? std::launch::async : std::launch::deferred, colour);
         }
-        m_st.seconds_color += since(t0);
+        // Without the raster the segments in reach serve the region rule and
+        // the exact check alone: their time is counted there.
+        (m_raster ? m_st.seconds_color : m_st.seconds_exact) += since(t0);
         m_pixel = m_colors ? m_colors->pixel : tile_pixel(m_eps, m_opt.color); // m_colors->pixel once known
         m_untested2 = untested_length2(m_pixel);
     }
@@ -521,7 +523,8 @@ class StoreSimplifier {
                 }
             }
         });
-        m_st.seconds_far += since(t0);
+        // Without the raster the grid is the region rule's index alone.
+        (m_raster ? m_st.seconds_far : m_st.seconds_exact) += since(t0);
     }
 
     /// The part of segment ab that another chain's segment comes within r of
