@@ -1,4 +1,4 @@
-// scan_bench LEVEL_DIR EPS_M [ROUNDS [scalar|lanes|hulls]]: the candidate scan of
+// scan_bench LEVEL_DIR EPS_M [ROUNDS [scalar|lanes|lanes4|hulls]]: the candidate scan of
 // tigerlod-simplify (proximate_shortcuts) alone, on one thread, over the owned
 // chains of every chain store of a level, at the tolerances tigerlod-simplify
 // would use; with `scalar`, `lanes` or `hulls`, that kernel instead of the
@@ -24,16 +24,17 @@ using namespace tigerlod::simplify;
 int main(int argc, char** argv)
 {
     if (argc < 3) {
-        std::fprintf(stderr, "usage: scan_bench LEVEL_DIR EPS_M [ROUNDS [scalar|lanes|hulls]]\n");
+        std::fprintf(stderr, "usage: scan_bench LEVEL_DIR EPS_M [ROUNDS [scalar|lanes|lanes4|hulls]]\n");
         return 2;
     }
     const double eps_m = std::atof(argv[2]);
     const int rounds = argc > 3 ? std::atoi(argv[3]) : 3;
     const std::string name = argc > 4 ? argv[4] : "fastest";
-    const ScanKernel kernel = name == "scalar"  ? ScanKernel::scalar
-                              : name == "lanes" ? ScanKernel::lanes
-                              : name == "hulls" ? ScanKernel::hulls
-                                                : ScanKernel::fastest;
+    const ScanKernel kernel = name == "scalar"   ? ScanKernel::scalar
+                              : name == "lanes"  ? ScanKernel::lanes
+                              : name == "lanes4" ? ScanKernel::lanes4
+                              : name == "hulls"  ? ScanKernel::hulls
+                                                 : ScanKernel::fastest;
     std::vector<fs::path> files;
     for (const auto& e : fs::directory_iterator(argv[1])) {
         if (e.path().extension() == ".tlc") {

@@ -156,7 +156,12 @@ class UnsureEnds {
             if (r2 >= keep2()) {
                 // Mostly the farthest yet (a chain going out): at the end.
                 const std::pair<double, uint32_t> e{r2, m_to};
-                m_far.insert(std::upper_bound(m_far.begin() + static_cast<std::ptrdiff_t>(m_begin), m_far.end(), e), e);
+                if (m_far.size() == m_begin || !(e < m_far.back())) {
+                    m_far.push_back(e); // where upper_bound would put it, without the search
+                } else {
+                    m_far.insert(std::upper_bound(m_far.begin() + static_cast<std::ptrdiff_t>(m_begin), m_far.end(), e),
+                                 e);
+                }
                 m_recent.emplace_back(m_to, r2);
             }
         }
@@ -398,12 +403,6 @@ void scan(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_rea
 #if defined(__x86_64__)
 #define TIGERLOD_SCAN_LANES 1
 
-/// Four doubles, and the masks their comparisons give (all bits set or
-/// none), as GCC vector extensions; the functions that use them are built
-/// for AVX2 (without FMA) and run only where the processor has it.
-using V4 = double __attribute__((vector_size(32)));
-using M4 = int64_t __attribute__((vector_size(32)));
-constexpr int lanes = 4;
 /// Steps of the scan worked out ahead, per block (see scan_lanes).
 constexpr int block_steps = 8;
 
@@ -413,201 +412,65 @@ bool has_avx2() noexcept
     return yes;
 }
 
-#define TIGERLOD_AVX2 __attribute__((target("avx2"), always_inline)) inline
-
-TIGERLOD_AVX2 V4 select(M4 m, V4 a, V4 b) noexcept
+bool has_avx512() noexcept
 {
-    return reinterpret_cast<V4>((m & reinterpret_cast<M4>(a)) | (~m & reinterpret_cast<M4>(b)));
+    static const bool yes = __builtin_cpu_supports("avx512f");
+    return yes;
 }
-/// Bit l set when lane l of `m` is.
-TIGERLOD_AVX2 int bits(M4 m) noexcept
+
+// The lanes kernel twice (scan_lanes.ipp): four starts at once for AVX2 and
+// eight for AVX-512, each built for its instruction set alone and run only
+// where the processor has it.
+#pragma GCC push_options
+#pragma GCC target("avx2")
+namespace avx2 {
+
+using V = double __attribute__((vector_size(32)));
+using M = int64_t __attribute__((vector_size(32)));
+constexpr int lanes = 4;
+inline int bits(M m) noexcept
 {
     return _mm256_movemask_pd(reinterpret_cast<__m256d>(m));
 }
-TIGERLOD_AVX2 V4 load4(const double* p) noexcept
+inline V root(V v) noexcept
 {
-    V4 v;
-    std::memcpy(&v, p, sizeof v);
-    return v;
+    return reinterpret_cast<V>(_mm256_sqrt_pd(reinterpret_cast<__m256d>(v)));
 }
-/// x cross y, as Arc computes it: x.x y.y - x.y y.x. Swapping x and y gives
-/// exactly its negation (the same two products, subtracted the other way).
-TIGERLOD_AVX2 V4 cross(V4 xx, V4 xy, V4 yx, V4 yy) noexcept
+inline V iota() noexcept
 {
-    return xx * yy - xy * yx;
+    return V{0, 1, 2, 3};
 }
 
-/// Per lane of the group of starts j, j + 1, ...: how many ends it tests (0
-/// where no start of [j, starts_hi) is), and the most of them.
-TIGERLOD_AVX2 double lane_steps(uint32_t j, uint32_t n, uint32_t starts_hi, uint32_t max_reach, V4& steps) noexcept
+#include "simplification/scan_lanes.ipp"
+
+} // namespace avx2
+#pragma GCC pop_options
+
+#pragma GCC push_options
+#pragma GCC target("avx512f")
+namespace avx512 {
+
+using V = double __attribute__((vector_size(64)));
+using M = int64_t __attribute__((vector_size(64)));
+constexpr int lanes = 8;
+inline int bits(M m) noexcept
 {
-    steps = V4{};
-    double longest = 0;
-    for (int l = 0; l < lanes; ++l) {
-        const uint32_t start = j + static_cast<uint32_t>(l);
-        if (start + 2 < n && start < starts_hi) {
-            const auto last = max_reach ? std::min<uint64_t>(n - 1, uint64_t{start} + max_reach) : n - 1;
-            steps[l] = double(last - (start + 1));
-            longest = std::max(longest, steps[l]);
-        }
-    }
-    return longest;
+    return _mm512_test_epi64_mask(reinterpret_cast<__m512i>(m), reinterpret_cast<__m512i>(m));
+}
+inline V root(V v) noexcept
+{
+    // (_mm512_sqrt_pd's _mm512_undefined_pd trips GCC 12's -Wmaybe-uninitialized.)
+    return reinterpret_cast<V>(_mm512_maskz_sqrt_pd(__mmask8{0xFF}, reinterpret_cast<__m512d>(v)));
+}
+inline V iota() noexcept
+{
+    return V{0, 1, 2, 3, 4, 5, 6, 7};
 }
 
-/// scan<> for L2 on four consecutive starts at once, one per lane, every
-/// lane doing the scalar scan's arithmetic (no fused multiply-adds), so
-/// both find the same shortcuts (tests compare them; so does scan_bench's
-/// hash, on the tract set at 1 to 64 m): the wedge's narrowing, the choice
-/// of its edges and the tests of each end become selects on masks instead
-/// of branches. Lane l starts at j + l and tests end j + l + 2 + t at step
-/// t; a group runs until its longest lane ends (5% more lane steps than the
-/// scalar scan's on the tract set: consecutive starts reach about as far).
-/// Exact in doubles because every coordinate difference is under 2^26 (the
-/// caller checks): squared lengths are integers below 2^53.
-__attribute__((target("avx2"))) void scan_lanes(std::span<const GridPoint> pts, const Tolerance& tol,
-                                                uint32_t max_reach, int128 reps2, uint32_t starts_lo,
-                                                uint32_t starts_hi, Candidates& out)
-{
-    const auto n = static_cast<uint32_t>(pts.size());
-    // The points as doubles, padded so that lanes past the end read copies of the last point.
-    std::vector<double> xs(n + 2 * lanes), ys(n + 2 * lanes);
-    for (uint32_t i = 0; i < n + 2 * lanes; ++i) {
-        const GridPoint p = pts[std::min(i, n - 1)];
-        xs[i] = p.x;
-        ys[i] = p.y;
-    }
-    const double reps2_d = double(reps2);
-    const WedgeConstants wc(reps2);
-    const double r_eps = wc.r_eps, cos_s = wc.cos_s, sin_s = wc.sin_s, deep2 = wc.deep2;
-    const double eps_cos = r_eps * cos_s, eps_sin = r_eps * sin_s; // scan<>'s products
-    // Per lane, the runs it closed in this group, and its unsure ends' test.
-    std::vector<Candidates::Run> closed[lanes];
-    std::vector<UnsureEnds> unsure(lanes, UnsureEnds(tol, r_eps, r_eps)); // L2: the ball is the disc
-    for (uint32_t j = starts_lo; j + 2 < n && j < starts_hi; j += lanes) {
-        for (int l = 0; l < lanes; ++l) {
-            unsure[l].reset(j + static_cast<uint32_t>(l));
-        }
-        V4 steps; // per lane, how many ends it tests (0: no start there)
-        const double longest = lane_steps(j, n, starts_hi, max_reach, steps);
-        const V4 ax = load4(&xs[j]), ay = load4(&ys[j]);
-        V4 wax{}, way{}, wbx{}, wby{}; // the wedge's arc, from WA counter-clockwise to WB
-        M4 open = ~M4{};               // no arc yet
-        M4 alive = steps > 0;          // ends left to test, and the wedge not empty
-        // The largest squared distance of an intermediate vertex from the
-        // start; infinite once a constraint was left out of the wedge (no
-        // end is then sure without the exact test, as in scan<>).
-        V4 far2{};
-        V4 k = V4{0, 1, 2, 3} + double(j + 2);
-        // Per lane, its run: hi the last end found (-2 for none yet), lo[l] its first.
-        V4 hi = V4{} - 2;
-        uint32_t lo[lanes] = {};
-        // Steps go in blocks: first what each step needs that does not
-        // depend on the wedge (the constraint's arc, through a square root),
-        // for the whole block, then the wedge's narrowing step by step. So
-        // the roots' latency overlaps, where one step at a time waits on each.
-        struct Step {
-            V4 oax, oay, obx, oby; // the constraint's arc OA -> OB (arc_around)
-            M4 narrow;             // the constraint narrows the wedge
-            V4 far;                // its squared distance, or infinity where it was left out
-            V4 bx, by, len2;       // end k, from the start
-        };
-        Step block[block_steps];
-        bool more = true;
-        for (double t0 = 0; more && t0 < longest; t0 += block_steps) {
-            const int count = static_cast<int>(std::min<double>(block_steps, longest - t0));
-            for (int i = 0; i < count; ++i) {
-                Step& st = block[i];
-                const auto at = static_cast<size_t>(j + 1 + static_cast<uint32_t>(t0) + static_cast<uint32_t>(i));
-                const V4 qx = load4(&xs[at]) - ax, qy = load4(&ys[at]) - ay;
-                const V4 r2 = qx * qx + qy * qy;
-                const V4 d = r2 - reps2_d;
-                const V4 c = reinterpret_cast<V4>(_mm256_sqrt_pd(reinterpret_cast<__m256d>(select(d < 0, -d, d))));
-                const M4 constrained = r2 > reps2_d;
-                const V4 sin_w = eps_cos + c * sin_s, cos_w = c * cos_s - eps_sin;
-                const M4 too_wide = cos_w <= 1e-6 * (c + r_eps);
-                st.far = select(constrained & too_wide, V4{} + HUGE_VAL, r2);
-                st.narrow = constrained & ~too_wide;
-                st.oax = qx * cos_w + qy * sin_w;
-                st.oay = qy * cos_w - qx * sin_w;
-                st.obx = qx * cos_w - qy * sin_w;
-                st.oby = qy * cos_w + qx * sin_w;
-                st.bx = load4(&xs[at + 1]) - ax;
-                st.by = load4(&ys[at + 1]) - ay;
-                st.len2 = st.bx * st.bx + st.by * st.by;
-            }
-            for (int i = 0; i < count; ++i, k += 1) {
-                const Step& st = block[i];
-                alive &= V4{} + (t0 + i) < steps;
-                if (bits(alive) == 0) {
-                    more = false;
-                    break;
-                }
-                // Vertex k - 1 becomes an intermediate vertex: narrow the
-                // wedge (Arc::intersect): each edge of the wedge stays if the
-                // arc holds it, else the arc's if the wedge holds that, else
-                // the intersection is empty.
-                far2 = select(far2 < st.far, st.far, far2);
-                const M4 narrow = st.narrow;
-                const V4 oa_wa = cross(st.oax, st.oay, wax, way), wa_ob = cross(wax, way, st.obx, st.oby);
-                const V4 oa_wb = cross(st.oax, st.oay, wbx, wby), wb_ob = cross(wbx, wby, st.obx, st.oby);
-                const M4 o_holds_wa = (oa_wa >= 0) & (wa_ob >= 0);
-                const M4 holds_oa = (oa_wa <= 0) & (oa_wb >= 0); // wa x oa >= 0, oa x wb >= 0
-                const M4 o_holds_wb = (oa_wb >= 0) & (wb_ob >= 0);
-                const M4 holds_ob = (wa_ob >= 0) & (wb_ob <= 0); // wa x ob >= 0, ob x wb >= 0
-                const M4 empty = ~open & ((~o_holds_wa & ~holds_oa) | (~o_holds_wb & ~holds_ob));
-                const M4 take_a = narrow & (open | ~o_holds_wa), take_b = narrow & (open | ~o_holds_wb);
-                alive &= ~(narrow & empty);
-                wax = select(take_a, st.oax, wax);
-                way = select(take_a, st.oay, way);
-                wbx = select(take_b, st.obx, wbx);
-                wby = select(take_b, st.oby, wby);
-                open &= ~narrow;
-                // End k: in the wedge, and surely or exactly proximate. An
-                // end equal to the start (len2 = 0) is never sure, and the
-                // exact branch leaves it out, as scan<> does.
-                const V4 c1 = cross(wax, way, st.bx, st.by), c2 = cross(st.bx, st.by, wbx, wby);
-                const M4 tested = alive & (open | ((c1 >= 0) & (c2 >= 0)));
-                const M4 deep = open | ((c1 > 0) & (c2 > 0) & (c1 * c1 >= deep2 * (wax * wax + way * way) * st.len2) &
-                                        (c2 * c2 >= deep2 * (wbx * wbx + wby * wby) * st.len2));
-                M4 found = tested & (far2 * (1 + 1e-12) < st.len2) & deep;
-                if (const int left = bits(tested & ~found)) {
-                    // Deep in a complete wedge (far2 is infinite once a
-                    // constraint was left out of it).
-                    const int deep_complete = bits(deep & (far2 < HUGE_VAL));
-                    for (int l = 0; l < lanes; ++l) {
-                        const uint32_t start = j + static_cast<uint32_t>(l), end = static_cast<uint32_t>(k[l]);
-                        if ((left >> l & 1) != 0 && pts[end] != pts[start] &&
-                            unsure[l].proximate(pts, end, (deep_complete >> l & 1) != 0)) {
-                            found[l] = ~int64_t{0};
-                        }
-                    }
-                }
-                // A found end extends its lane's run, or opens one (after a gap: the old one goes out).
-                if (const int opened = bits(found & (hi + 1 != k))) {
-                    for (int l = 0; l < lanes; ++l) {
-                        if ((opened >> l & 1) != 0) {
-                            if (hi[l] >= 0) {
-                                closed[l].push_back(
-                                    {j + static_cast<uint32_t>(l), lo[l], static_cast<uint32_t>(hi[l])});
-                            }
-                            lo[l] = static_cast<uint32_t>(k[l]);
-                        }
-                    }
-                }
-                hi = select(found, k, hi);
-            }
-        }
-        for (int l = 0; l < lanes; ++l) {
-            for (const auto& r : closed[l]) {
-                out.add_run(r.from, r.lo, r.hi);
-            }
-            closed[l].clear();
-            if (hi[l] >= 0) {
-                out.add_run(j + static_cast<uint32_t>(l), lo[l], static_cast<uint32_t>(hi[l]));
-            }
-        }
-    }
-}
+#include "simplification/scan_lanes.ipp"
+
+} // namespace avx512
+#pragma GCC pop_options
 #endif
 
 } // namespace
@@ -615,6 +478,9 @@ __attribute__((target("avx2"))) void scan_lanes(std::span<const GridPoint> pts, 
 const char* fastest_scan_kernel() noexcept
 {
 #if TIGERLOD_SCAN_LANES
+    if (has_avx512()) {
+        return "avx512";
+    }
     if (has_avx2()) {
         return "avx2";
     }
@@ -662,8 +528,13 @@ Candidates proximate_shortcuts_from(std::span<const GridPoint> pts, const Tolera
         return out;
     }
 #if TIGERLOD_SCAN_LANES
-    if ((kernel == ScanKernel::fastest || kernel == ScanKernel::lanes) && has_avx2() && exact_in_doubles) {
-        scan_lanes(pts, tol, max_reach, reps2, first, last, out);
+    const bool any_lanes = kernel == ScanKernel::fastest || kernel == ScanKernel::lanes;
+    if (exact_in_doubles && any_lanes && has_avx512()) {
+        avx512::scan_lanes(pts, tol, max_reach, reps2, first, last, out);
+        return out;
+    }
+    if (exact_in_doubles && (any_lanes || kernel == ScanKernel::lanes4) && has_avx2()) {
+        avx2::scan_lanes(pts, tol, max_reach, reps2, first, last, out);
         return out;
     }
 #endif

@@ -94,15 +94,16 @@ Candidates proximate_shortcuts(std::span<const GridPoint> pts, const Tolerance& 
 /// where the tolerance is coarse for the chain's spacing and every
 /// coordinate difference of the chain is under 2^31 (hull_scan.hpp: blocks
 /// of ends decided at once), else, where the differences are under 2^26,
-/// four starts at once on x86-64 processors with AVX2 (`lanes`); the
-/// scalar scan elsewhere. `scalar`, `lanes` and `hulls` run that scan
+/// several starts at once on x86-64 processors (`lanes`: eight with
+/// AVX-512F, four with AVX2; `lanes4`: four, with AVX2); the scalar scan
+/// elsewhere. `scalar`, `lanes`, `lanes4` and `hulls` run that scan
 /// wherever it can (the scalar one elsewhere), so tests and benchmarks can
-/// compare: all give the same shortcuts, each exactly (`scalar` and `lanes`
-/// with the same IEEE operations in the same order, `hulls` by its own
-/// proofs).
-enum class ScanKernel { fastest, scalar, lanes, hulls };
+/// compare: all give the same shortcuts, each exactly (`scalar` and the
+/// lanes with the same IEEE operations in the same order, `hulls` by its
+/// own proofs).
+enum class ScanKernel { fastest, scalar, lanes, lanes4, hulls };
 /// What `fastest` runs on this processor where the hull scan does not pay
-/// (hull_scan_pays): "avx2" or "scalar".
+/// (hull_scan_pays): "avx512", "avx2" or "scalar".
 const char* fastest_scan_kernel() noexcept;
 Candidates proximate_shortcuts(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach,
                                ScanKernel kernel);

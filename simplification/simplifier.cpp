@@ -11,6 +11,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <future>
 #include <iomanip>
 #include <map>
@@ -107,6 +108,77 @@ struct Work {
 struct GridSeg {
     uint32_t chain, index;
 };
+
+} // namespace
+
+/// The grid of a store's segments in reach of its owned chains, which the
+/// region rule and the far rule query: every segment in the cells it passes
+/// through (not its bounding box: a 10 km diagonal at 1 m covers 25 M cells
+/// of its box, measured at 17 GB), each cell's in (chain, index) order.
+/// What a query finds does not depend on the cell size, nor on segments out
+/// of reach being there too: simplify_ladder builds one for several
+/// tolerances (README.md beside this file, "The ladder").
+struct StoreGrid {
+    double cell = 0;
+    CellGrid cells;
+    std::optional<CellBuckets<GridSeg>> buckets;
+
+    StoreGrid(const ChainStore& store, const std::vector<uint8_t>& keep, double cell_size) : cell(cell_size)
+    {
+        std::vector<std::pair<uint64_t, GridSeg>> grid; // (cell, segment), segments in (chain, index) order
+        GridBox extent;
+        for (uint32_t c = 0; c < store.chains.size(); ++c) {
+            for (const GridPoint p : store.chain_points(store.chains[c])) {
+                extent.extend(p);
+            }
+        }
+        if (!extent.empty()) {
+            cells =
+                CellGrid(double(extent.min_x), double(extent.min_y), double(extent.max_x), double(extent.max_y), cell);
+        }
+        for (uint32_t c = 0; c < store.chains.size(); ++c) {
+            const auto pts = store.chain_points(store.chains[c]);
+            const auto use = keep_of(keep, store.chains[c]);
+            for (uint32_t i = 0; i + 1 < pts.size(); ++i) {
+                if (!takes_part(use, i)) {
+                    continue;
+                }
+                cover_cells(pts[i].x, pts[i].y, pts[i + 1].x, pts[i + 1].y, 0.0, cell, 0.0, 0.0,
+                            [&](int64_t x, int64_t y) {
+                                grid.emplace_back(cells.key(x, y), GridSeg{c, i});
+                            });
+            }
+        }
+        buckets.emplace(grid);
+    }
+};
+
+namespace {
+
+/// The far rule's reach at tolerances `eps` (grid units, per chain): the
+/// largest eps_j in the metric plus the colouring margin, as an L2 distance.
+double far_reach(std::span<const double> eps, double pixel, const SimplifyOptions& opt)
+{
+    const double ball_l2 = l2_reach(opt.metric), margin = pixel * opt.color.margin_px;
+    double reach = 0;
+    for (const double e : eps) {
+        reach = std::max(reach, e * ball_l2 + margin);
+    }
+    return reach;
+}
+
+/// The grid's cell at tolerances `eps` (per chain, grid units; `pixel` the
+/// tiles' pixel) for a store whose segments are `mean_segment` long on
+/// average. Cells at least three mean segments wide: at 1 m a 2 x reach
+/// cell is 3 m, and a county's 100 m segments each filled dozens of them
+/// (74 s of the tract ladder's 1 m step); one mean segment still made a
+/// query visit nine cells (far rule on the tract level at 16 m 0.65 -> 0.40
+/// s with three, contours 0.52 -> 0.39 s; four was slower on the contours).
+/// The answer does not depend on the size.
+double grid_cell(std::span<const double> eps, double pixel, const SimplifyOptions& opt, double mean_segment)
+{
+    return std::max({2 * far_reach(eps, pixel, opt), 3 * mean_segment, 1.0});
+}
 
 /// Twice the signed area of the ring through pts[at(0)], pts[at(1)], ..., pts[at(n-1)].
 template <class At> int128 signed_area2(std::span<const GridPoint> pts, size_t n, At at)
@@ -220,10 +292,13 @@ using TestPair = std::pair<uint32_t, uint32_t>;
 /// check bans what the raster let through, until nothing meets.
 class StoreSimplifier {
   public:
+    /// `grid`, if given, holds every segment in reach at this tolerance;
+    /// `keep`, if given, the segments in reach at it (segments_in_reach).
     StoreSimplifier(const ChainStore& store, double eps_m, const SimplifyOptions& opt, Raster* raster,
-                    const ColorResult* colors, ToleranceStats& st)
+                    const ColorResult* colors, ToleranceStats& st, std::vector<double> eps,
+                    const StoreGrid* grid = nullptr, const std::vector<uint8_t>* keep = nullptr)
         : m_store(store), m_eps_m(eps_m), m_opt(opt), m_raster(raster), m_colors(raster ? colors : nullptr), m_st(st),
-          m_eps(chain_tolerances(store, eps_m, opt))
+          m_eps(std::move(eps)), m_given_keep(keep), m_grid(grid)
     {
         m_st.eps_m = eps_m;
     }
@@ -257,7 +332,7 @@ class StoreSimplifier {
     void start_colouring()
     {
         const auto t0 = Clock::now();
-        m_keep = segments_in_reach(m_store, halo_reach(m_eps, m_opt));
+        m_keep = m_given_keep ? *m_given_keep : segments_in_reach(m_store, halo_reach(m_eps, m_opt));
         if (m_raster && !m_colors) {
             auto colour = [this] {
                 const auto c0 = Clock::now();
@@ -453,45 +528,11 @@ class StoreSimplifier {
     {
         const auto t0 = Clock::now();
         m_ball_l2 = l2_reach(m_opt.metric); // the metric's unit ball lies in the L2 disc of this radius
-        const double margin = m_pixel * m_opt.color.margin_px;
-        for (const double e : m_eps) {
-            m_reach_max = std::max(m_reach_max, e * m_ball_l2 + margin);
+        m_reach_max = far_reach(m_eps, m_pixel, m_opt);
+        if (!m_grid) {
+            m_own_grid.emplace(m_store, m_keep, grid_cell(m_eps, m_pixel, m_opt, mean_segment_length(m_store)));
+            m_grid = &*m_own_grid;
         }
-        // Cells at least three mean segments wide: at 1 m a 2 x reach cell is
-        // 3 m, and a county's 100 m segments each filled dozens of them (74 s of
-        // the tract ladder's 1 m step); one mean segment still made a query visit
-        // nine cells (far rule on the tract level at 16 m 0.65 -> 0.40 s with
-        // three, contours 0.52 -> 0.39 s; four was slower on the contours). The
-        // answer does not depend on the size.
-        m_cell = std::max({2 * m_reach_max, 3 * mean_segment_length(m_store), 1.0});
-        std::vector<std::pair<uint64_t, GridSeg>> grid; // (cell, segment), segments in (chain, index) order
-        // Each segment goes in the cells it passes through (not its bounding box:
-        // a 10 km diagonal at 1 m covers 25 M cells of its box, measured at 17 GB).
-        GridBox extent;
-        for (uint32_t c = 0; c < m_store.chains.size(); ++c) {
-            for (const GridPoint p : m_store.chain_points(m_store.chains[c])) {
-                extent.extend(p);
-            }
-        }
-        if (!extent.empty()) {
-            m_cells = CellGrid(double(extent.min_x), double(extent.min_y), double(extent.max_x), double(extent.max_y),
-                               m_cell);
-        }
-        for (uint32_t c = 0; c < m_store.chains.size(); ++c) {
-            const auto pts = m_store.chain_points(m_store.chains[c]);
-            const auto use = keep_of(m_keep, m_store.chains[c]);
-            for (uint32_t i = 0; i + 1 < pts.size(); ++i) {
-                if (!takes_part(use, i)) {
-                    continue;
-                }
-                cover_cells(pts[i].x, pts[i].y, pts[i + 1].x, pts[i + 1].y, 0.0, m_cell, 0.0, 0.0,
-                            [&](int64_t x, int64_t y) {
-                                grid.emplace_back(m_cells.key(x, y), GridSeg{c, i});
-                            });
-            }
-        }
-        m_grid_cells.emplace(grid); // each cell's segments in (chain, index) order
-        grid = {};
         // Per owned chain, prefix counts of its segments that have another chain
         // within eps_i x l2_reach + the largest reach (L2): a shortcut spanning
         // only clear segments lies within eps_i x l2_reach of them, so farther
@@ -534,14 +575,14 @@ class StoreSimplifier {
         std::optional<std::pair<double, double>> near;
         const double reach = r * (1 + 1e-9) + 1;
         // The cells within r of ab (a segment within r of ab passes through one).
-        cover_cells(a.x, a.y, b.x, b.y, r, m_cell, 0.0, 0.0, [&](int64_t x, int64_t y) {
+        cover_cells(a.x, a.y, b.x, b.y, r, m_grid->cell, 0.0, 0.0, [&](int64_t x, int64_t y) {
             if (near && near->first == 0 && near->second == 1) {
                 return; // the whole segment already
             }
-            if (!m_cells.contains(x, y)) {
+            if (!m_grid->cells.contains(x, y)) {
                 return; // beyond every segment of the store
             }
-            for (const GridSeg gs : m_grid_cells->find(m_cells.key(x, y))) {
+            for (const GridSeg gs : m_grid->buckets->find(m_grid->cells.key(x, y))) {
                 if (gs.chain == chain) {
                     continue;
                 }
@@ -1000,15 +1041,16 @@ class StoreSimplifier {
         // in several of them is seen several times: no harm), first for the
         // cheap test, then for the points: most shortcuts that fail cross a
         // neighbour, and stop at the first.
-        const int64_t x0 = floor_int(double(box.min_x) / m_cell), x1 = floor_int(double(box.max_x) / m_cell);
-        const int64_t y0 = floor_int(double(box.min_y) / m_cell), y1 = floor_int(double(box.max_y) / m_cell);
+        const double cell = m_grid->cell;
+        const int64_t x0 = floor_int(double(box.min_x) / cell), x1 = floor_int(double(box.max_x) / cell);
+        const int64_t y0 = floor_int(double(box.min_y) / cell), y1 = floor_int(double(box.max_y) / cell);
         auto each_near = [&](auto&& f) {
             for (int64_t x = x0; x <= x1; ++x) {
                 for (int64_t y = y0; y <= y1; ++y) {
-                    if (!m_cells.contains(x, y)) {
+                    if (!m_grid->cells.contains(x, y)) {
                         continue;
                     }
-                    for (const GridSeg gs : m_grid_cells->find(m_cells.key(x, y))) {
+                    for (const GridSeg gs : m_grid->buckets->find(m_grid->cells.key(x, y))) {
                         if (gs.chain == w.chain) {
                             continue;
                         }
@@ -1142,8 +1184,9 @@ class StoreSimplifier {
     Raster* const m_raster;      ///< null: the exact rules alone (no eps-Voronoi test)
     const ColorResult* m_colors; ///< given, or m_own_colors once finish_colouring has it
     ToleranceStats& m_st;
-    const std::vector<double> m_eps; ///< per chain, grid units (chain_tolerances)
-    std::vector<uint8_t> m_keep;     ///< the segments in reach (segments_in_reach)
+    const std::vector<double> m_eps;          ///< per chain, grid units (chain_tolerances)
+    const std::vector<uint8_t>* m_given_keep; ///< the segments in reach, if given
+    std::vector<uint8_t> m_keep;              ///< the segments in reach (segments_in_reach)
     ColorResult m_own_colors;
     /// After m_eps and m_keep, which it reads: destroyed (waited for) before them.
     std::future<std::pair<ColorResult, double>> m_colouring;
@@ -1151,9 +1194,9 @@ class StoreSimplifier {
     int128 m_untested2 = -1; ///< shortcuts at most this long (squared) leave no pixel to test
     std::vector<Work> m_work;
     // The far rule (build_far_rule).
-    double m_ball_l2 = 0, m_reach_max = 0, m_cell = 0;
-    CellGrid m_cells;
-    std::optional<CellBuckets<GridSeg>> m_grid_cells;
+    double m_ball_l2 = 0, m_reach_max = 0;
+    const StoreGrid* m_grid; ///< given (simplify_ladder), or m_own_grid
+    std::optional<StoreGrid> m_own_grid;
     std::vector<std::vector<uint32_t>> m_blocked;
     std::vector<std::vector<NearSegment>> m_blocked_at;
     std::vector<std::vector<std::pair<uint32_t, uint8_t>>> m_tiles_of; ///< (tile, class) of each owned chain
@@ -1165,7 +1208,59 @@ class StoreSimplifier {
 ChainStore simplify_store(const ChainStore& store, double eps_m, const SimplifyOptions& opt, Raster* raster,
                           const ColorResult* colors, ToleranceStats& st)
 {
-    return StoreSimplifier(store, eps_m, opt, raster, colors, st).run();
+    return StoreSimplifier(store, eps_m, opt, raster, colors, st, chain_tolerances(store, eps_m, opt)).run();
+}
+
+void simplify_ladder(const ChainStore& store, std::span<const double> tolerances_m, const SimplifyOptions& opt,
+                     Raster* raster, const std::function<const ColorResult*(size_t)>& colors,
+                     std::vector<ToleranceStats>& stats,
+                     const std::function<void(size_t, const chains::ChainStore&)>& done)
+{
+    if (!std::is_sorted(tolerances_m.begin(), tolerances_m.end())) {
+        throw std::logic_error("simplify_ladder: the tolerances are not in increasing order");
+    }
+    stats.assign(tolerances_m.size(), ToleranceStats{});
+    const auto t0 = Clock::now();
+    const double mean = mean_segment_length(store);
+    std::vector<std::vector<double>> eps(tolerances_m.size());
+    std::vector<double> cells(tolerances_m.size());
+    for (size_t t = 0; t < tolerances_m.size(); ++t) {
+        eps[t] = chain_tolerances(store, tolerances_m[t], opt);
+        cells[t] = grid_cell(eps[t], tile_pixel(eps[t], opt.color), opt, mean);
+    }
+    double planning = since(t0);
+    // Groups of tolerances whose cells are within max_cell_growth of the
+    // group's first share one grid, with the largest cell of the group and
+    // the segments in reach at its largest tolerance (which that tolerance
+    // then takes as its own). A coarser cell makes each query see more
+    // segments, but building the grid costs more than that over three
+    // doublings (tract set at 250-2000 m, cells 8x apart: one grid took the
+    // exact check's store-seconds from 2.48 to 2.25); far apart tolerances
+    // (1 m and 2 km in one run) get grids of their own. (A ladder of
+    // doublings makes cells exactly 8x apart: the slack keeps rounding from
+    // splitting it.)
+    constexpr double max_cell_growth = 8;
+    for (size_t first = 0; first < tolerances_m.size();) {
+        size_t last = first;
+        while (last + 1 < tolerances_m.size() && cells[last + 1] <= max_cell_growth * cells[first] * (1 + 1e-9)) {
+            ++last;
+        }
+        const auto g0 = Clock::now();
+        const auto keep = segments_in_reach(store, halo_reach(eps[last], opt));
+        const StoreGrid grid(store, keep,
+                             *std::max_element(cells.begin() + static_cast<std::ptrdiff_t>(first),
+                                               cells.begin() + static_cast<std::ptrdiff_t>(last) + 1));
+        // Counted where each tolerance alone counts its grid and halo cut.
+        (raster ? stats[first].seconds_far : stats[first].seconds_exact) += since(g0) + planning;
+        planning = 0;
+        for (size_t t = first; t <= last; ++t) {
+            const ChainStore result = StoreSimplifier(store, tolerances_m[t], opt, raster, colors(t), stats[t],
+                                                      std::move(eps[t]), &grid, t == last ? &keep : nullptr)
+                                          .run();
+            done(t, result);
+        }
+        first = last + 1;
+    }
 }
 
 } // namespace tigerlod::simplify

@@ -8,6 +8,8 @@
 #include "simplification/raster.hpp"
 #include "simplification/tolerances.hpp"
 
+#include <functional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -59,5 +61,17 @@ struct ToleranceStats {
 /// alone").
 chains::ChainStore simplify_store(const chains::ChainStore& store, double eps_m, const SimplifyOptions& opt,
                                   Raster* raster, const ColorResult* colors, ToleranceStats& stats);
+
+/// simplify_store at each of `tolerances_m` (increasing) of one store,
+/// sharing what one tolerance's work can serve for the next (the grid of the
+/// segments in reach, built once for tolerances whose grids are alike).
+/// Each result is byte for byte simplify_store's at that tolerance, handed
+/// to `done(index, result)` as soon as it is made; `colors(index)` gives
+/// what simplify_store's `colors` would be (null for none). `stats` gets
+/// one entry per tolerance.
+void simplify_ladder(const chains::ChainStore& store, std::span<const double> tolerances_m, const SimplifyOptions& opt,
+                     Raster* raster, const std::function<const ColorResult*(size_t)>& colors,
+                     std::vector<ToleranceStats>& stats,
+                     const std::function<void(size_t, const chains::ChainStore&)>& done);
 
 } // namespace tigerlod::simplify

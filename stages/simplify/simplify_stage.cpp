@@ -191,23 +191,29 @@ std::vector<ToleranceStats> SimplifyStage::simplify_one(const StoreFile& sf, con
             throw input_error(sf.path.string() + ": " + *fault);
         }
     }
-    for (size_t ti = 0; ti < m_common.tolerances.size(); ++ti) {
-        const double eps_m = m_common.tolerances[ti];
-        ColorResult given;
-        const ColorResult* colors = nullptr;
-        if (!m_colors.empty()) {
-            given =
-                colors_from_json(fs::path(m_colors) / tolerance_dir(eps_m) / sf.level / (sf.partition + ".colors.json"),
+    // Every tolerance of the store in one go (simplify_ladder shares work
+    // between them); each result is written as it comes.
+    const auto& tolerances = m_common.tolerances;
+    ColorResult given;
+    auto colors = [&](size_t ti) -> const ColorResult* {
+        if (m_colors.empty()) {
+            return nullptr;
+        }
+        const double eps_m = tolerances[ti];
+        given = colors_from_json(fs::path(m_colors) / tolerance_dir(eps_m) / sf.level / (sf.partition + ".colors.json"),
                                  store, eps_m, so.metric, tile_pixel(chain_tolerances(store, eps_m, so), so.color));
-            colors = &given;
-        }
-        chains::ChainStore result;
-        try {
-            result = simplify_store(store, eps_m, so, raster, colors, stats[ti]);
-        } catch (const input_error& e) {
-            throw input_error(sf.path.string() + " at eps " + std::to_string(eps_m) + " m: " + e.what());
-        }
-        out.write(fs::path(tolerance_dir(eps_m)) / sf.level / (sf.partition + ".tlc"), chains::encode(result));
+        return &given;
+    };
+    size_t at = 0; // the tolerance being simplified, for the message of a failure
+    auto write = [&](size_t ti, const chains::ChainStore& result) {
+        out.write(fs::path(tolerance_dir(tolerances[ti])) / sf.level / (sf.partition + ".tlc"), chains::encode(result));
+        at = ti + 1;
+    };
+    try {
+        simplify_ladder(store, tolerances, so, raster, colors, stats, write);
+    } catch (const input_error& e) {
+        throw input_error(sf.path.string() + " at eps " +
+                          std::to_string(tolerances[std::min(at, tolerances.size() - 1)]) + " m: " + e.what());
     }
     return stats;
 }

@@ -172,7 +172,8 @@ TEST(Candidates, ChainsGoingOutAndBackMatchBruteForce)
             }
             const Tolerance tol(double(150 + trial % 5 * 150), m);
             const std::vector<Shortcut> want = brute_force_shortcuts(pts, tol, 0);
-            for (const ScanKernel kernel : {ScanKernel::fastest, ScanKernel::scalar, ScanKernel::hulls}) {
+            for (const ScanKernel kernel :
+                 {ScanKernel::fastest, ScanKernel::scalar, ScanKernel::lanes, ScanKernel::lanes4, ScanKernel::hulls}) {
                 const auto got = proximate_shortcuts(pts, tol, 0, kernel).list();
                 ASSERT_EQ(got, want) << metric_name(m) << " trial " << trial;
             }
@@ -183,7 +184,7 @@ TEST(Candidates, ChainsGoingOutAndBackMatchBruteForce)
 // A long chain's starts are scanned in pieces on threads of their own
 // (simplify's find_candidates): the pieces, appended in order, must be the
 // whole scan, whichever kernel, metric, reach cap and cut points (cuts off
-// the four-start groups of the AVX2 kernel included).
+// the groups of eight and four starts of the lanes kernels included).
 TEST(Candidates, StartsScannedInPiecesAppendToTheWholeScan)
 {
     std::mt19937 rng(11);
@@ -198,7 +199,8 @@ TEST(Candidates, StartsScannedInPiecesAppendToTheWholeScan)
             const auto n = static_cast<uint32_t>(pts.size());
             const Tolerance tol(double(100 + trial * 60), m);
             const uint32_t reach = trial % 3 == 0 ? 37 : 0;
-            for (const ScanKernel kernel : {ScanKernel::fastest, ScanKernel::scalar, ScanKernel::hulls}) {
+            for (const ScanKernel kernel :
+                 {ScanKernel::fastest, ScanKernel::scalar, ScanKernel::lanes, ScanKernel::lanes4, ScanKernel::hulls}) {
                 const auto whole = proximate_shortcuts(pts, tol, reach, kernel);
                 std::vector<uint32_t> cuts{0, n};
                 std::uniform_int_distribution<uint32_t> at(1, n - 1);
@@ -246,8 +248,9 @@ TEST(Candidates, AVertexWhoseConeIsNearlyAHalfPlaneStillCounts)
 
 TEST(Candidates, TheFastestKernelFindsWhatTheScalarScanFinds)
 {
-    // Four starts at once against one at a time, run for run: chains of every
-    // length around the lane count, long straight stretches (long runs),
+    // Eight starts at once (AVX-512F; four where the processor has AVX2 only)
+    // and four against one at a time, run for run: chains of every length
+    // around the lane counts, long straight stretches (long runs),
     // sharp turns and repeated points (gaps in runs, ends equal to the
     // start), a ring, tolerances from tiny to wide, with and without a reach.
     if (std::string_view(fastest_scan_kernel()) == "scalar") {
@@ -278,15 +281,18 @@ TEST(Candidates, TheFastestKernelFindsWhatTheScalarScanFinds)
         }
         const Tolerance tol(double(1 + trial % 9 * 15), Metric::l2);
         const uint32_t reach = trial % 4 == 0 ? static_cast<uint32_t>(2 + trial % 11) : 0;
-        const auto fast = proximate_shortcuts(pts, tol, reach, ScanKernel::lanes);
         const auto slow = proximate_shortcuts(pts, tol, reach, ScanKernel::scalar);
-        ASSERT_EQ(fast.runs().size(), slow.runs().size()) << "trial " << trial;
-        for (size_t r = 0; r < fast.runs().size(); ++r) {
-            EXPECT_EQ(fast.runs()[r].from, slow.runs()[r].from) << "trial " << trial << " run " << r;
-            EXPECT_EQ(fast.runs()[r].lo, slow.runs()[r].lo) << "trial " << trial << " run " << r;
-            EXPECT_EQ(fast.runs()[r].hi, slow.runs()[r].hi) << "trial " << trial << " run " << r;
+        for (const ScanKernel kernel : {ScanKernel::lanes, ScanKernel::lanes4}) {
+            const auto fast = proximate_shortcuts(pts, tol, reach, kernel);
+            const char* name = kernel == ScanKernel::lanes ? "lanes" : "lanes4";
+            ASSERT_EQ(fast.runs().size(), slow.runs().size()) << name << " trial " << trial;
+            for (size_t r = 0; r < fast.runs().size(); ++r) {
+                EXPECT_EQ(fast.runs()[r].from, slow.runs()[r].from) << name << " trial " << trial << " run " << r;
+                EXPECT_EQ(fast.runs()[r].lo, slow.runs()[r].lo) << name << " trial " << trial << " run " << r;
+                EXPECT_EQ(fast.runs()[r].hi, slow.runs()[r].hi) << name << " trial " << trial << " run " << r;
+            }
+            EXPECT_EQ(fast.list(), slow.list()) << name << " trial " << trial;
         }
-        EXPECT_EQ(fast.list(), slow.list()) << "trial " << trial;
         for (size_t r = 1; r < slow.runs().size(); ++r) {
             with_gaps += slow.runs()[r].from == slow.runs()[r - 1].from;
         }

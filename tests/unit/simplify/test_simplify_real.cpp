@@ -192,3 +192,51 @@ TEST(SimplifyReal, FloydIsByteIdenticalAcrossThreadCountsAndModes)
     EXPECT_LT(raster_tiny.stats().one_piece_boxes, raster_tiny.stats().tiles);
     EXPECT_EQ(raster_one.stats().one_piece_boxes, raster_one.stats().tiles);
 }
+
+// The ladder (simplify_ladder: one grid for tolerances whose grids are alike,
+// the segments in reach cut once) gives each tolerance byte for byte what
+// simplify_store gives it alone, with the same counts, whether tolerances
+// share a grid or not.
+TEST(SimplifyReal, FloydLadderIsByteIdenticalToEachToleranceAlone)
+{
+    if (!fs::exists(shared_data / "tiger" / "tl_2020_51063_edges.zip")) {
+        GTEST_SKIP() << "../shared/data/tiger is absent: Floyd County tests need it";
+    }
+    const auto stores = ingest_floyd();
+    auto ctx = gl::Context::create(gl::Backend::osmesa);
+    Raster raster(*ctx, RasterOptions{});
+    SimplifyOptions opt;
+    opt.threads = 2;
+    auto same_counts = [](const ToleranceStats& a, const ToleranceStats& b) {
+        return std::tie(a.chains, a.input_vertices, a.output_vertices, a.candidates, a.drawn_segments, a.proved_far,
+                        a.proved_short, a.banned_raster, a.banned_exact, a.banned_region, a.banned_points,
+                        a.self_intersection_repairs, a.orientation_repairs, a.input_conflicts, a.rounds) ==
+               std::tie(b.chains, b.input_vertices, b.output_vertices, b.candidates, b.drawn_segments, b.proved_far,
+                        b.proved_short, b.banned_raster, b.banned_exact, b.banned_region, b.banned_points,
+                        b.self_intersection_repairs, b.orientation_repairs, b.input_conflicts, b.rounds);
+    };
+    // fine and coarse: one grid for the four on most stores; wide: 1 and
+    // 16 m share one, 2000 m (cells more than 8x wider) gets its own.
+    const std::vector<double> fine{1, 4, 16, 64}, coarse{250, 500, 1000, 2000}, wide{1, 16, 2000};
+    for (const auto& [ladder, engine] :
+         {std::pair{&fine, &raster}, std::pair{&fine, static_cast<Raster*>(nullptr)},
+          std::pair{&coarse, static_cast<Raster*>(nullptr)}, std::pair{&wide, static_cast<Raster*>(nullptr)}}) {
+        for (const auto& store : stores) {
+            SCOPED_TRACE(store.level_name + "/" + store.partition + " at " + std::to_string(ladder->front()) +
+                         " m up, " + (engine ? "eps-Voronoi test" : "exact rules alone"));
+            std::vector<ToleranceStats> stats;
+            std::vector<std::string> bytes(ladder->size());
+            simplify_ladder(
+                store, *ladder, opt, engine, [](size_t) { return nullptr; }, stats,
+                [&](size_t t, const ChainStore& result) { bytes[t] = chains::encode(result); });
+            ASSERT_EQ(stats.size(), ladder->size());
+            for (size_t t = 0; t < ladder->size(); ++t) {
+                ToleranceStats alone;
+                EXPECT_EQ(bytes[t], chains::encode(simplify_store(store, (*ladder)[t], opt, engine, nullptr, alone)))
+                    << "eps " << (*ladder)[t];
+                EXPECT_TRUE(same_counts(stats[t], alone)) << "eps " << (*ladder)[t];
+                EXPECT_EQ(stats[t].eps_m, (*ladder)[t]);
+            }
+        }
+    }
+}
