@@ -1222,10 +1222,11 @@ void simplify_ladder(const ChainStore& store, std::span<const double> tolerances
     stats.assign(tolerances_m.size(), ToleranceStats{});
     const auto t0 = Clock::now();
     const double mean = mean_segment_length(store);
+    const ChainScales scales(store, opt);
     std::vector<std::vector<double>> eps(tolerances_m.size());
     std::vector<double> cells(tolerances_m.size());
     for (size_t t = 0; t < tolerances_m.size(); ++t) {
-        eps[t] = chain_tolerances(store, tolerances_m[t], opt);
+        eps[t] = scales.tolerances(tolerances_m[t]);
         cells[t] = grid_cell(eps[t], tile_pixel(eps[t], opt.color), opt, mean);
     }
     double planning = since(t0);

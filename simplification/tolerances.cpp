@@ -43,19 +43,17 @@ std::span<const uint8_t> keep_of(const std::vector<uint8_t>& keep, const chains:
     return keep.empty() ? std::span<const uint8_t>{} : std::span<const uint8_t>(keep).subspan(c.first, c.count);
 }
 
-std::vector<double> chain_tolerances(const ChainStore& store, double eps_m, const SimplifyOptions& opt)
+ChainScales::ChainScales(const ChainStore& store, const SimplifyOptions& opt)
+    : m_grid_m(store.projection.grid_m), m_class(store.chains.size(), 1.0), m_projection(store.chains.size(), 1.0)
 {
     const Projection proj(store.projection);
-    const double base = eps_m / store.projection.grid_m;
     const bool conformal = store.projection.kind != ProjectionParams::Kind::albers;
-    std::vector<double> eps(store.chains.size());
     for (size_t i = 0; i < store.chains.size(); ++i) {
         const auto& c = store.chains[i];
-        double e = base;
         if (!opt.class_scale.empty()) {
             const auto it = opt.class_scale.find(store.strings[c.feature_class]);
             if (it != opt.class_scale.end()) {
-                e *= it->second;
+                m_class[i] = it->second;
             }
         }
         if (opt.projection_scale) {
@@ -69,11 +67,27 @@ std::vector<double> chain_tolerances(const ChainStore& store, double eps_m, cons
             // Ground length = projected / k (conformal); for the equal-area
             // Albers it is between projected * k and projected / k: take the
             // smaller eps so no direction exceeds eps_m on the ground.
-            e *= conformal ? k : std::min(k, 1.0 / k);
+            m_projection[i] = conformal ? k : std::min(k, 1.0 / k);
         }
+    }
+}
+
+std::vector<double> ChainScales::tolerances(double eps_m) const
+{
+    const double base = eps_m / m_grid_m;
+    std::vector<double> eps(m_class.size());
+    for (size_t i = 0; i < eps.size(); ++i) {
+        double e = base;
+        e *= m_class[i];
+        e *= m_projection[i];
         eps[i] = e;
     }
     return eps;
+}
+
+std::vector<double> chain_tolerances(const ChainStore& store, double eps_m, const SimplifyOptions& opt)
+{
+    return ChainScales(store, opt).tolerances(eps_m);
 }
 
 std::vector<uint8_t> segments_in_reach(const ChainStore& store, double reach)

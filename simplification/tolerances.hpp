@@ -49,6 +49,22 @@ struct SimplifyOptions {
 /// The tolerance of each chain of `store` in grid units for `eps_m` ground metres.
 std::vector<double> chain_tolerances(const chains::ChainStore& store, double eps_m, const SimplifyOptions& opt);
 
+/// What chain_tolerances multiplies a tolerance by, per chain of a store,
+/// worked out once for a ladder: the projection's scale costs a
+/// GeographicLib call a chain (a quarter of a verify job's time on the
+/// synthetic nation's blocks, at each of 8 LODs).
+class ChainScales {
+  public:
+    ChainScales(const chains::ChainStore& store, const SimplifyOptions& opt);
+    /// chain_tolerances(store, eps_m, opt), bit for bit.
+    std::vector<double> tolerances(double eps_m) const;
+
+  private:
+    double m_grid_m;
+    /// Per chain, the class's scale and the projection's, 1 where none (x * 1 is x exactly).
+    std::vector<double> m_class, m_projection;
+}; // class ChainScales
+
 /// Per point of `store`, whether the segment starting there takes part:
 /// every owned segment, and the halo segments within `reach` grid units of
 /// an owned one. The halo holds whole chains with any part near the

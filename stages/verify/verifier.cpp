@@ -14,6 +14,7 @@
 #include <iterator>
 #include <cmath>
 #include <mutex>
+#include <optional>
 #include <set>
 #include <unordered_map>
 
@@ -483,6 +484,9 @@ class Verifier {
             original_facts(*ls.by_partition.at(partition_of(nodes[i])), area_sign[i], user_points[i]);
         });
 
+        // What each chain's tolerance is scaled by, once for every LOD.
+        std::vector<std::optional<simplify::ChainScales>> scales(ls.stores.size());
+        parallel_each(ls.stores.size(), m_options.threads, [&](size_t i) { scales[i].emplace(ls.stores[i], m_opt); });
         for (uint32_t k = 0; k < m_sk.lod_eps_m.size(); ++k) {
             LevelLod ll;
             ll.level = level;
@@ -494,8 +498,8 @@ class Verifier {
             // Tolerances of the LOD, per original chain.
             std::map<const chains::ChainStore*, std::vector<double>> eps;
             if (k > 0) {
-                for (const auto& s : ls.stores) {
-                    eps[&s] = simplify::chain_tolerances(s, ll.eps_m, m_opt);
+                for (size_t i = 0; i < ls.stores.size(); ++i) {
+                    eps[&ls.stores[i]] = scales[i]->tolerances(ll.eps_m);
                 }
             }
             // The selected nodes checked, the others decoded.
