@@ -1023,70 +1023,50 @@ class StoreSimplifier {
     }
 
     /// Whether no other chain's original meets the region between shortcut
-    /// from -> to of `w` and the subchain it replaces: no segment of another
-    /// chain meets the shortcut other than at a shared end point, and no
-    /// vertex of one lies strictly inside (even-odd). As the map is planar,
-    /// another chain can enter the region only across the shortcut, so these
-    /// two tests see every way in. The region lies in the subchain's box,
-    /// within the far rule's grid (every segment in reach).
+    /// from -> to of `w` and the subchain it replaces. One test sees every
+    /// way in: no segment of another chain meets the shortcut other than at
+    /// a shared end point. The input is planar for a chain that is
+    /// simplified (ingest flags every chain of a meeting as a problem, and
+    /// those keep their vertices), so another chain cannot cross the
+    /// subchain, and one that enters the region without crossing the
+    /// shortcut enters at a corner that is a junction and lies wholly
+    /// inside: its middle vertex (or, with two vertices, an end other than
+    /// the shortcut's) is then in the region, and the point constraints
+    /// refused the shortcut before any path took it (README.md beside this
+    /// file, step 7; formats/chains/SPEC.md, "The partition contract"). So
+    /// only the cells along the shortcut are looked at, not every cell of
+    /// its subchain's box: a segment meeting it passes through one of them
+    /// (2 grid units around it, for the rounding of both covers).
     bool region_clear(const Work& w, uint32_t from, uint32_t to) const
     {
         const auto pts = points_of(w);
         const GridPoint a = pts[from], b = pts[to];
-        GridBox box;
-        for (uint32_t k = from; k <= to; ++k) {
-            box.extend(pts[k]);
-        }
-        // Every segment of another chain in the cells over the box (a segment
-        // in several of them is seen several times: no harm), first for the
-        // cheap test, then for the points: most shortcuts that fail cross a
-        // neighbour, and stop at the first.
-        const double cell = m_grid->cell;
-        const int64_t x0 = floor_int(double(box.min_x) / cell), x1 = floor_int(double(box.max_x) / cell);
-        const int64_t y0 = floor_int(double(box.min_y) / cell), y1 = floor_int(double(box.max_y) / cell);
-        auto each_near = [&](auto&& f) {
-            for (int64_t x = x0; x <= x1; ++x) {
-                for (int64_t y = y0; y <= y1; ++y) {
-                    if (!m_grid->cells.contains(x, y)) {
-                        continue;
-                    }
-                    for (const GridSeg gs : m_grid->buckets->find(m_grid->cells.key(x, y))) {
-                        if (gs.chain == w.chain) {
-                            continue;
-                        }
-                        const auto other = m_store.chain_points(m_store.chains[gs.chain]);
-                        const GridPoint c = other[gs.index], d = other[gs.index + 1];
-                        if (std::max(c.x, d.x) < box.min_x || std::min(c.x, d.x) > box.max_x ||
-                            std::max(c.y, d.y) < box.min_y || std::min(c.y, d.y) > box.max_y) {
-                            continue;
-                        }
-                        if (!f(c, d)) {
-                            return false;
-                        }
-                    }
+        const int32_t min_x = std::min(a.x, b.x), max_x = std::max(a.x, b.x);
+        const int32_t min_y = std::min(a.y, b.y), max_y = std::max(a.y, b.y);
+        bool clear = true;
+        cover_cells(a.x, a.y, b.x, b.y, 2.0, m_grid->cell, 0.0, 0.0, [&](int64_t x, int64_t y) {
+            if (!clear || !m_grid->cells.contains(x, y)) {
+                return;
+            }
+            // A segment in several of the cells is seen several times: no harm.
+            for (const GridSeg gs : m_grid->buckets->find(m_grid->cells.key(x, y))) {
+                if (gs.chain == w.chain) {
+                    continue;
+                }
+                const auto other = m_store.chain_points(m_store.chains[gs.chain]);
+                const GridPoint c = other[gs.index], d = other[gs.index + 1];
+                if (std::max(c.x, d.x) < min_x || std::min(c.x, d.x) > max_x || std::max(c.y, d.y) < min_y ||
+                    std::min(c.y, d.y) > max_y) {
+                    continue;
+                }
+                const SegmentRelation rel = segment_relation(a, b, c, d);
+                if (rel != SegmentRelation::disjoint && rel != SegmentRelation::shared_endpoint) {
+                    clear = false;
+                    return;
                 }
             }
-            return true;
-        };
-        const bool clear_of_segments = each_near([&](GridPoint c, GridPoint d) {
-            const SegmentRelation rel = segment_relation(a, b, c, d);
-            return rel == SegmentRelation::disjoint || rel == SegmentRelation::shared_endpoint;
         });
-        if (!clear_of_segments) {
-            return false;
-        }
-        auto inside = [&](GridPoint p) {
-            if (p.x < box.min_x || p.x > box.max_x || p.y < box.min_y || p.y > box.max_y) {
-                return false;
-            }
-            PointInPolygon pip(p);
-            for (uint32_t k = from; k < to; ++k) {
-                pip.add_segment(pts[k], pts[k + 1]);
-            }
-            pip.add_segment(b, a);
-            return pip.location() == PointLocation::inside;
-        };
-        return each_near([&](GridPoint c, GridPoint d) { return !inside(c) && !inside(d); });
+        return clear;
     }
 
     /// What a segment of the exact check is.
