@@ -5,12 +5,15 @@
 #include "core/segment_grid.hpp"
 #include "simplification/candidates.hpp"
 #include "simplification/cell_cover.hpp"
+#include "simplification/fewest_edges.hpp"
 #include "simplification/near_parts.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <functional>
 #include <future>
 #include <iomanip>
@@ -87,6 +90,7 @@ constexpr uint32_t lazy_rounds = 3;
 constexpr size_t rest_rounds = 8;
 
 enum State : uint8_t { unknown = 0, good = 1, bad_raster = 2, bad_exact = 3, bad_points = 4 };
+static_assert(bad_raster == first_banned_state, "fewest_edges_path takes the states from bad_raster on as banned");
 
 /// Per owned chain.
 struct Work {
@@ -191,59 +195,10 @@ template <class At> int128 signed_area2(std::span<const GridPoint> pts, size_t n
     return a;
 }
 
-/// Fewest-vertex path 0 -> n-1 over original edges and the candidates not
-/// banned, with at least R edges (a ring 3, so it keeps three vertices);
-/// among shortest paths, the lexicographically largest vertex sequence (a
-/// total order, so lazy and exhaustive testing choose the same path).
+/// Step 4 for one chain (fewest_edges.hpp).
 void shortest_path(Work& w, size_t n)
 {
-    // Layer r holds the fewest edges to n-1 using at least r of them. An
-    // open chain needs no layer beyond 0: every path from 0 to n-1 > 0 has
-    // an edge (a second layer computed the same values again).
-    const uint32_t R = w.ring ? 3 : 0;
-    constexpr uint32_t inf = UINT32_MAX / 2;
-    std::vector<uint32_t> f((R + 1) * n, inf), next((R + 1) * n, 0), via((R + 1) * n, UINT32_MAX);
-    auto at = [n](uint32_t r, size_t v) { return r * n + v; };
-    f[at(0, n - 1)] = 0;
-    for (size_t vv = n - 1; vv-- > 0;) {
-        const auto v = static_cast<uint32_t>(vv);
-        for (uint32_t r = 0; r <= R; ++r) {
-            const uint32_t rr = r > 0 ? r - 1 : 0;
-            uint32_t best = inf, bk = 0, bc = UINT32_MAX;
-            // Candidates from v, farthest first; ties keep the farthest.
-            const auto runs = w.cand.runs_from(v);
-            for (size_t q = runs.size(); q-- > 0;) {
-                const auto& run = runs[q];
-                const uint32_t id0 = w.cand.run_id(w.cand.first_run(v) + q);
-                for (uint32_t k = run.hi + 1; k-- > run.lo;) {
-                    if (f[at(rr, k)] + 1 < best && w.state[id0 + (k - run.lo)] < bad_raster) {
-                        best = f[at(rr, k)] + 1;
-                        bk = k;
-                        bc = id0 + (k - run.lo);
-                    }
-                }
-            }
-            if (f[at(rr, v + 1)] + 1 < best) {
-                best = f[at(rr, v + 1)] + 1;
-                bk = v + 1;
-                bc = UINT32_MAX;
-            }
-            f[at(r, v)] = best;
-            next[at(r, v)] = bk;
-            via[at(r, v)] = bc;
-        }
-    }
-    w.path.clear();
-    w.path_cand.clear();
-    uint32_t v = 0, r = R;
-    w.path.push_back(0);
-    while (v != n - 1) {
-        const uint32_t k = next[at(r, v)];
-        w.path_cand.push_back(via[at(r, v)]);
-        r = r > 0 ? r - 1 : 0;
-        v = k;
-        w.path.push_back(v);
-    }
+    fewest_edges_path(w.cand, w.state, n, w.ring, w.path, w.path_cand);
 }
 
 /// Points that constrain chain `self`: near it, and not its own representative.

@@ -8,6 +8,7 @@
 #include "simplification/candidates.hpp"
 #include "simplification/cell_cover.hpp"
 #include "simplification/coloring.hpp"
+#include "simplification/fewest_edges.hpp"
 #include "simplification/hull_scan.hpp"
 #include "simplification/near_parts.hpp"
 #include "simplification/raster.hpp"
@@ -179,6 +180,71 @@ TEST(Candidates, ChainsGoingOutAndBackMatchBruteForce)
             }
         }
     }
+}
+
+// Step 4 reads a run of shortcuts one at a time, or through a tree of range
+// minima where runs are long: the same path, edge for edge, whatever is
+// banned (single shortcuts, a run's first or last, whole stretches), open
+// chains and rings, short runs and long ones.
+TEST(FewestEdges, TheTreeFindsThePathOneByOneReadingFinds)
+{
+    std::mt19937 rng(29);
+    size_t compared = 0, long_runs = 0, banned_in_runs = 0;
+    for (int trial = 0; trial < 300; ++trial) {
+        Pts pts;
+        const int n = 3 + static_cast<int>(rng() % 400);
+        std::uniform_int_distribution<int> wiggle(-30, 30);
+        for (int k = 0; k < n; ++k) {
+            pts.push_back({100 * k + (trial % 3 == 0 ? 0 : wiggle(rng)), trial % 2 == 0 ? wiggle(rng) : (k % 7) * 40});
+        }
+        const bool ring = trial % 5 == 0;
+        if (ring) {
+            pts.push_back({pts.back().x, pts.back().y + 5000});
+            pts.push_back(pts.front());
+        }
+        const Tolerance tol(double(20 + trial % 7 * 60), Metric::l2);
+        const auto cand = proximate_shortcuts(pts, tol, 0);
+        std::vector<uint8_t> state(cand.size(), 0);
+        const int mode = trial % 4; // none banned, a few, a tenth, most
+        std::uniform_int_distribution<int> pick(0, 99);
+        for (auto& st : state) {
+            const int p = pick(rng);
+            const bool ban = mode == 1 ? p < 2 : mode == 2 ? p < 10 : mode == 3 ? p < 80 : false;
+            st = ban ? static_cast<uint8_t>(first_banned_state + rng() % 3) : static_cast<uint8_t>(rng() % 2);
+        }
+        for (const auto& r : cand.runs()) {
+            long_runs += r.hi - r.lo >= 48;
+        }
+        for (const uint8_t st : state) {
+            banned_in_runs += st >= first_banned_state;
+        }
+        std::vector<uint32_t> path1, cand1, path2, cand2, path3, cand3;
+        fewest_edges_path(cand, state, pts.size(), ring, path1, cand1, RunReading::one_by_one);
+        fewest_edges_path(cand, state, pts.size(), ring, path2, cand2, RunReading::tree);
+        fewest_edges_path(cand, state, pts.size(), ring, path3, cand3);
+        ASSERT_EQ(path1, path2) << "trial " << trial;
+        ASSERT_EQ(cand1, cand2) << "trial " << trial;
+        ASSERT_EQ(path1, path3) << "trial " << trial;
+        ASSERT_EQ(path1.front(), 0U);
+        ASSERT_EQ(path1.back(), pts.size() - 1);
+        if (ring) {
+            EXPECT_GE(path1.size(), 4U) << "a ring keeps three vertices";
+        }
+        for (size_t e = 0; e < cand1.size(); ++e) {
+            if (cand1[e] != UINT32_MAX) {
+                EXPECT_LT(state[cand1[e]], first_banned_state) << "trial " << trial;
+                EXPECT_EQ(cand.at(cand1[e]).from, path1[e]);
+                EXPECT_EQ(cand.at(cand1[e]).to, path1[e + 1]);
+            } else {
+                EXPECT_EQ(path1[e + 1], path1[e] + 1);
+            }
+        }
+        compared += path1.size();
+    }
+    // The cases above must have made what they are there for.
+    EXPECT_GT(long_runs, 1000U);
+    EXPECT_GT(banned_in_runs, 10000U);
+    EXPECT_GT(compared, 3000U);
 }
 
 // A long chain's starts are scanned in pieces on threads of their own
