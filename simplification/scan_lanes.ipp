@@ -15,7 +15,7 @@
 /// a where m is set, else b.
 inline V select(M m, V a, V b) noexcept
 {
-    return reinterpret_cast<V>((m & reinterpret_cast<M>(a)) | (~m & reinterpret_cast<M>(b)));
+    return m ? a : b; // a blend (each lane of m is all ones or all zeros)
 }
 /// `lanes` doubles from p on.
 inline V load(const double* p) noexcept
