@@ -910,6 +910,11 @@ class StoreSimplifier {
         for (const auto& x : meets) {
             const Tag& a = tags[segs[x.first].tag];
             const Tag& b = tags[segs[x.second].tag];
+            if (a.work == UINT32_MAX && b.work == UINT32_MAX) {
+                // Two halo chains: the partitions that own them count it
+                // (and which halo segments are here depends on the cut).
+                continue;
+            }
             bool banned = false;
             for (const Tag* t : {&a, &b}) {
                 if (t->work != UINT32_MAX && t->cand != UINT32_MAX) {
@@ -1190,8 +1195,13 @@ void simplify_ladder(const ChainStore& store, std::span<const double> tolerances
         (raster ? stats[first].seconds_far : stats[first].seconds_exact) += since(g0) + planning;
         planning = 0;
         for (size_t t = first; t <= last; ++t) {
+            // Without the raster the halo cut serves the exact check alone,
+            // where segments out of reach find nothing to meet: the group's
+            // cut serves every tolerance of it (the colouring and the tents
+            // need each tolerance's own).
+            const bool own_cut = raster && t != last;
             const ChainStore result = StoreSimplifier(store, tolerances_m[t], opt, raster, colors(t), stats[t],
-                                                      std::move(eps[t]), &grid, t == last ? &keep : nullptr)
+                                                      std::move(eps[t]), &grid, own_cut ? nullptr : &keep)
                                           .run();
             done(t, result);
         }

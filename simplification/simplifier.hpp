@@ -39,8 +39,8 @@ struct ToleranceStats {
     size_t banned_points = 0;
     size_t self_intersection_repairs = 0;
     size_t orientation_repairs = 0;
-    /// Original segments that meet (ingest problems), counted by the check
-    /// that finds them; left as they are.
+    /// Original segments that meet (ingest problems), one of them of an
+    /// owned chain, counted by the check that finds them; left as they are.
     size_t input_conflicts = 0;
     size_t rounds = 0;
     size_t tiles = 0;
