@@ -54,6 +54,7 @@ class UnsureEnds {
         m_j = j;
         m_to = j + 1;
         m_far2 = 0;
+        m_keep2_stale = true;
         m_far.clear();
         m_recent.clear();
         m_begin = 0;
@@ -152,8 +153,21 @@ class UnsureEnds {
         for (; m_to < k; ++m_to) {
             const double qx = double(pts[m_to].x) - a.x, qy = double(pts[m_to].y) - a.y;
             const double r2 = qx * qx + qy * qy;
-            m_far2 = std::max(m_far2, r2);
-            if (r2 >= keep2()) {
+            // keep2() follows m_far2, so it is worked out again only after
+            // m_far2 grew; a new farthest vertex is kept without it (keep2
+            // is below m_far2).
+            bool keep = true;
+            if (r2 >= m_far2) {
+                m_far2 = r2;
+                m_keep2_stale = true;
+            } else {
+                if (m_keep2_stale) {
+                    m_keep2 = keep2();
+                    m_keep2_stale = false;
+                }
+                keep = r2 >= m_keep2;
+            }
+            if (keep) {
                 // Mostly the farthest yet (a chain going out): at the end.
                 const std::pair<double, uint32_t> e{r2, m_to};
                 if (m_far.size() == m_begin || !(e < m_far.back())) {
@@ -189,6 +203,8 @@ class UnsureEnds {
     bool m_l2;
     uint32_t m_j = 0, m_to = 1;
     double m_far2 = 0;
+    double m_keep2 = -1; ///< keep2() when m_keep2_stale is false
+    bool m_keep2_stale = true;
     /// (squared distance from a, vertex) of the vertices near the farthest,
     /// nearest first, from m_begin on (those before it fell out of the band).
     std::vector<std::pair<double, uint32_t>> m_far;
