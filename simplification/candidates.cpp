@@ -543,22 +543,76 @@ Candidates proximate_shortcuts_from(std::span<const GridPoint> pts, const Tolera
         scan_hulls(pts, tol, max_reach, reps2, first, last, out);
         return out;
     }
+    const bool scalar_int64 =
+        !pts.empty() && box.max_x - box.min_x < limit && box.max_y - box.min_y < limit && reps2 < int128{limit};
+    auto scalar = [&](uint32_t lo, uint32_t hi) {
+        if (scalar_int64) {
+            scan<int64_t>(pts, tol, max_reach, reps2, lo, hi, out);
+        } else {
+            scan<int128>(pts, tol, max_reach, reps2, lo, hi, out);
+        }
+    };
 #if TIGERLOD_SCAN_LANES
     const bool any_lanes = kernel == ScanKernel::fastest || kernel == ScanKernel::lanes;
-    if (exact_in_doubles && any_lanes && has_avx512()) {
-        avx512::scan_lanes(pts, tol, max_reach, reps2, first, last, out);
+    using Lanes = void (*)(std::span<const GridPoint>, const Tolerance&, uint32_t, int128, uint32_t, uint32_t,
+                           Candidates&, std::vector<uint32_t>*);
+    const Lanes lanes_kernel = any_lanes && has_avx512()                                   ? avx512::scan_lanes
+                               : (any_lanes || kernel == ScanKernel::lanes4) && has_avx2() ? avx2::scan_lanes
+                                                                                           : nullptr;
+    if (lanes_kernel && exact_in_doubles) {
+        lanes_kernel(pts, tol, max_reach, reps2, first, last, out, nullptr);
         return out;
     }
-    if (exact_in_doubles && (any_lanes || kernel == ScanKernel::lanes4) && has_avx2()) {
-        avx2::scan_lanes(pts, tol, max_reach, reps2, first, last, out);
+    if (lanes_kernel && l2 && reps2 < int128{1} << 52) {
+        // A chain wider than the lanes' 2^26 (a nation's or a state's
+        // outline): in windows where it is narrower, each scanning the
+        // first half of its starts; a start whose scan reaches the window's
+        // end with the wedge still open may go beyond, and takes the scalar
+        // scan. The runs go out in start order, the same as the scalar
+        // scan's for the whole chain.
+        const auto n = static_cast<uint32_t>(pts.size());
+        std::vector<uint32_t> ran_out;
+        for (uint32_t s0 = first; s0 < last && s0 + 2 < n;) {
+            GridBox window;
+            window.extend(pts[s0]);
+            uint32_t e = s0 + 1; // the window: pts[s0, e)
+            for (; e < n; ++e) {
+                GridBox wider = window;
+                wider.extend(pts[e]);
+                if (wider.max_x - wider.min_x >= exact_limit || wider.max_y - wider.min_y >= exact_limit) {
+                    break;
+                }
+                window = wider;
+            }
+            if (e - s0 < 3) {
+                scalar(s0, s0 + 1); // a segment 2^26 long next: nothing for the lanes
+                ++s0;
+                continue;
+            }
+            const uint32_t s1 = std::min(last, e == n ? n : s0 + (e - s0) / 2);
+            Candidates part;
+            ran_out.clear();
+            lanes_kernel(pts.subspan(s0, e - s0), tol, max_reach, reps2, 0, s1 - s0, part, e < n ? &ran_out : nullptr);
+            const auto runs = part.runs();
+            size_t r = 0, q = 0;
+            for (uint32_t j = s0; j < s1; ++j) {
+                const bool redo = q < ran_out.size() && ran_out[q] + s0 == j;
+                q += redo ? 1 : 0;
+                for (; r < runs.size() && runs[r].from + s0 == j; ++r) {
+                    if (!redo) {
+                        out.add_run(j, runs[r].lo + s0, runs[r].hi + s0);
+                    }
+                }
+                if (redo) {
+                    scalar(j, j + 1);
+                }
+            }
+            s0 = s1;
+        }
         return out;
     }
 #endif
-    if (!pts.empty() && box.max_x - box.min_x < limit && box.max_y - box.min_y < limit && reps2 < int128{limit}) {
-        scan<int64_t>(pts, tol, max_reach, reps2, first, last, out);
-    } else {
-        scan<int128>(pts, tol, max_reach, reps2, first, last, out);
-    }
+    scalar(first, last);
     return out;
 }
 

@@ -59,8 +59,11 @@ inline double lane_steps(uint32_t j, uint32_t n, uint32_t starts_hi, uint32_t ma
 /// about as far).
 /// Exact in doubles because every coordinate difference is under 2^26 (the
 /// caller checks): squared lengths are integers below 2^53.
+/// `ran_out`, if given, gets the starts whose scan reached the last vertex
+/// of `pts` with the wedge still open (not stopped by `max_reach`): where
+/// `pts` is a window of a longer chain, those may have shortcuts beyond it.
 void scan_lanes(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach, int128 reps2,
-                uint32_t starts_lo, uint32_t starts_hi, Candidates& out)
+                uint32_t starts_lo, uint32_t starts_hi, Candidates& out, std::vector<uint32_t>* ran_out = nullptr)
 {
     const auto n = static_cast<uint32_t>(pts.size());
     // The points as doubles, padded so that lanes past the end read copies of the last point.
@@ -107,6 +110,7 @@ void scan_lanes(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t m
         };
         Step block[block_steps];
         bool more = true;
+        M ended{}; // lanes that tested their last end with the wedge open
         for (double t0 = 0; more && t0 < longest; t0 += block_steps) {
             const int count = static_cast<int>(std::min<double>(block_steps, longest - t0));
             for (int i = 0; i < count; ++i) {
@@ -131,7 +135,9 @@ void scan_lanes(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t m
             }
             for (int i = 0; i < count; ++i, k += 1) {
                 const Step& st = block[i];
+                const M before = alive;
                 alive &= V{} + (t0 + i) < steps;
+                ended |= before & ~alive; // tested every end, the wedge open
                 if (bits(alive) == 0) {
                     more = false;
                     break;
@@ -189,6 +195,15 @@ void scan_lanes(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t m
                     }
                 }
                 hi = select(found, k, hi);
+            }
+        }
+        if (ran_out) {
+            ended |= alive; // the longest lanes, open to the end
+            for (int l = 0; l < lanes; ++l) {
+                const uint32_t start = j + static_cast<uint32_t>(l);
+                if (ended[l] != 0 && (max_reach == 0 || uint64_t{start} + max_reach >= n - 1)) {
+                    ran_out->push_back(start);
+                }
             }
         }
         for (int l = 0; l < lanes; ++l) {

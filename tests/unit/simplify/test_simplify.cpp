@@ -369,6 +369,60 @@ TEST(Candidates, TheFastestKernelFindsWhatTheScalarScanFinds)
     EXPECT_GT(with_gaps, 50U);
 }
 
+// A chain wider than the lanes' 2^26 grid units (a nation's outline) is
+// scanned by the lanes in windows narrower than that, the starts whose scan
+// reaches a window's end with the wedge open by the scalar scan: the same
+// runs as the scalar scan of the whole chain, whether the scans stop inside
+// the windows (wiggles), run through several (straight stretches), or meet
+// a segment longer than a window, with and without a reach cap.
+TEST(Candidates, ChainsWiderThanTheLanesFindWhatTheScalarScanFinds)
+{
+    if (std::string_view(fastest_scan_kernel()) == "scalar") {
+        GTEST_SKIP() << "this processor has no AVX2 (or this is not x86-64): every kernel is the scalar scan";
+    }
+    std::mt19937 rng(31);
+    size_t compared = 0, wide = 0;
+    for (int trial = 0; trial < 120; ++trial) {
+        Pts pts;
+        const int n = 140 + static_cast<int>(rng() % 300);   // 140 steps of 2^20: wider than 2^27
+        const int64_t step = int64_t{1} << (20 + trial % 4); // 2^20 to 2^23: 8 to 64 steps a window
+        std::uniform_int_distribution<int64_t> wiggle(-(step >> 3), step >> 3);
+        int64_t x = -(int64_t{1} << 30), y = 0;
+        for (int k = 0; k < n; ++k) {
+            pts.push_back({static_cast<int32_t>(x), static_cast<int32_t>(y)});
+            const int kind = (k / 25 + trial) % 3; // stretches: straight, wiggling, turning
+            x += step;
+            y += kind == 0 ? 0 : kind == 1 ? wiggle(rng) : (k % 2 ? step : -step / 2);
+            if (trial % 10 == 0 && k == n / 2) {
+                x += int64_t{1} << 27; // one segment wider than a window
+            }
+            x = std::min<int64_t>(x, (int64_t{1} << 31) - 1);
+        }
+        GridBox box;
+        for (const GridPoint p : pts) {
+            box.extend(p);
+        }
+        wide += box.max_x - box.min_x >= int64_t{1} << 26;
+        const Tolerance tol(double(step / 4 + trial * 997), Metric::l2);
+        const uint32_t reach = trial % 4 == 1 ? static_cast<uint32_t>(3 + trial % 40) : 0;
+        const auto slow = proximate_shortcuts(pts, tol, reach, ScanKernel::scalar);
+        for (const ScanKernel kernel : {ScanKernel::lanes, ScanKernel::lanes4}) {
+            const auto fast = proximate_shortcuts(pts, tol, reach, kernel);
+            ASSERT_EQ(fast.list(), slow.list())
+                << (kernel == ScanKernel::lanes ? "lanes" : "lanes4") << " trial " << trial;
+            // And in pieces, as a long chain's starts are spread over threads.
+            const auto cut = static_cast<uint32_t>(pts.size() / 3);
+            Candidates pieces = proximate_shortcuts_from(pts, tol, reach, 0, cut, kernel);
+            pieces.append(proximate_shortcuts_from(pts, tol, reach, cut, static_cast<uint32_t>(pts.size()), kernel));
+            pieces.finish(static_cast<uint32_t>(pts.size()));
+            ASSERT_EQ(pieces.list(), slow.list()) << "in pieces, trial " << trial;
+        }
+        compared += slow.size();
+    }
+    EXPECT_EQ(wide, 120U) << "every chain wider than the lanes";
+    EXPECT_GT(compared, 20000U);
+}
+
 // The hull scan (hull_scan.hpp) decides blocks of ends at once by their
 // convex hulls: every proof it makes must give exactly what testing each
 // shortcut vertex by vertex gives. Chains dense for their tolerance (where
