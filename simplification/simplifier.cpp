@@ -9,11 +9,9 @@
 #include "simplification/near_parts.hpp"
 
 #include <algorithm>
-#include <bit>
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <cstring>
 #include <functional>
 #include <future>
 #include <iomanip>
@@ -253,7 +251,7 @@ class StoreSimplifier {
                     const ColorResult* colors, ToleranceStats& st, std::vector<double> eps,
                     const StoreGrid* grid = nullptr, const std::vector<uint8_t>* keep = nullptr)
         : m_store(store), m_eps_m(eps_m), m_opt(opt), m_raster(raster), m_colors(raster ? colors : nullptr), m_st(st),
-          m_eps(std::move(eps)), m_given_keep(keep), m_grid(grid)
+          m_eps(std::move(eps)), m_keep(keep), m_grid(grid)
     {
         m_st.eps_m = eps_m;
     }
@@ -287,11 +285,14 @@ class StoreSimplifier {
     void start_colouring()
     {
         const auto t0 = Clock::now();
-        m_keep = m_given_keep ? *m_given_keep : segments_in_reach(m_store, halo_reach(m_eps, m_opt));
+        if (!m_keep) {
+            m_own_keep = segments_in_reach(m_store, halo_reach(m_eps, m_opt));
+            m_keep = &m_own_keep;
+        }
         if (m_raster && !m_colors) {
             auto colour = [this] {
                 const auto c0 = Clock::now();
-                auto result = color_chains(m_store, m_eps, m_keep, m_opt);
+                auto result = color_chains(m_store, m_eps, *m_keep, m_opt);
                 return std::pair{std::move(result), since(c0)};
             };
             m_colouring = std::async(m_opt.threads > 1 ? std::launch::async : std::launch::deferred, colour);
@@ -485,7 +486,7 @@ class StoreSimplifier {
         m_ball_l2 = l2_reach(m_opt.metric); // the metric's unit ball lies in the L2 disc of this radius
         m_reach_max = far_reach(m_eps, m_pixel, m_opt);
         if (!m_grid) {
-            m_own_grid.emplace(m_store, m_keep, grid_cell(m_eps, m_pixel, m_opt, mean_segment_length(m_store)));
+            m_own_grid.emplace(m_store, *m_keep, grid_cell(m_eps, m_pixel, m_opt, mean_segment_length(m_store)));
             m_grid = &*m_own_grid;
         }
         // Per owned chain, prefix counts of its segments that have another chain
@@ -706,7 +707,7 @@ class StoreSimplifier {
             std::vector<TentChain> tents(tile.chains.size());
             for (size_t m = 0; m < tile.chains.size(); ++m) {
                 const auto& c = m_store.chains[tile.chains[m]];
-                tents[m] = {m_store.chain_points(c), m_eps[tile.chains[m]], tile.classes[m], keep_of(m_keep, c)};
+                tents[m] = {m_store.chain_points(c), m_eps[tile.chains[m]], tile.classes[m], keep_of(*m_keep, c)};
             }
             prepared[i] = m_raster->prepare(tile.spec, tents, per_tile[drawn_tiles[i]]);
         });
@@ -1074,7 +1075,7 @@ class StoreSimplifier {
                 continue;
             }
             const auto pts = m_store.chain_points(m_store.chains[i]);
-            const auto use = keep_of(m_keep, m_store.chains[i]);
+            const auto use = keep_of(*m_keep, m_store.chains[i]);
             for (size_t e = 0; e + 1 < pts.size(); ++e) {
                 if (!takes_part(use, e)) {
                     continue;
@@ -1124,11 +1125,12 @@ class StoreSimplifier {
     Raster* const m_raster;      ///< null: the exact rules alone (no eps-Voronoi test)
     const ColorResult* m_colors; ///< given, or m_own_colors once finish_colouring has it
     ToleranceStats& m_st;
-    const std::vector<double> m_eps;          ///< per chain, grid units (chain_tolerances)
-    const std::vector<uint8_t>* m_given_keep; ///< the segments in reach, if given
-    std::vector<uint8_t> m_keep;              ///< the segments in reach (segments_in_reach)
+    const std::vector<double> m_eps; ///< per chain, grid units (chain_tolerances)
+    /// The segments in reach (segments_in_reach): given, or m_own_keep.
+    const std::vector<uint8_t>* m_keep;
+    std::vector<uint8_t> m_own_keep;
     ColorResult m_own_colors;
-    /// After m_eps and m_keep, which it reads: destroyed (waited for) before them.
+    /// After m_eps and m_own_keep, which it reads: destroyed (waited for) before them.
     std::future<std::pair<ColorResult, double>> m_colouring;
     double m_pixel = 0;      ///< the tiles' pixel, grid units
     int128 m_untested2 = -1; ///< shortcuts at most this long (squared) leave no pixel to test
