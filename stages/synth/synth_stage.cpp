@@ -34,6 +34,8 @@ struct CountyCounts {
     uint64_t edge_features = 0, vertex_records = 0; ///< as written, border edges in both files
     uint64_t edges = 0, vertices = 0;               ///< the edges this county owns (each edge once over the nation)
     uint64_t faces = 0, water_faces = 0, face_vertex_records = 0, bytes = 0;
+    double geometry_s = 0, files_s = 0;      ///< a thread's seconds building the county, and writing its files
+    WriteSeconds write_s;                    ///< and in the shapefile driver and the zip
     std::vector<uint32_t> vertices_per_edge; ///< owned edges
     std::vector<float> edge_m;               ///< owned edges' lengths
     std::vector<uint32_t> face_blocks;       ///< each face's block
@@ -51,6 +53,10 @@ struct CountyCounts {
                                 {&bytes, k.bytes}}) {
             *to += from;
         }
+        geometry_s += k.geometry_s;
+        files_s += k.files_s;
+        write_s.shapefile += k.write_s.shapefile;
+        write_s.deflate += k.write_s.deflate;
         vertices_per_edge.insert(vertices_per_edge.end(), k.vertices_per_edge.begin(), k.vertices_per_edge.end());
         edge_m.insert(edge_m.end(), k.edge_m.begin(), k.edge_m.end());
     }
@@ -163,7 +169,14 @@ int SynthStage::run(const StageContext& ctx)
         const auto& st = nation.units(state)[cty.parent];
         const std::string ssccc = st.code + cty.code;
         auto& k = counts[c];
+        const auto built = std::chrono::steady_clock::now();
         const auto parts = nation.county_parts(uint32_t(c));
+        k.geometry_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - built).count();
+        auto timed_write = [&](const fs::path& file, const std::string& bytes) {
+            const auto started = std::chrono::steady_clock::now();
+            write_file(file, bytes);
+            k.files_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+        };
         const auto& edges = parts.edges;
         for (const auto& e : edges) {
             ++k.edge_features;
@@ -176,8 +189,8 @@ int SynthStage::run(const StageContext& ctx)
                 k.edge_m.push_back(float(length_m(e.points)));
             }
         }
-        const std::string ez = edges_zip(ssccc, st.code, cty.code, edges);
-        write_file(out.path() / ("tl_2020_" + ssccc + "_edges.zip"), ez);
+        const std::string ez = edges_zip(ssccc, st.code, cty.code, edges, k.write_s);
+        timed_write(out.path() / ("tl_2020_" + ssccc + "_edges.zip"), ez);
         const auto& faces = parts.faces;
         for (const auto& f : faces) {
             ++k.faces;
@@ -187,8 +200,8 @@ int SynthStage::run(const StageContext& ctx)
                 k.face_vertex_records += ring.size();
             }
         }
-        const std::string fz = faces_zip(ssccc, nation, faces);
-        write_file(out.path() / ("tl_2020_" + ssccc + "_faces.zip"), fz);
+        const std::string fz = faces_zip(ssccc, nation, faces, k.write_s);
+        timed_write(out.path() / ("tl_2020_" + ssccc + "_faces.zip"), fz);
         k.bytes = ez.size() + fz.size();
         progress.advance(k.vertices);
     });
@@ -235,6 +248,13 @@ int SynthStage::run(const StageContext& ctx)
                     {"vertices_per_s", total > 0 ? double(all.vertices) / total : 0.0},
                     {"written_vertices_per_s", total > 0 ? written / total : 0.0},
                     {"bytes", all.bytes},
+                    // Where the threads' time went, summed over threads
+                    // (the plan and the manifest are plan_s and the rest).
+                    {"thread_s",
+                     {{"geometry", all.geometry_s},
+                      {"shapefile", all.write_s.shapefile},
+                      {"deflate", all.write_s.deflate},
+                      {"files", all.files_s}}},
                     {"peak_rss_mb", peak_rss_mb()}};
     write_file(out.path() / "synth-timings.json", timings.dump(2) + "\n");
     out.commit();

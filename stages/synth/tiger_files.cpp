@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <initializer_list>
 #include <cstdio>
@@ -20,6 +21,8 @@ namespace tigerlod::synth {
 namespace {
 
 std::atomic<uint64_t> next_folder{0};
+
+using Clock = std::chrono::steady_clock;
 
 /// An attribute of a shapefile: its name, type and width.
 struct Field {
@@ -62,29 +65,46 @@ class MemShapefile {
     MemShapefile& operator=(const MemShapefile&) = delete;
     ~MemShapefile()
     {
+        if (m_row) {
+            OGR_F_Destroy(m_row);
+        }
         if (m_ds) {
             GDALClose(m_ds);
         }
         VSIRmdirRecursive(m_folder.c_str());
     }
 
-    /// A new feature of the layer, for write(), which destroys it.
-    OGRFeatureH feature() { return OGR_F_Create(OGR_L_GetLayerDefn(m_layer)); }
+    /// The layer's one feature, to fill and write() row after row: one
+    /// feature and its geometry for every row, not an allocation of each
+    /// per row. A field a row does not set must be unset; `geometry` is
+    /// the type of the feature's geometry, created with it.
+    OGRFeatureH row(OGRwkbGeometryType geometry)
+    {
+        if (m_row == nullptr) {
+            m_row = OGR_F_Create(OGR_L_GetLayerDefn(m_layer));
+            OGR_F_SetGeometryDirectly(m_row, OGR_G_CreateGeometry(geometry));
+        }
+        OGR_F_SetFID(m_row, OGRNullFID);
+        return m_row;
+    }
     void write(OGRFeatureH f)
     {
         const OGRErr err = OGR_L_CreateFeature(m_layer, f);
-        OGR_F_Destroy(f);
         if (err != OGRERR_NONE) {
             throw environment_error("synth: GDAL cannot write a feature of " + m_base + ": " +
                                     std::string(CPLGetLastErrorMsg()));
         }
     }
 
-    /// Close the shapefile and zip its files, in name order.
-    std::string zip()
+    /// Close the shapefile and zip its files, in name order; the seconds
+    /// from `start` to the closed files go to `seconds.shapefile`, the zip's
+    /// to `seconds.deflate`.
+    std::string zip(Clock::time_point start, WriteSeconds& seconds)
     {
         GDALClose(m_ds);
         m_ds = nullptr;
+        const auto closed = Clock::now();
+        seconds.shapefile += std::chrono::duration<double>(closed - start).count();
         char** names = VSIReadDir(m_folder.c_str());
         std::vector<std::string> files;
         for (char** n = names; n && *n; ++n) {
@@ -98,13 +118,16 @@ class MemShapefile {
             const GByte* data = VSIGetMemFileBuffer((m_folder + "/" + name).c_str(), &size, FALSE);
             zip.add(name, std::string_view(reinterpret_cast<const char*>(data), size_t(size)));
         }
-        return zip.finish();
+        std::string bytes = zip.finish();
+        seconds.deflate += std::chrono::duration<double>(Clock::now() - closed).count();
+        return bytes;
     }
 
   private:
     std::string m_base, m_folder;
     GDALDatasetH m_ds = nullptr;
     OGRLayerH m_layer = nullptr;
+    OGRFeatureH m_row = nullptr;
 };
 
 void set_points(OGRGeometryH g, const std::vector<Pt>& pts)
@@ -150,8 +173,9 @@ int64_t area_m2(const Face& f)
 } // namespace
 
 std::string edges_zip(const std::string& ssccc, const std::string& state, const std::string& county,
-                      const std::vector<Edge>& edges)
+                      const std::vector<Edge>& edges, WriteSeconds& seconds)
 {
+    const auto start = Clock::now();
     MemShapefile shp("tl_2020_" + ssccc + "_edges", wkbLineString,
                      {{"STATEFP", OFTString, 2},
                       {"COUNTYFP", OFTString, 3},
@@ -162,29 +186,30 @@ std::string edges_zip(const std::string& ssccc, const std::string& state, const 
                       {"TNIDF", OFTInteger64, 10},
                       {"TNIDT", OFTInteger64, 10}});
     for (const auto& e : edges) {
-        OGRFeatureH f = shp.feature();
+        OGRFeatureH f = shp.row(wkbLineString);
         OGR_F_SetFieldString(f, 0, state.c_str());
         OGR_F_SetFieldString(f, 1, county.c_str());
         OGR_F_SetFieldInteger64(f, 2, e.tlid);
-        if (e.tfidl != 0) { // else outside the nation: unset
-            OGR_F_SetFieldInteger64(f, 3, e.tfidl);
-        }
-        if (e.tfidr != 0) {
-            OGR_F_SetFieldInteger64(f, 4, e.tfidr);
+        for (const auto& [field, face] : {std::pair{3, e.tfidl}, {4, e.tfidr}}) {
+            if (face != 0) {
+                OGR_F_SetFieldInteger64(f, field, face);
+            } else { // outside the nation
+                OGR_F_UnsetField(f, field);
+            }
         }
         OGR_F_SetFieldString(f, 5, e.mtfcc);
         OGR_F_SetFieldInteger64(f, 6, e.tnidf);
         OGR_F_SetFieldInteger64(f, 7, e.tnidt);
-        OGRGeometryH g = OGR_G_CreateGeometry(wkbLineString);
-        set_points(g, e.points);
-        OGR_F_SetGeometryDirectly(f, g);
+        set_points(OGR_F_GetGeometryRef(f), e.points);
         shp.write(f);
     }
-    return shp.zip();
+    return shp.zip(start, seconds);
 }
 
-std::string faces_zip(const std::string& ssccc, const Nation& nation, const std::vector<Face>& faces)
+std::string faces_zip(const std::string& ssccc, const Nation& nation, const std::vector<Face>& faces,
+                      WriteSeconds& seconds)
 {
+    const auto start = Clock::now();
     MemShapefile shp("tl_2020_" + ssccc + "_faces", wkbPolygon,
                      {{"TFID", OFTInteger64, 10},
                       {"STATEFP20", OFTString, 2},
@@ -202,7 +227,7 @@ std::string faces_zip(const std::string& ssccc, const Nation& nation, const std:
         const auto& trc = nation.units(tract)[grp.parent];
         const auto& cty = nation.units(county)[trc.parent];
         const auto& st = nation.units(state)[cty.parent];
-        OGRFeatureH f = shp.feature();
+        OGRFeatureH f = shp.row(wkbPolygon);
         OGR_F_SetFieldInteger64(f, 0, face.tfid);
         OGR_F_SetFieldString(f, 1, st.code.c_str());
         OGR_F_SetFieldString(f, 2, cty.code.c_str());
@@ -213,16 +238,20 @@ std::string faces_zip(const std::string& ssccc, const Nation& nation, const std:
         OGR_F_SetFieldInteger64(f, 7, area_m2(face));
         OGR_F_SetFieldString(f, 8, degrees(face.intpt.y, 11).c_str());
         OGR_F_SetFieldString(f, 9, degrees(face.intpt.x, 12).c_str());
-        OGRGeometryH g = OGR_G_CreateGeometry(wkbPolygon);
-        for (const auto& ring : face.rings) {
-            OGRGeometryH r = OGR_G_CreateGeometry(wkbLinearRing);
-            set_points(r, ring);
-            OGR_G_AddGeometryDirectly(g, r);
+        // The rings of the last face are kept and refilled, extra ones removed.
+        OGRGeometryH g = OGR_F_GetGeometryRef(f);
+        for (size_t r = 0; r < face.rings.size(); ++r) {
+            if (int(r) == OGR_G_GetGeometryCount(g)) {
+                OGR_G_AddGeometryDirectly(g, OGR_G_CreateGeometry(wkbLinearRing));
+            }
+            set_points(OGR_G_GetGeometryRef(g, int(r)), face.rings[r]);
         }
-        OGR_F_SetGeometryDirectly(f, g);
+        while (OGR_G_GetGeometryCount(g) > int(face.rings.size())) {
+            OGR_G_RemoveGeometry(g, OGR_G_GetGeometryCount(g) - 1, TRUE);
+        }
         shp.write(f);
     }
-    return shp.zip();
+    return shp.zip(start, seconds);
 }
 
 } // namespace tigerlod::synth

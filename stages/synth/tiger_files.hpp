@@ -13,13 +13,21 @@
 
 namespace tigerlod::synth {
 
+/// Seconds a thread spent in each part of writing a county's files, for
+/// synth-timings.json (where the time of a run goes).
+struct WriteSeconds {
+    double shapefile = 0; ///< GDAL's shapefile driver, from the first row to the closed files
+    double deflate = 0;   ///< the zip: CRC and deflate of each member
+};
+
 /// The zip of `edges` as tl_2020_SSCCC_edges (SSCCC = state + county).
 /// Throws environment_error if GDAL cannot write.
 std::string edges_zip(const std::string& ssccc, const std::string& state, const std::string& county,
-                      const std::vector<Edge>& edges);
+                      const std::vector<Edge>& edges, WriteSeconds& seconds);
 
 /// The zip of `faces` as tl_2020_SSCCC_faces, with the codes of each face's
 /// block and its parents in `nation`.
-std::string faces_zip(const std::string& ssccc, const Nation& nation, const std::vector<Face>& faces);
+std::string faces_zip(const std::string& ssccc, const Nation& nation, const std::vector<Face>& faces,
+                      WriteSeconds& seconds);
 
 } // namespace tigerlod::synth

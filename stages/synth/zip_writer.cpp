@@ -3,6 +3,7 @@
 #include <libdeflate.h>
 
 #include <limits>
+#include <vector>
 #include <string>
 #include <stdexcept>
 
@@ -36,23 +37,53 @@ uint32_t checked(size_t n, const std::string& what)
 
 } // namespace
 
+namespace {
+
+/// This thread's compressor at one level, kept from member to member (its
+/// tables are hundreds of KiB), and a buffer for its output.
+struct Deflater {
+    int level = -1;
+    libdeflate_compressor* compressor = nullptr;
+    std::vector<char> packed;
+    Deflater() = default;
+    Deflater(const Deflater&) = delete;
+    Deflater& operator=(const Deflater&) = delete;
+    ~Deflater() { libdeflate_free_compressor(compressor); }
+
+    /// `data` deflated; valid until the next call on this thread.
+    std::string_view deflate(int at_level, std::string_view data, const std::string& name)
+    {
+        if (compressor == nullptr || level != at_level) {
+            libdeflate_free_compressor(compressor);
+            compressor = libdeflate_alloc_compressor(at_level);
+            level = at_level;
+            if (compressor == nullptr) {
+                throw std::runtime_error("zip: no deflate compressor at level " + std::to_string(at_level));
+            }
+        }
+        const size_t bound = libdeflate_deflate_compress_bound(compressor, data.size());
+        if (packed.size() < bound) {
+            packed.resize(bound);
+        }
+        const size_t n =
+            libdeflate_deflate_compress(compressor, data.data(), data.size(), packed.data(), packed.size());
+        if (n == 0 && !data.empty()) {
+            throw std::runtime_error("zip: deflate failed for " + name);
+        }
+        return {packed.data(), n};
+    }
+};
+
+} // namespace
+
 void ZipWriter::add(const std::string& name, std::string_view data)
 {
+    thread_local Deflater deflater;
     Member m;
     m.name = name;
     m.size = checked(data.size(), name);
     m.crc = libdeflate_crc32(0, data.data(), data.size());
-    libdeflate_compressor* c = libdeflate_alloc_compressor(m_level);
-    if (c == nullptr) {
-        throw std::runtime_error("zip: no deflate compressor at level " + std::to_string(m_level));
-    }
-    std::string packed(libdeflate_deflate_compress_bound(c, data.size()), '\0');
-    const size_t n = libdeflate_deflate_compress(c, data.data(), data.size(), packed.data(), packed.size());
-    libdeflate_free_compressor(c);
-    if (n == 0 && !data.empty()) {
-        throw std::runtime_error("zip: deflate failed for " + name);
-    }
-    packed.resize(n);
+    const std::string_view packed = deflater.deflate(m_level, data, name);
     m.compressed = checked(packed.size(), name);
     m.offset = checked(m_out.size(), "the archive");
     put32(m_out, 0x04034b50);

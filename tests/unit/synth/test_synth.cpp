@@ -290,6 +290,16 @@ TEST_F(SynthCli, SameSeedSameBytesWhateverTheThreads)
         }
     }
     EXPECT_EQ(files, 9U); // 4 counties x 2, and the manifest
+    // The timings say where the threads' time went: each part measured, and
+    // together no more than the threads had.
+    const auto timings = nlohmann::json::parse(slurp(m_dir / "b" / "synth-timings.json"));
+    double parts = 0;
+    for (const char* part : {"geometry", "shapefile", "deflate", "files"}) {
+        const double s = timings.at("thread_s").at(part).get<double>();
+        EXPECT_GT(s, 0.0) << part;
+        parts += s;
+    }
+    EXPECT_LE(parts, 2 * timings.at("total_s").get<double>());
     ASSERT_EQ(run("synth", (m_dir / "c").string() + " --seed 8 --states 2 --counties-per-state 2 "
                                                     "--target-vertices 40000")
                   .code,
