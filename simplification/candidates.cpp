@@ -10,6 +10,8 @@
 
 #if defined(__x86_64__)
 #include <immintrin.h>
+#include <stdexcept>
+#include <string>
 #endif
 
 namespace tigerlod::simplify {
@@ -223,8 +225,21 @@ class UnsureEnds {
 
 } // namespace
 
+uint64_t Candidates::count() const noexcept
+{
+    uint64_t total = 0;
+    for (const Run& r : m_runs) {
+        total += r.hi - r.lo + 1;
+    }
+    return total;
+}
+
 void Candidates::finish(uint32_t n)
 {
+    if (const uint64_t total = count(); total > max_ids) {
+        throw std::length_error("a chain of " + std::to_string(n) + " vertices has " + std::to_string(total) +
+                                " proximate shortcuts, more than a 32-bit id can number");
+    }
     m_runs.shrink_to_fit();
     m_base.assign(m_runs.size() + 1, 0);
     for (size_t r = 0; r < m_runs.size(); ++r) {

@@ -43,8 +43,15 @@ class Candidates {
     }
     /// Appends the runs of `later` (not finished), whose starts all follow this one's.
     void append(const Candidates& later);
+    /// The shortcuts of the runs so far, finished or not, counted without
+    /// the 32 bits of an id: a chain can have more (a coast of millions of
+    /// vertices at kilometres), which finish() refuses.
+    uint64_t count() const noexcept;
     /// Ends the list for a chain of `n` vertices; add() may not follow.
+    /// Throws std::length_error if count() passes max_ids: the ids would wrap.
     void finish(uint32_t n);
+    /// The most shortcuts a chain's ids can number.
+    static constexpr uint64_t max_ids = UINT32_MAX;
 
     /// Shortcuts in all.
     uint32_t size() const noexcept { return m_base.empty() ? 0 : m_base.back(); }

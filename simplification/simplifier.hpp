@@ -42,6 +42,9 @@ struct ToleranceStats {
     /// Original segments that meet (ingest problems), one of them of an
     /// owned chain, counted by the check that finds them; left as they are.
     size_t input_conflicts = 0;
+    /// Chains with more proximate shortcuts than SimplifyOptions::
+    /// max_chain_shortcuts, scanned again with their reach capped.
+    size_t reach_capped_chains = 0;
     size_t rounds = 0;
     size_t tiles = 0;
     size_t splits = 0;

@@ -33,7 +33,13 @@ struct SimplifyOptions {
     std::map<std::string, double> class_scale; ///< eps multiplier by feature class
     bool projection_scale = true;              ///< eps in ground metres through the local projection scale
     uint32_t max_reach = 0;                    ///< cap on a shortcut's reach in vertices (0: none)
-    bool point_constraints = true;             ///< units' internal points and user points keep their side
+    /// The most proximate shortcuts a chain may have: a chain of n vertices
+    /// with more (a coast of millions of vertices at kilometres) is scanned
+    /// again with its reach capped at max(2, this / n), so that it has at
+    /// most max(this, n), and counted in reach_capped_chains. The default
+    /// is what a 32-bit shortcut id can number; tests set less.
+    uint64_t max_chain_shortcuts = UINT32_MAX;
+    bool point_constraints = true; ///< units' internal points and user points keep their side
     std::vector<LonLat> user_points;
     bool lazy = true;       ///< test only shortcuts on shortest paths
     bool clip_tests = true; ///< draw only the parts of a shortcut that can fail (near_parts.hpp); off for tests

@@ -326,6 +326,7 @@ json SimplifyStage::report_json(size_t stores, const std::string& gl, const std:
         j["self_intersection_repairs"] = t.self_intersection_repairs;
         j["orientation_repairs"] = t.orientation_repairs;
         j["input_conflicts"] = t.input_conflicts;
+        j["reach_capped_chains"] = t.reach_capped_chains;
         j["rounds"] = t.rounds;
         j["tiles"] = t.tiles;
         j["tile_splits"] = t.splits;
@@ -385,6 +386,11 @@ void SimplifyStage::print_summary(size_t stores, const std::string& gl, const st
                         t.input_vertices ? 100.0 * double(t.output_vertices) / double(t.input_vertices) : 0.0,
                         t.candidates, t.drawn_segments, t.banned_raster, t.banned_exact, t.banned_region,
                         t.banned_points);
+            if (t.reach_capped_chains > 0) {
+                std::printf("  eps %g m: %zu chains had more proximate shortcuts than a chain may hold: their reach "
+                            "was capped (reach_capped_chains in the report)\n",
+                            t.eps_m, t.reach_capped_chains);
+            }
         }
         std::printf("outputs in %s\n", m_common.output.c_str());
     }

@@ -19,6 +19,7 @@
 
 #include <map>
 #include <random>
+#include <stdexcept>
 #include <string_view>
 
 using namespace tigerlod;
@@ -564,6 +565,60 @@ TEST(Candidates, RunsNumberTheShortcutsInOrder)
     const auto none = proximate_shortcuts(Pts{{0, 0}, {100, 0}}, Tolerance(10, Metric::l2), 0);
     EXPECT_TRUE(none.empty());
     EXPECT_EQ(none.first_id(0), 0U);
+}
+
+TEST(Candidates, MoreShortcutsThanAnIdNumbersAreRefusedNotWrapped)
+{
+    // 65,535 starts reaching 65,536 ends each: 4,294,901,760 shortcuts, just
+    // under 2^32; one start more passes it. Counted from the runs alone.
+    Candidates fits, over;
+    for (uint32_t v = 0; v < 65536; ++v) {
+        if (v < 65535) {
+            fits.add_run(v, v + 2, v + 65537);
+        }
+        over.add_run(v, v + 2, v + 65537);
+    }
+    EXPECT_EQ(fits.count(), uint64_t{65535} * 65536);
+    EXPECT_EQ(over.count(), uint64_t{65536} * 65536);
+    fits.finish(140000);
+    EXPECT_EQ(fits.size(), uint32_t(uint64_t{65535} * 65536));
+    EXPECT_EQ(fits.run_id(65534), uint32_t(uint64_t{65534} * 65536));
+    EXPECT_THROW(over.finish(140000), std::length_error);
+}
+
+TEST(Simplify, AChainWithMoreShortcutsThanItMayHoldIsScannedWithItsReachCapped)
+{
+    // 200 collinear vertices 1 m apart at eps 1 m: every one of the 19,701
+    // shortcuts is proximate and the whole chain is one segment. Allowed
+    // 1,000, the chain's reach is capped at 1000 / 200 = 5 vertices: 4
+    // shortcuts a start, and the fewest edges over 199 are ceil(199 / 5) = 40.
+    Pts line;
+    for (int i = 0; i < 200; ++i) {
+        line.push_back({100 * i, 0});
+    }
+    MapBuilder m;
+    m.chain(1, line);
+    ToleranceStats whole, capped;
+    const auto out = run_exact(m.s, 1.0, plain(), &whole);
+    EXPECT_EQ(points_of(out, 1), (Pts{line.front(), line.back()}));
+    EXPECT_EQ(whole.candidates, 19701U);
+    EXPECT_EQ(whole.reach_capped_chains, 0U);
+
+    SimplifyOptions o = plain();
+    o.max_chain_shortcuts = 1000;
+    for (const bool with_raster : {false, true}) {
+        const auto cut = with_raster ? run(m.s, 1.0, o, &capped) : run_exact(m.s, 1.0, o, &capped);
+        const Pts got = points_of(cut, 1);
+        ASSERT_EQ(got.size(), 41U) << with_raster;
+        EXPECT_EQ(got.front(), line.front());
+        EXPECT_EQ(got.back(), line.back());
+        for (size_t k = 0; k + 1 < got.size(); ++k) {
+            EXPECT_GT(got[k + 1].x, got[k].x);
+            EXPECT_LE(got[k + 1].x - got[k].x, 500) << "a shortcut past the capped reach";
+        }
+        EXPECT_EQ(capped.reach_capped_chains, 1U);
+        EXPECT_EQ(capped.candidates, 195U * 4 + 3 + 2 + 1); // starts 0-194 reach 4 ends, then 3, 2, 1
+    }
 }
 
 TEST(Candidates, PointCullingMatchesTheRegionTestOnRandomChains)
