@@ -41,6 +41,7 @@ const std::vector<std::string> all_modes = {"incore", "ooc-noprefetch", "ooc-pre
 /// One frame's row of the CSV.
 struct Row {
     double ms = 0;
+    double select_ms = 0; ///< choosing the front (and, prefetching, what to load ahead): part of ms
     size_t front_nodes = 0;
     std::string lods; ///< "lod:count ..." of the front
     uint64_t chains = 0, vertices = 0, segments = 0;
@@ -217,7 +218,10 @@ struct Run {
             Row row;
             std::vector<reader::Drawable> front;
             bool complete = true;
-            for (const auto& item : reader::select_front(s, views[f], front_options)) {
+            const auto t_select = Clock::now();
+            const auto items = reader::select_front(s, views[f], front_options);
+            row.select_ms = 1000 * since(t_select);
+            for (const auto& item : items) {
                 reader::Drawable d{item, item.lod,
                                    geometry[item.node].empty() ? nullptr : geometry[item.node][item.lod],
                                    tables[item.node]};
@@ -257,6 +261,7 @@ struct Run {
             const auto t0 = Clock::now();
             Row row;
             streamer.set_view(views[f]);
+            row.select_ms = 1000 * since(t0);
             row.misses = streamer.missing();
             row.complete = streamer.wait_front(std::chrono::seconds(60));
             const auto front = streamer.resident_front();
@@ -295,10 +300,11 @@ double percentile(std::vector<double> v, double p)
 
 json summary_of(const ModeRun& m, uint64_t budget)
 {
-    std::vector<double> ms;
+    std::vector<double> ms, select;
     uint64_t read = 0, misses = 0, incomplete = 0;
     for (const auto& r : m.rows) {
         ms.push_back(r.ms);
+        select.push_back(r.select_ms);
         read += r.bytes_read;
         misses += r.misses;
         incomplete += r.complete ? 0 : 1;
@@ -312,6 +318,9 @@ json summary_of(const ModeRun& m, uint64_t budget)
     j["p95_ms"] = percentile(ms, 0.95);
     j["max_ms"] = ms.empty() ? 0.0 : *std::max_element(ms.begin(), ms.end());
     j["frames_over_2x_median"] = over;
+    j["select_median_ms"] = percentile(select, 0.5);
+    j["select_p95_ms"] = percentile(select, 0.95);
+    j["select_max_ms"] = select.empty() ? 0.0 : *std::max_element(select.begin(), select.end());
     j["first_complete_frame_s"] = m.first_complete_s;
     j["incomplete_frames"] = incomplete;
     j["load_s"] = m.load_s;
@@ -330,14 +339,15 @@ json summary_of(const ModeRun& m, uint64_t budget)
 std::string csv_of(const ModeRun& m)
 {
     std::ostringstream out;
-    out << "frame,ms,front_nodes,lods,chains,vertices,segments,resident_bytes,misses,bytes_read,complete\n";
+    out << "frame,ms,front_nodes,lods,chains,vertices,segments,resident_bytes,misses,bytes_read,complete,select_ms\n";
     for (size_t f = 0; f < m.rows.size(); ++f) {
         const auto& r = m.rows[f];
-        char ms[32];
+        char ms[32], select[32];
         std::snprintf(ms, sizeof ms, "%.3f", r.ms);
+        std::snprintf(select, sizeof select, "%.3f", r.select_ms);
         out << f << "," << ms << "," << r.front_nodes << "," << r.lods << "," << r.chains << "," << r.vertices << ","
             << r.segments << "," << r.resident_bytes << "," << r.misses << "," << r.bytes_read << ","
-            << (r.complete ? 1 : 0) << "\n";
+            << (r.complete ? 1 : 0) << "," << select << "\n";
     }
     return out.str();
 }
@@ -399,8 +409,10 @@ std::string RenderStage::help_notes() const
            "  OUTPUT/frames-<mode>.csv   per frame: frame, ms, front_nodes, lods (LOD:count), chains, vertices,\n"
            "                             segments (drawn in view), resident_bytes (skeleton included), misses\n"
            "                             (front payloads and tables not resident when the view was set),\n"
-           "                             bytes_read, complete (the whole front at its own LODs)\n"
+           "                             bytes_read, complete (the whole front at its own LODs), select_ms (choosing\n"
+           "                             the front, and out of core what to load ahead, within ms)\n"
            "  OUTPUT/summary.json        per mode: median, p95 and max frame time, frames over 2x the median,\n"
+           "                             the median, p95 and max time choosing the front (select_*_ms),\n"
            "                             time to the first complete frame, peak bytes against the budget,\n"
            "                             misses, bytes read, chains drawn twice (none)\n"
            "  OUTPUT/overview.png, OUTPUT/zoom.png  the whole tree, and the path's closest view\n"

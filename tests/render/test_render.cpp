@@ -156,10 +156,12 @@ void expect_budget_and_once(const fs::path& out, uint64_t budget)
         EXPECT_EQ(m["budget_bytes"], budget) << mode;
         EXPECT_TRUE(m["within_budget"].get<bool>()) << mode << ": peak " << m["peak_bytes"];
         EXPECT_LE(m["peak_bytes"].get<uint64_t>(), budget) << mode;
+        EXPECT_LE(m["select_p95_ms"].get<double>(), m["select_max_ms"].get<double>()) << mode;
         std::istringstream csv(slurp(out / ("frames-" + mode + ".csv")));
         std::string line;
         std::getline(csv, line);
-        EXPECT_EQ(line, "frame,ms,front_nodes,lods,chains,vertices,segments,resident_bytes,misses,bytes_read,complete");
+        EXPECT_EQ(line, "frame,ms,front_nodes,lods,chains,vertices,segments,resident_bytes,misses,bytes_read,complete,"
+                        "select_ms");
         size_t rows = 0;
         for (; std::getline(csv, line); ++rows) {
             std::vector<std::string> f;
@@ -167,8 +169,10 @@ void expect_budget_and_once(const fs::path& out, uint64_t budget)
             for (std::string c; std::getline(cells, c, ',');) {
                 f.push_back(c);
             }
-            ASSERT_EQ(f.size(), 11U) << line;
+            ASSERT_EQ(f.size(), 12U) << line;
             EXPECT_LE(std::stoull(f[7]), budget) << mode << " frame " << f[0];
+            // Choosing the front is part of the frame's time.
+            EXPECT_LE(std::stod(f[11]), std::stod(f[1])) << mode << " frame " << f[0];
         }
         EXPECT_EQ(rows, m["frames"].get<size_t>()) << mode;
     }
