@@ -7,11 +7,11 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <stdexcept>
+#include <string>
 
 #if defined(__x86_64__)
 #include <immintrin.h>
-#include <stdexcept>
-#include <string>
 #endif
 
 namespace tigerlod::simplify {
@@ -236,14 +236,16 @@ uint64_t Candidates::count() const noexcept
 
 void Candidates::finish(uint32_t n)
 {
-    if (const uint64_t total = count(); total > max_ids) {
-        throw std::length_error("a chain of " + std::to_string(n) + " vertices has " + std::to_string(total) +
-                                " proximate shortcuts, more than a 32-bit id can number");
-    }
     m_runs.shrink_to_fit();
     m_base.assign(m_runs.size() + 1, 0);
+    uint64_t total = 0;
     for (size_t r = 0; r < m_runs.size(); ++r) {
-        m_base[r + 1] = m_base[r] + (m_runs[r].hi - m_runs[r].lo + 1);
+        total += m_runs[r].hi - m_runs[r].lo + 1;
+        if (total > max_ids) {
+            throw std::length_error("a chain of " + std::to_string(n) + " vertices has " + std::to_string(count()) +
+                                    " proximate shortcuts, more than a 32-bit id can number");
+        }
+        m_base[r + 1] = static_cast<uint32_t>(total);
     }
     m_run_first.clear();
     if (m_runs.empty()) {

@@ -3,6 +3,7 @@
 #include "core/parallel.hpp"
 #include "core/projection.hpp"
 #include "core/segment_grid.hpp"
+#include "core/timing.hpp"
 #include "simplification/candidates.hpp"
 #include "simplification/cell_cover.hpp"
 #include "simplification/fewest_edges.hpp"
@@ -62,10 +63,6 @@ void ToleranceStats::add(const ToleranceStats& o)
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t0)
-{
-    return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 /// The mean length of the store's segments, in grid units (0 if none).
 double mean_segment_length(const ChainStore& store)
@@ -294,13 +291,13 @@ class StoreSimplifier {
             auto colour = [this] {
                 const auto c0 = Clock::now();
                 auto result = color_chains(m_store, m_eps, *m_keep, m_opt);
-                return std::pair{std::move(result), since(c0)};
+                return std::pair{std::move(result), seconds_since(c0)};
             };
             m_colouring = std::async(m_opt.threads > 1 ? std::launch::async : std::launch::deferred, colour);
         }
         // Without the raster the segments in reach serve the region rule and
         // the exact check alone: their time is counted there.
-        (m_raster ? m_st.seconds_color : m_st.seconds_exact) += since(t0);
+        (m_raster ? m_st.seconds_color : m_st.seconds_exact) += seconds_since(t0);
         m_pixel = m_colors ? m_colors->pixel : tile_pixel(m_eps, m_opt.color); // m_colors->pixel once known
         m_untested2 = untested_length2(m_pixel);
     }
@@ -367,7 +364,7 @@ class StoreSimplifier {
                 w.cand.finish(pieces[i].last);
             }
         }
-        m_st.seconds_candidates += since(t0);
+        m_st.seconds_candidates += seconds_since(t0);
     }
 
     /// A chain with more proximate shortcuts than max_chain_shortcuts
@@ -455,7 +452,7 @@ class StoreSimplifier {
             }
         }
         ban_second_chords();
-        m_st.seconds_constraints += since(t0);
+        m_st.seconds_constraints += seconds_since(t0);
     }
 
     /// The region rule's one blind spot: two chains between the same two
@@ -547,7 +544,7 @@ class StoreSimplifier {
             }
         });
         // Without the raster the grid is the region rule's index alone.
-        (m_raster ? m_st.seconds_far : m_st.seconds_exact) += since(t0);
+        (m_raster ? m_st.seconds_far : m_st.seconds_exact) += seconds_since(t0);
     }
 
     /// The part of segment ab that another chain's segment comes within r of
@@ -841,7 +838,7 @@ class StoreSimplifier {
                 keep_orientation(w, pts);
             }
         });
-        m_st.seconds_shortest_path += since(t0);
+        m_st.seconds_shortest_path += seconds_since(t0);
     }
 
     /// A ring keeps its orientation: ban the longest shortcut of its path until it holds.
@@ -961,7 +958,7 @@ class StoreSimplifier {
             }
             banned_any |= banned;
         }
-        m_st.seconds_exact += since(t0);
+        m_st.seconds_exact += seconds_since(t0);
         return banned_any;
     }
 
@@ -1005,7 +1002,7 @@ class StoreSimplifier {
                 redo.push_back(chains[k]);
             }
         }
-        m_st.seconds_exact += since(t0);
+        m_st.seconds_exact += seconds_since(t0);
         return redo;
     }
 
@@ -1197,7 +1194,7 @@ void simplify_ladder(const ChainStore& store, std::span<const double> tolerances
         eps[t] = scales.tolerances(tolerances_m[t]);
         cells[t] = grid_cell(eps[t], tile_pixel(eps[t], opt.color), opt, mean);
     }
-    double planning = since(t0);
+    double planning = seconds_since(t0);
     // Groups of tolerances whose cells are within max_cell_growth of the
     // group's first share one grid, with the largest cell of the group and
     // the segments in reach at its largest tolerance (which that tolerance
@@ -1235,7 +1232,7 @@ void simplify_ladder(const ChainStore& store, std::span<const double> tolerances
         }
         const bool halo_heavy = halo_kept > owned;
         // Counted where each tolerance alone counts its grid and halo cut.
-        (raster ? stats[first].seconds_far : stats[first].seconds_exact) += since(g0) + planning;
+        (raster ? stats[first].seconds_far : stats[first].seconds_exact) += seconds_since(g0) + planning;
         planning = 0;
         for (size_t t = first; t <= last; ++t) {
             // Without the raster the halo cut serves the exact check alone,

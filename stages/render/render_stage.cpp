@@ -6,6 +6,7 @@
 #include "config/schema.hpp"
 #include "core/errors.hpp"
 #include "core/fs.hpp"
+#include "core/timing.hpp"
 #include "stages/render/camera.hpp"
 #include "stages/render/line_renderer.hpp"
 
@@ -31,10 +32,6 @@ namespace tigerlod::render {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t0)
-{
-    return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 const std::vector<std::string> all_modes = {"incore", "ooc-noprefetch", "ooc-prefetch"};
 
@@ -209,7 +206,7 @@ struct Run {
             }
         }
         m.errors = m.error_messages.size();
-        m.load_s = since(t_start);
+        m.load_s = seconds_since(t_start);
         m.peak_bytes = bytes;
         const auto t_path = Clock::now();
         for (size_t f = 0; f < views.size(); ++f) {
@@ -220,7 +217,7 @@ struct Run {
             bool complete = true;
             const auto t_select = Clock::now();
             const auto items = reader::select_front(s, views[f], front_options);
-            row.select_ms = 1000 * since(t_select);
+            row.select_ms = 1000 * seconds_since(t_select);
             for (const auto& item : items) {
                 reader::Drawable d{item, item.lod,
                                    geometry[item.node].empty() ? nullptr : geometry[item.node][item.lod],
@@ -229,11 +226,11 @@ struct Run {
                 front.push_back(std::move(d));
             }
             draw(m, row, f, front);
-            row.ms = 1000 * since(t0);
+            row.ms = 1000 * seconds_since(t0);
             row.resident_bytes = bytes;
             row.complete = complete;
             if (complete && m.first_complete_s < 0) {
-                m.first_complete_s = since(t_start);
+                m.first_complete_s = seconds_since(t_start);
             }
             m.rows.push_back(std::move(row));
             maybe_png(m, f);
@@ -261,18 +258,18 @@ struct Run {
             const auto t0 = Clock::now();
             Row row;
             streamer.set_view(views[f]);
-            row.select_ms = 1000 * since(t0);
+            row.select_ms = 1000 * seconds_since(t0);
             row.misses = streamer.missing();
             row.complete = streamer.wait_front(std::chrono::seconds(60));
             const auto front = streamer.resident_front();
             draw(m, row, f, front);
-            row.ms = 1000 * since(t0);
+            row.ms = 1000 * seconds_since(t0);
             const reader::Stats st = streamer.stats();
             row.resident_bytes = skeleton + st.resident_bytes;
             row.bytes_read = st.bytes_read - last_read;
             last_read = st.bytes_read;
             if (row.complete && m.first_complete_s < 0) {
-                m.first_complete_s = since(t_start);
+                m.first_complete_s = seconds_since(t_start);
             }
             m.rows.push_back(std::move(row));
             maybe_png(m, f);

@@ -6,6 +6,7 @@
 #include "core/manifest.hpp"
 #include "core/memory.hpp"
 #include "core/parallel.hpp"
+#include "core/timing.hpp"
 #include "stages/synth/nation.hpp"
 #include "stages/synth/tiger_files.hpp"
 
@@ -144,7 +145,7 @@ std::string SynthStage::help_notes() const
 int SynthStage::run(const StageContext& ctx)
 {
     const auto t0 = std::chrono::steady_clock::now();
-    auto seconds = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
+    auto seconds = [&] { return seconds_since(t0); };
     GDALAllRegister();
     OutputDir out(m_output, m_overwrite); // an existing OUTPUT is refused before the plan's seconds
     log_removed_leftovers(ctx.log, out.removed_leftovers());
@@ -171,11 +172,11 @@ int SynthStage::run(const StageContext& ctx)
         auto& k = counts[c];
         const auto built = std::chrono::steady_clock::now();
         const auto parts = nation.county_parts(uint32_t(c));
-        k.geometry_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - built).count();
+        k.geometry_s = seconds_since(built);
         auto timed_write = [&](const fs::path& file, const std::string& bytes) {
             const auto started = std::chrono::steady_clock::now();
             write_file(file, bytes);
-            k.files_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+            k.files_s += seconds_since(started);
         };
         const auto& edges = parts.edges;
         for (const auto& e : edges) {

@@ -1,6 +1,7 @@
 #include "stages/synth/tiger_files.hpp"
 
 #include "core/errors.hpp"
+#include "core/timing.hpp"
 #include "stages/synth/zip_writer.hpp"
 
 #include <cpl_string.h>
@@ -103,8 +104,8 @@ class MemShapefile {
     {
         GDALClose(m_ds);
         m_ds = nullptr;
+        seconds.shapefile += seconds_since(start);
         const auto closed = Clock::now();
-        seconds.shapefile += std::chrono::duration<double>(closed - start).count();
         char** names = VSIReadDir(m_folder.c_str());
         std::vector<std::string> files;
         for (char** n = names; n && *n; ++n) {
@@ -119,7 +120,7 @@ class MemShapefile {
             zip.add(name, std::string_view(reinterpret_cast<const char*>(data), size_t(size)));
         }
         std::string bytes = zip.finish();
-        seconds.deflate += std::chrono::duration<double>(Clock::now() - closed).count();
+        seconds.deflate += seconds_since(closed);
         return bytes;
     }
 

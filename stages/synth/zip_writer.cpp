@@ -3,9 +3,9 @@
 #include <libdeflate.h>
 
 #include <limits>
-#include <vector>
-#include <string>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 namespace tigerlod::synth {
 
@@ -34,10 +34,6 @@ uint32_t checked(size_t n, const std::string& what)
     }
     return uint32_t(n);
 }
-
-} // namespace
-
-namespace {
 
 /// This thread's compressor at one level, kept from member to member (its
 /// tables are hundreds of KiB), and a buffer for its output.
