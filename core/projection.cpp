@@ -3,6 +3,7 @@
 #include "core/errors.hpp"
 
 #include <GeographicLib/AlbersEqualArea.hpp>
+#include <GeographicLib/Geodesic.hpp>
 #include <GeographicLib/LambertConformalConic.hpp>
 #include <GeographicLib/Math.hpp>
 #include <GeographicLib/TransverseMercator.hpp>
@@ -91,6 +92,7 @@ struct Projection::Impl {
     std::variant<GeographicLib::AlbersEqualArea, GeographicLib::LambertConformalConic,
                  GeographicLib::TransverseMercator>
         proj;
+    GeographicLib::Geodesic geodesic;
     double lon0 = 0, x0 = 0, y0 = 0; // subtracted after the forward projection
     bool transverse = false;
     // Snyder's formulas, where they agree with GeographicLib (albers, two
@@ -98,13 +100,33 @@ struct Projection::Impl {
     std::optional<SnyderAlbers> fast;
     double tie_guard = 0; // grid steps from a half-step tie where to_grid asks GeographicLib
     std::once_flag fast_checked;
+    // The conics' apex in GeographicLib's frame: on the central meridian
+    // (x = 0) at y = apex_y, where every meridian's straight image meets;
+    // none (a cylinder: n = 0) when the meridians are parallel.
+    bool has_apex = false;
+    double apex_y = 0;
+    double sign = 1; ///< -1 for a mirrored (southern) Albers: GeographicLib's latitude and y are negated
+
+    /// GeographicLib 2.1.2's AlbersEqualArea::Forward is wrong for a cone
+    /// opening south (sin(stdlat1) + sin(stdlat2) < 0: its latitude's sign
+    /// is reversed twice, so Reverse(Forward(lat)) gives -lat; upstream
+    /// issue 55, fixed after 2.1.2). Such a cone is projected as the mirror
+    /// image of its northern twin, which is exact: the ellipsoid and the
+    /// projection are symmetric in the equator (lat -> -lat, y -> -y).
+    static bool mirrored(const ProjectionParams& p)
+    {
+        return p.kind == ProjectionParams::Kind::albers &&
+               std::sin(p.stdlat1_deg * std::numbers::pi / 180) + std::sin(p.stdlat2_deg * std::numbers::pi / 180) < 0;
+    }
 
     static decltype(proj) make(const ProjectionParams& p)
     {
         using K = ProjectionParams::Kind;
         switch (p.kind) {
         case K::albers:
-            return GeographicLib::AlbersEqualArea(p.a_m, p.f, p.stdlat1_deg, p.stdlat2_deg, p.k0);
+            // A southern cone as the mirror of its northern twin (see `mirror`).
+            return mirrored(p) ? GeographicLib::AlbersEqualArea(p.a_m, p.f, -p.stdlat1_deg, -p.stdlat2_deg, p.k0)
+                               : GeographicLib::AlbersEqualArea(p.a_m, p.f, p.stdlat1_deg, p.stdlat2_deg, p.k0);
         case K::lcc:
             return GeographicLib::LambertConformalConic(p.a_m, p.f, p.stdlat1_deg, p.stdlat2_deg, p.k0);
         case K::tm:
@@ -115,7 +137,8 @@ struct Projection::Impl {
         throw config_error("unknown projection kind");
     }
 
-    explicit Impl(const ProjectionParams& params) : p(params), proj(make(params))
+    explicit Impl(const ProjectionParams& params)
+        : p(params), proj(make(params)), geodesic(params.a_m, params.f), sign(mirrored(params) ? -1.0 : 1.0)
     {
         using K = ProjectionParams::Kind;
         transverse = p.kind == K::tm || p.kind == K::utm;
@@ -131,7 +154,45 @@ struct Projection::Impl {
         raw_forward(lat0, lon0, x, y);
         x0 = x - p.false_easting_m;
         y0 = y - p.false_northing_m;
+        if (!transverse) {
+            // Two points of one meridian fix its line; it meets x = 0 at the apex.
+            double x1 = 0, y1 = 0, x2 = 0, y2 = 0;
+            raw_forward(-10.0, lon0 + 10.0, x1, y1);
+            raw_forward(50.0, lon0 + 10.0, x2, y2);
+            const double ay = y1 - x1 * (y2 - y1) / (x2 - x1);
+            if (std::isfinite(ay) && std::fabs(x2 - x1) > 1e-3 * std::fabs(y2 - y1)) {
+                has_apex = true;
+                apex_y = ay;
+            }
+        }
     }
+
+    /// Latitude at (x, y) of GeographicLib's frame.
+    double latitude(double x, double y) const
+    {
+        double lat = 0, lon = 0;
+        reverse(x, y, lat, lon);
+        return lat;
+    }
+
+    /// GeographicLib's Reverse, mirrored back where `sign` says.
+    void reverse(double x, double y, double& lat, double& lon) const
+    {
+        double gamma = 0, k = 0;
+        std::visit([&](const auto& pr) { pr.Reverse(lon0, x, sign * y, lat, lon, gamma, k); }, proj);
+        lat *= sign;
+    }
+
+    /// The point scale k at lon/lat.
+    double point_scale(double lat, double lon) const
+    {
+        double x = 0, y = 0, gamma = 0, k = 0;
+        std::visit([&](const auto& pr) { pr.Forward(lon0, sign * lat, lon, x, y, gamma, k); }, proj);
+        return k;
+    }
+
+    /// The conics' latitude of least scale.
+    template <class T> double origin_latitude(const T& pr) const { return sign * pr.OriginLatitude(); }
 
     /// Use Snyder's formulas if they agree with GeographicLib within 1 um
     /// over the globe; to_grid then asks GeographicLib within 10 um of a tie.
@@ -147,7 +208,7 @@ struct Projection::Impl {
 
     void check_fast(const GeographicLib::AlbersEqualArea& albers)
     {
-        const SnyderAlbers s(p.a_m, p.f, p.stdlat1_deg, p.stdlat2_deg, albers.OriginLatitude());
+        const SnyderAlbers s(p.a_m, p.f, p.stdlat1_deg, p.stdlat2_deg, origin_latitude(albers));
         if (!(std::isfinite(s.n) && std::isfinite(s.rho0) && s.n > 0)) { // northern cones only
             return;
         }
@@ -169,7 +230,8 @@ struct Projection::Impl {
     void raw_forward(double lat, double lon, double& x, double& y) const
     {
         double gamma = 0, k = 0;
-        std::visit([&](const auto& pr) { pr.Forward(lon0, lat, lon, x, y, gamma, k); }, proj);
+        std::visit([&](const auto& pr) { pr.Forward(lon0, sign * lat, lon, x, y, gamma, k); }, proj);
+        y *= sign;
     }
 };
 
@@ -255,15 +317,65 @@ void Projection::to_lonlat(double gx, double gy, double& lon_deg, double& lat_de
 {
     const double x = gx * m_impl->p.grid_m + m_impl->x0;
     const double y = gy * m_impl->p.grid_m + m_impl->y0;
-    double gamma = 0, k = 0;
-    std::visit([&](const auto& pr) { pr.Reverse(m_impl->lon0, x, y, lat_deg, lon_deg, gamma, k); }, m_impl->proj);
+    m_impl->reverse(x, y, lat_deg, lon_deg);
 }
 
 double Projection::scale(double lon_deg, double lat_deg) const noexcept
 {
-    double x = 0, y = 0, gamma = 0, k = 0;
-    std::visit([&](const auto& pr) { pr.Forward(m_impl->lon0, lat_deg, lon_deg, x, y, gamma, k); }, m_impl->proj);
-    return k;
+    return m_impl->point_scale(lat_deg, lon_deg);
+}
+
+double Projection::smallest_scale(const GridBox& box) const noexcept
+{
+    if (box.empty()) {
+        return 0.0;
+    }
+    const Impl& m = *m_impl;
+    double s = 0.0;
+    std::visit(
+        [&](const auto& pr) {
+            using T = std::decay_t<decltype(pr)>;
+            if constexpr (std::is_same_v<T, GeographicLib::TransverseMercator>) {
+                s = pr.CentralScale();
+            } else {
+                const double g = m.p.grid_m;
+                const double xa = double(box.min_x) * g + m.x0, xb = double(box.max_x) * g + m.x0;
+                const double ya = double(box.min_y) * g + m.y0, yb = double(box.max_y) * g + m.y0;
+                double lo = 90, hi = -90;
+                auto take = [&](double lat) {
+                    lo = std::min(lo, lat);
+                    hi = std::max(hi, lat);
+                };
+                for (const double x : {xa, xb}) {
+                    for (const double y : {ya, yb}) {
+                        take(m.latitude(x, y)); // the farthest point from the apex is a corner
+                    }
+                }
+                if (m.has_apex) {
+                    const double px = std::clamp(0.0, xa, xb), py = std::clamp(m.apex_y, ya, yb);
+                    if (px == 0.0 && py == m.apex_y) {
+                        take(m.apex_y > 0 ? 90.0 : -90.0); // the box holds the apex: the pole is in reach
+                    } else {
+                        take(m.latitude(px, py));
+                    }
+                }
+                const double k_lo = scale(m.lon0, lo), k_hi = scale(m.lon0, hi);
+                const double origin = m.origin_latitude(pr);
+                const double k_min = origin >= lo && origin <= hi ? pr.CentralScale() : std::min(k_lo, k_hi);
+                const double k_max = std::max(k_lo, k_hi);
+                s = std::is_same_v<T, GeographicLib::AlbersEqualArea> ? std::min(k_min, 1.0 / k_max) : k_min;
+            }
+        },
+        m.proj);
+    s *= 1 - 1e-9;
+    return std::isfinite(s) && s > 0 ? s : 0.0;
+}
+
+double Projection::geodesic_m(double lon1_deg, double lat1_deg, double lon2_deg, double lat2_deg) const noexcept
+{
+    double s12 = 0;
+    m_impl->geodesic.Inverse(lat1_deg, lon1_deg, lat2_deg, lon2_deg, s12);
+    return s12;
 }
 
 double Projection::lattice_separation_m(double step_deg, double lat_lo_deg, double lat_hi_deg) const noexcept
@@ -293,7 +405,7 @@ double Projection::lattice_separation_m(double step_deg, double lat_lo_deg, doub
                 k_min = h_min = pr.CentralScale();
             } else {
                 const double k_lo = scale(m_impl->lon0, lo), k_hi = scale(m_impl->lon0, hi);
-                const double origin = pr.OriginLatitude();
+                const double origin = m_impl->origin_latitude(pr);
                 k_min = origin > lo && origin < hi ? pr.CentralScale() : std::min(k_lo, k_hi);
                 h_min = std::is_same_v<T, GeographicLib::AlbersEqualArea> ? 1 / std::max(k_lo, k_hi) : k_min;
             }

@@ -76,6 +76,28 @@ class Projection {
     /// along the parallel for the conics).
     double scale(double lon_deg, double lat_deg) const noexcept;
 
+    /// A lower bound s > 0 on the projection's scale over the grid box `box`
+    /// in every direction: any curve inside the box is at most its
+    /// projected length / s long on the ellipsoid, so a point within planar
+    /// distance d of a segment, both in the box, is within d / s ground
+    /// metres of the segment's image (the planar segment joining them lies
+    /// in the box). Transverse Mercator: k0, its scale on the central
+    /// meridian and its least anywhere. The conics: their scale depends on
+    /// latitude alone, least on the latitude of origin and growing toward
+    /// either pole (checked over every latitude in the tests), and
+    /// latitude is monotone in the distance from the cone's apex, so its
+    /// range over the box is set by the corners and the box's point nearest
+    /// the apex; LCC is conformal (s = k), Albers scales a meridian by 1/k
+    /// and a parallel by k, every other direction between them (s =
+    /// min(k, 1/k)). With a relative margin of 1e-9 for rounding. 0 when the
+    /// box is empty or reaches a pole where the scale has no positive bound.
+    double smallest_scale(const GridBox& box) const noexcept;
+
+    /// The geodesic distance in metres between two lon/lat points (degrees)
+    /// on the projection's ellipsoid (GeographicLib's Geodesic, Karney 2013:
+    /// accurate to nanometres).
+    double geodesic_m(double lon1_deg, double lat1_deg, double lon2_deg, double lat2_deg) const noexcept;
+
     /// A lower bound on the projected distance, in metres, between any two
     /// distinct points of a lon/lat lattice of step `step_deg` that lie in the
     /// band of latitudes [lat_lo_deg, lat_hi_deg]: the smaller of the lattice's

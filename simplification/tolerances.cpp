@@ -47,7 +47,6 @@ ChainScales::ChainScales(const ChainStore& store, const SimplifyOptions& opt)
     : m_grid_m(store.projection.grid_m), m_class(store.chains.size(), 1.0), m_projection(store.chains.size(), 1.0)
 {
     const Projection proj(store.projection);
-    const bool conformal = store.projection.kind != ProjectionParams::Kind::albers;
     for (size_t i = 0; i < store.chains.size(); ++i) {
         const auto& c = store.chains[i];
         if (!opt.class_scale.empty()) {
@@ -61,13 +60,12 @@ ChainScales::ChainScales(const ChainStore& store, const SimplifyOptions& opt)
             for (const GridPoint p : store.chain_points(c)) {
                 box.extend(p);
             }
-            double lon = 0, lat = 0;
-            proj.to_lonlat(0.5 * double(box.min_x + box.max_x), 0.5 * double(box.min_y + box.max_y), lon, lat);
-            const double k = proj.scale(lon, lat);
-            // Ground length = projected / k (conformal); for the equal-area
-            // Albers it is between projected * k and projected / k: take the
-            // smaller eps so no direction exceeds eps_m on the ground.
-            m_projection[i] = conformal ? k : std::min(k, 1.0 / k);
+            // The least scale over the chain's box in any direction: every
+            // skipped vertex, the point of its shortcut nearest to it and the
+            // planar segment between them lie in the box, so a planar
+            // distance within eps_m * s is within eps_m on the ellipsoid
+            // (the README's guarantee; Projection::smallest_scale).
+            m_projection[i] = proj.smallest_scale(box);
         }
     }
 }

@@ -242,6 +242,8 @@ struct NodeResult {
     datatree::Geometry geometry;
     bool ok = false;
     uint64_t points = 0;
+    double ground_ratio = 0; ///< LevelLod::ground_ratio_max of the node
+    uint64_t ground_geodesics = 0;
 };
 
 /// Which unit of a node's map contains each user point (found on the original map).
@@ -287,6 +289,7 @@ class Verifier {
         }
         m_report.nodes = m_sk.nodes.size();
         m_report.lods = m_sk.lod_eps_m.size();
+        m_report.ground = m_options.ground;
         for (uint32_t l = 0; l < m_sk.level_names.size(); ++l) {
             verify_level(l);
         }
@@ -539,6 +542,8 @@ class Verifier {
             m_report.chains += ll.chains;
             m_report.segments += ll.segments;
             m_report.points += ll.points;
+            m_report.ground_ratio_max = std::max(m_report.ground_ratio_max, ll.ground_ratio_max);
+            m_report.ground_geodesics += ll.ground_geodesics;
             m_report.by_level_lod.push_back(std::move(ll));
         }
         check_across_lods(level, lods, rule, input_meetings);
@@ -679,6 +684,8 @@ class Verifier {
             auto& r = *by_node[n];
             ++ll.nodes;
             ll.points += r.points;
+            ll.ground_ratio_max = std::max(ll.ground_ratio_max, r.ground_ratio);
+            ll.ground_geodesics += r.ground_geodesics;
             for (auto& v : r.violations) {
                 v.level = level;
                 v.lod = k;
@@ -945,7 +952,7 @@ class Verifier {
     /// check 2 (every skipped vertex within eps, exactly, and the reverse
     /// direction), check 4 (a ring keeps 3 vertices and its orientation).
     /// `worst` gets the largest L2 deviation, grid units.
-    void check_chain(const NodeResult& r, size_t c, uint32_t n, uint32_t k,
+    void check_chain(NodeResult& r, size_t c, uint32_t n, uint32_t k,
                      const std::unordered_map<uint64_t, Original>& owned,
                      const std::map<const chains::ChainStore*, std::vector<double>>& eps, const Emit& violation,
                      double& worst) const
@@ -998,6 +1005,9 @@ class Verifier {
                 }
             }
         }
+        if (!exceeded && k > 0 && m_options.ground) {
+            check_ground(r, e.id, *o.store, *o.info, orig, pts, at, k, violation);
+        }
         // Check 4: rings keep 3 vertices and their orientation.
         if (e.flags & chains::chain_closed) {
             std::set<GridPoint> distinct(pts.begin(), pts.end());
@@ -1008,6 +1018,116 @@ class Verifier {
                 violation("ring_orientation", {e.id}, pts.front(), "orientation differs from the original's");
             }
         }
+    }
+
+    /// Check 2 on the ellipsoid, independent of simplify's model: every
+    /// skipped vertex within its ground eps (eps_m times its class's scale;
+    /// times sqrt(2) for Linf, whose unit ball reaches that far) of the
+    /// image on the ellipsoid of the segment that replaced it. Fast path,
+    /// proven: a planar distance d within the segment's box (the segment and
+    /// the vertices it skips) is at most d / s ground metres, s the least
+    /// scale over that box (Projection::smallest_scale). Where that bound
+    /// is within 1e-6 of eps, or over it, the geodesic distance itself
+    /// (ground_distance_m). One violation per chain.
+    void check_ground(NodeResult& r, uint64_t id, const chains::ChainStore& store, const chains::ChainInfo& info,
+                      std::span<const GridPoint> orig, std::span<const GridPoint> pts, const std::vector<size_t>& at,
+                      uint32_t k, const Emit& violation) const
+    {
+        double eps_m = m_sk.lod_eps_m[k];
+        if (!m_opt.class_scale.empty()) {
+            const auto it = m_opt.class_scale.find(store.strings[info.feature_class]);
+            eps_m *= it == m_opt.class_scale.end() ? 1.0 : it->second;
+        }
+        if (m_metric == Metric::linf) {
+            eps_m *= std::sqrt(2.0);
+        }
+        for (size_t i = 0; i + 1 < pts.size(); ++i) {
+            if (at[i + 1] <= at[i] + 1) {
+                continue; // an original edge: nothing skipped
+            }
+            GridBox box;
+            box.extend(pts[i]);
+            box.extend(pts[i + 1]);
+            for (size_t m = at[i] + 1; m < at[i + 1]; ++m) {
+                box.extend(orig[m]);
+            }
+            const double reach = m_proj.smallest_scale(box) * eps_m / m_sk.grid_m(); // grid units
+            for (size_t m = at[i] + 1; m < at[i + 1]; ++m) {
+                const double d = point_segment_distance(orig[m], pts[i], pts[i + 1]);
+                double ratio = d == 0 ? 0.0 : reach > 0 ? d / reach : INFINITY;
+                if (ratio > 1 - 1e-6) {
+                    ratio = ground_distance_m(orig[m], pts[i], pts[i + 1]) / eps_m;
+                    ++r.ground_geodesics;
+                }
+                r.ground_ratio = std::max(r.ground_ratio, ratio);
+                if (ratio > 1) {
+                    char detail[256];
+                    std::snprintf(detail, sizeof detail,
+                                  "on the ground: original vertex %zu is %.3f m from its shortcut on the ellipsoid, "
+                                  "%.6f times its eps of %.3f m",
+                                  m, ratio * eps_m, ratio, eps_m);
+                    violation("eps_exceeded", {id}, orig[m], detail);
+                    return;
+                }
+            }
+        }
+    }
+
+    /// The geodesic distance in metres from grid point v to the image on
+    /// the ellipsoid of the grid segment ab: the least geodesic distance
+    /// from v to a + t (b - a), t in [0, 1], found by sampling t at 64 steps
+    /// and the planar foot, then golden-section search around the best. The
+    /// function is unimodal wherever the projection is nearly affine over
+    /// the segment (the ground image of a short planar segment is nearly
+    /// straight); every value is a distance that is reached, so the result
+    /// never falls below the true least distance by more than the
+    /// search's resolution (about 1e-12 of the segment).
+    double ground_distance_m(GridPoint v, GridPoint a, GridPoint b) const
+    {
+        double vlon = 0, vlat = 0;
+        m_proj.to_lonlat(v.x, v.y, vlon, vlat);
+        const double dx = double(b.x) - a.x, dy = double(b.y) - a.y;
+        auto g = [&](double t) {
+            double lon = 0, lat = 0;
+            m_proj.to_lonlat(a.x + t * dx, a.y + t * dy, lon, lat);
+            return m_proj.geodesic_m(vlon, vlat, lon, lat);
+        };
+        constexpr int steps = 64;
+        double best = INFINITY, best_t = 0;
+        auto take = [&](double t) {
+            const double d = g(t);
+            if (d < best) {
+                best = d;
+                best_t = t;
+            }
+        };
+        for (int j = 0; j <= steps; ++j) {
+            take(double(j) / steps);
+        }
+        const double len2 = dx * dx + dy * dy;
+        if (len2 > 0) {
+            take(std::clamp(((double(v.x) - a.x) * dx + (double(v.y) - a.y) * dy) / len2, 0.0, 1.0));
+        }
+        double lo = std::max(0.0, best_t - 1.0 / steps), hi = std::min(1.0, best_t + 1.0 / steps);
+        constexpr double phi = 0.6180339887498949;
+        double t1 = hi - phi * (hi - lo), t2 = lo + phi * (hi - lo);
+        double g1 = g(t1), g2 = g(t2);
+        for (int it = 0; it < 60 && hi - lo > 1e-13; ++it) {
+            if (g1 < g2) {
+                hi = t2;
+                t2 = t1;
+                g2 = g1;
+                t1 = hi - phi * (hi - lo);
+                g1 = g(t1);
+            } else {
+                lo = t1;
+                t1 = t2;
+                g1 = g2;
+                t2 = lo + phi * (hi - lo);
+                g2 = g(t2);
+            }
+        }
+        return std::min({best, g1, g2});
     }
 
     /// Checks 5 and 6: every unit's boundary closes, with its original area sign.
@@ -1167,6 +1287,9 @@ Report merge_reports(std::vector<Report>&& shares, const std::vector<std::string
         out.input_problems += r.input_problems;
         out.items_dropped += r.items_dropped;
         out.seconds += r.seconds;
+        out.ground = r.ground;
+        out.ground_ratio_max = std::max(out.ground_ratio_max, r.ground_ratio_max);
+        out.ground_geodesics += r.ground_geodesics;
         for (const auto& [k, v] : r.violations) {
             out.violations[k] += v;
         }
@@ -1181,6 +1304,8 @@ Report merge_reports(std::vector<Report>&& shares, const std::vector<std::string
                 m.vertices += ll.vertices;
                 m.points += ll.points;
                 m.input_problems += ll.input_problems;
+                m.ground_ratio_max = std::max(m.ground_ratio_max, ll.ground_ratio_max);
+                m.ground_geodesics += ll.ground_geodesics;
                 for (const auto& [k, v] : ll.violations) {
                     m.violations[k] += v;
                 }

@@ -49,6 +49,12 @@ struct LevelLod {
     uint32_t lod = 0;
     double eps_m = 0;
     uint64_t nodes = 0, chains = 0, segments = 0, vertices = 0, points = 0;
+    /// On the ellipsoid (Options::ground): the largest ratio of a skipped
+    /// vertex's ground distance from its shortcut to its eps (an upper
+    /// bound, the geodesic itself wherever the bound came within 1e-6 of
+    /// 1), and how many vertices were measured by geodesics.
+    double ground_ratio_max = 0;
+    uint64_t ground_geodesics = 0;
     std::map<std::string, uint64_t> violations; ///< by kind, every kind present
     uint64_t input_problems = 0;                ///< meetings already in the original map
 };
@@ -59,6 +65,12 @@ struct Options {
     /// not checked). The metric and the ladder are the skeleton's.
     simplify::SimplifyOptions tolerance;
     std::vector<simplify::LonLat> user_points;
+    /// Check every skipped vertex on the ellipsoid too, whatever simplify's
+    /// model: its geodesic distance from the image of its shortcut within
+    /// its eps in ground metres (the class scale's, times sqrt(2) for Linf).
+    /// tigerlod-verify sets it where the contract's eps are ground metres
+    /// (tolerance.projection_scale).
+    bool ground = true;
     unsigned threads = 1;
     size_t max_items = 10000; ///< violations listed one by one at most; all are counted
     /// The meeting checks (crossings within a LOD, and across LODs) look at
@@ -74,6 +86,9 @@ struct Report {
     /// crossings ingest reports and flags): listed as items of kind
     /// "input_problem", not counted as violations.
     uint64_t input_problems = 0;
+    bool ground = false;         ///< checked on the ellipsoid (Options::ground)
+    double ground_ratio_max = 0; ///< the largest of by_level_lod's
+    uint64_t ground_geodesics = 0;
     std::vector<LevelLod> by_level_lod;
     std::vector<Violation> items;
     uint64_t items_dropped = 0;

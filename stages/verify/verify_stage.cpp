@@ -216,6 +216,7 @@ json report_json(const Report& r, const Options& options, const std::string& tre
     }
     report["violations"] = counts;
     report["input_problems"] = r.input_problems;
+    report["ground"] = {{"checked", r.ground}, {"ratio_max", r.ground_ratio_max}, {"geodesics", r.ground_geodesics}};
     json by = json::array();
     for (const auto& ll : r.by_level_lod) {
         json v = json::object();
@@ -231,7 +232,9 @@ json report_json(const Report& r, const Options& options, const std::string& tre
                       {"vertices", ll.vertices},
                       {"points", ll.points},
                       {"violations", v},
-                      {"input_problems", ll.input_problems}});
+                      {"input_problems", ll.input_problems},
+                      {"ground_ratio_max", ll.ground_ratio_max},
+                      {"ground_geodesics", ll.ground_geodesics}});
     }
     report["by_level_lod"] = by;
     json items = json::array();
@@ -321,6 +324,13 @@ void print_summary(const Report& r, const std::string& tree, const std::string& 
                 static_cast<unsigned long long>(r.nodes), static_cast<unsigned long long>(r.lods),
                 static_cast<unsigned long long>(r.chains), static_cast<unsigned long long>(r.segments),
                 static_cast<unsigned long long>(r.points), r.seconds);
+    if (r.ground) {
+        std::printf("  on the ellipsoid: skipped vertices at most %.6f of their eps from their shortcuts "
+                    "(%llu measured by geodesics)\n",
+                    r.ground_ratio_max, static_cast<unsigned long long>(r.ground_geodesics));
+    } else {
+        std::printf("  on the ellipsoid: not checked (the tree's eps are projected metres: projection_scale off)\n");
+    }
     if (r.total() == 0) {
         std::printf("  CLEAN: no violations\n");
     } else {
@@ -376,6 +386,9 @@ Report report_from_json(const json& j)
         r.violations[k] = v.get<uint64_t>();
     }
     r.input_problems = j.at("input_problems");
+    r.ground = j.at("ground").at("checked");
+    r.ground_ratio_max = j.at("ground").at("ratio_max");
+    r.ground_geodesics = j.at("ground").at("geodesics");
     for (const auto& b : j.at("by_level_lod")) {
         LevelLod ll;
         ll.level = b.at("level");
@@ -390,6 +403,8 @@ Report report_from_json(const json& j)
             ll.violations[k] = v.get<uint64_t>();
         }
         ll.input_problems = b.at("input_problems");
+        ll.ground_ratio_max = b.at("ground_ratio_max");
+        ll.ground_geodesics = b.at("ground_geodesics");
         r.by_level_lod.push_back(std::move(ll));
     }
     for (const auto& it : j.at("items")) {
@@ -559,6 +574,7 @@ int VerifyStage::run_partitions(const StageContext& ctx)
     options.tolerance =
         simplify::tolerance_contract(packed.doc.at("simplify"), (fs::path(m_tree) / "manifest.json").string());
     options.user_points = options.tolerance.user_points;
+    options.ground = options.tolerance.projection_scale;
     const Report r = verify_tree(*tree, m_original, options, &selection);
     json share = report_json(r, options, m_tree, m_original);
     share["schema"] = "tigerlod.verify-share/1";
@@ -611,6 +627,7 @@ int VerifyStage::run(const StageContext& ctx)
     options.tolerance =
         simplify::tolerance_contract(packed.doc.at("simplify"), (fs::path(m_tree) / "manifest.json").string());
     options.user_points = options.tolerance.user_points;
+    options.ground = options.tolerance.projection_scale;
     Report r;
     if (!tree) {
         // An unreadable skeleton is the tree's failure: one violation, nothing else can be checked.
