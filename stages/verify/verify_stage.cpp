@@ -8,6 +8,7 @@
 #include "core/partitions.hpp"
 #include "simplification/stage_options.hpp"
 #include "stages/pack/packer.hpp"
+#include "stages/verify/cgal_check.hpp"
 #include "stages/verify/verifier.hpp"
 
 #include <GeographicLib/Config.h>
@@ -37,6 +38,9 @@ void VerifyStage::add_args(ArgSet& args)
     args.add("compare", &m_compare, "an earlier verify-report.json: report new and fixed violations and vertex counts",
              "FILE");
     config::add_option(args, "verify.max_items", &m_max_items);
+    args.add("cgal", &m_cgal,
+             "check the meetings again with a second exact checker on CGAL (its exact kernel and box-intersection "
+             "sweep, no code shared with verify's) and fail if the two disagree (whole runs and --finish)");
     args.group("Run");
     config::add_option(args, "verify.threads", &m_threads);
     args.add("overwrite", &m_overwrite, "replace OUTPUT if it exists");
@@ -68,6 +72,10 @@ void VerifyStage::initialize()
     }
     if (!m_partitions.empty() && !m_compare.empty()) {
         throw usage_error("verify: option '--compare' goes with a whole run or '--finish', not '--partitions'");
+    }
+    if (m_cgal && !m_partitions.empty()) {
+        throw usage_error("verify: option '--cgal' checks the whole tree: with a whole run or '--finish', not "
+                          "'--partitions'");
     }
     if (m_finish != !m_shares.empty()) {
         throw usage_error("verify: options '--finish' and '--shares LIST' go together");
@@ -639,8 +647,22 @@ int VerifyStage::run(const StageContext& ctx)
         r = verify_tree(*tree, m_original, options);
     }
     ctx.log.info("verify: checked");
+    std::optional<CgalCheck> cgal;
+    if (m_cgal && tree) {
+        cgal = cgal_check(*tree, r);
+        ctx.log.info("verify: CGAL check done");
+    }
 
     json report = report_json(r, options, m_tree, m_original);
+    if (cgal) {
+        report["cgal"] = {{"segments", cgal->segments},
+                          {"within_pairs", cgal->within_pairs},
+                          {"across_pairs", cgal->across_pairs},
+                          {"input_pairs", cgal->input_pairs},
+                          {"agrees", cgal->disagreements.empty()},
+                          {"disagreements", cgal->disagreements},
+                          {"seconds", cgal->seconds}};
+    }
     const std::string compare_text = m_compare.empty() ? std::string() : compare_reports(report, old, m_compare);
     write_file_atomic(out.path() / "verify-report.json", report.dump(2) + "\n");
     write_gpkg(out.path() / "violations.gpkg", r);
@@ -651,6 +673,20 @@ int VerifyStage::run(const StageContext& ctx)
     write_file_atomic(out.path() / "manifest.json", manifest_text(manifest));
     out.commit();
     print_summary(r, m_tree, m_original, m_output, compare_text);
+    if (cgal) {
+        if (cgal->disagreements.empty()) {
+            std::printf("  CGAL check: agrees (%llu segments, %llu meetings within LODs, %llu across, %.2f s)\n",
+                        static_cast<unsigned long long>(cgal->segments),
+                        static_cast<unsigned long long>(cgal->within_pairs),
+                        static_cast<unsigned long long>(cgal->across_pairs), cgal->seconds);
+        } else {
+            std::printf("  CGAL check: DISAGREES with verify's predicates:\n");
+            for (const auto& d : cgal->disagreements) {
+                std::printf("    %s\n", d.c_str());
+            }
+            return exit_data;
+        }
+    }
     return r.total() == 0 ? exit_ok : exit_data;
 }
 

@@ -30,6 +30,7 @@ class VerifyStage final : public Stage {
     std::string m_tree, m_original, m_output, m_compare;
     std::string m_partitions, m_plan, m_report, m_shares;
     bool m_finish = false;
+    bool m_cgal = false;
     bool m_overwrite = false;
     int m_threads = 0;
     int m_max_items = 10000;

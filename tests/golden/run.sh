@@ -10,7 +10,8 @@
 #                  error and payload checksum per LOD, the tile names (so a
 #                  change of any byte of the tree shows)
 #   vertices.txt   vertices per level and LOD, summed from the skeleton
-#   verify.txt     verify's verdict and its violations by kind
+#   verify.txt     verify's verdict and its violations by kind (verify runs
+#                  with --cgal: the CGAL checker must agree, or the case fails)
 #   stores/*.txt   tigerlod-dump of the stores listed in the case's `stores`,
 #                  original and at each tolerance
 #
@@ -63,7 +64,7 @@ PY
     run "$bin/tigerlod-color" --tolerances "$ladder" "$w/in" "$w/colors" &&
     run "$bin/tigerlod-simplify" --tolerances "$ladder" --colors "$w/colors" "$w/in" "$w/simp" &&
     run "$bin/tigerlod-pack" "$w/in" "$w/simp" "$w/tree" &&
-    run "$bin/tigerlod-verify" "$w/tree" "$w/in" "$w/verify" &&
+    run "$bin/tigerlod-verify" --cgal "$w/tree" "$w/in" "$w/verify" &&
     run "$bin/tigerlod-dump" "$w/tree" || {
     failed=1
     continue
@@ -88,6 +89,9 @@ with open(f"{a}/verify.txt", "w") as f:
     f.write(f"clean {str(ver['clean']).lower()}\n")
     for kind, n in ver["violations"].items():
         f.write(f"{kind} {n}\n")
+    g = ver["ground"]
+    f.write(f"ground checked {str(g['checked']).lower()}, within eps {str(g['ratio_max'] <= 1).lower()}\n")
+    f.write(f"cgal agrees {str(ver['cgal']['agrees']).lower()}\n")
 levels, lods, sums, node_level = [], [], {}, None
 for line in open(f"{a}/tree.txt"):
     if line.startswith("levels "):

@@ -371,8 +371,12 @@ TEST_F(PackReal, DumpAndExport)
 TEST_F(PackReal, VerifyIsCleanOnRealDataAndCatchesDamage)
 {
     const std::string d = dir.string();
-    ASSERT_EQ(run("verify", d + "/tree " + d + "/ingest " + d + "/v1", dir / "out"), 0) << slurp(dir / "out");
+    ASSERT_EQ(run("verify", "--cgal " + d + "/tree " + d + "/ingest " + d + "/v1", dir / "out"), 0)
+        << slurp(dir / "out");
     EXPECT_NE(slurp(dir / "out").find("CLEAN: no violations"), std::string::npos) << slurp(dir / "out");
+    EXPECT_NE(slurp(dir / "out").find("CGAL check: agrees"), std::string::npos) << slurp(dir / "out");
+    EXPECT_NE(slurp(dir / "out").find("on the ellipsoid: skipped vertices at most"), std::string::npos)
+        << slurp(dir / "out");
     const std::string report = slurp(dir / "v1" / "verify-report.json");
     EXPECT_NE(report.find("\"schema\": \"tigerlod.verify-report/1\""), std::string::npos);
     EXPECT_NE(report.find("\"clean\": true"), std::string::npos);

@@ -2,6 +2,7 @@
 // and the exact violations expected; the clean tree reports zero.
 #include "formats/chains/chain_store.hpp"
 #include "stages/pack/packer.hpp"
+#include "stages/verify/cgal_check.hpp"
 #include "stages/verify/verifier.hpp"
 
 #include <gtest/gtest.h>
@@ -112,6 +113,11 @@ class Verify : public ::testing::Test {
         options.tolerance.projection_scale = false; // eps in grid metres: exact expectations
         auto whole = verify::verify_tree(*t, dir / "orig", options);
         expect_same_by_stores(*t, options, whole);
+        // The second checker, on CGAL, finds the same meetings in every case.
+        const auto cgal = verify::cgal_check(*t, whole);
+        for (const auto& d : cgal.disagreements) {
+            ADD_FAILURE() << "CGAL check: " << d;
+        }
         return whole;
     }
 
@@ -261,6 +267,25 @@ TEST_F(Verify, ShortcutAcrossAnIslandIsACrossing)
     EXPECT_EQ(v.x, 500.0);
     EXPECT_TRUE(v.y == 450.0 || v.y == 550.0) << v.y;
     EXPECT_NEAR(v.lon, -96.0, 0.1); // grid 1 m around the Albers origin
+}
+
+TEST_F(Verify, TheCgalCheckFindsTheCrossingAndNamesAMissedOne)
+{
+    Map m = county_a(true, {300, 200});
+    m.simplified[12] = {{500, 0}, {500, 400}, {500, 600}, {500, 1000}}; // through island I, as above
+    auto r = run(m);                                                    // run() asks the CGAL check to agree
+    std::string error;
+    const auto t = reader::Tree::open(dir / "tree", error);
+    ASSERT_TRUE(t) << error;
+    auto c = verify::cgal_check(*t, r);
+    EXPECT_EQ(c.within_pairs, 1U);
+    EXPECT_EQ(c.across_pairs, 0U); // 13 is the same at both LODs: the meeting is LOD 1's, not one across LODs
+    EXPECT_TRUE(c.disagreements.empty());
+    // A report that missed the crossing: the check says which pair.
+    r.items.clear();
+    c = verify::cgal_check(*t, r);
+    ASSERT_EQ(c.disagreements.size(), 1U);
+    EXPECT_EQ(c.disagreements[0], "tract LOD 1: CGAL finds chains 12 and 13 meeting; verify does not");
 }
 
 TEST_F(Verify, VertexFartherThanEps)
