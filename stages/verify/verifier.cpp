@@ -1005,8 +1005,10 @@ class Verifier {
                 }
             }
         }
-        if (!exceeded && k > 0 && m_options.ground) {
-            check_ground(r, e.id, *o.store, *o.info, orig, pts, at, k, violation);
+        if (k > 0 && m_options.ground) {
+            // Measured even where the planar check failed (the report's
+            // largest ratio is then the ground's), reported only where it did not.
+            check_ground(r, e.id, *o.store, *o.info, orig, pts, at, k, exceeded ? nullptr : &violation);
         }
         // Check 4: rings keep 3 vertices and their orientation.
         if (e.flags & chains::chain_closed) {
@@ -1028,10 +1030,11 @@ class Verifier {
     /// the vertices it skips) is at most d / s ground metres, s the least
     /// scale over that box (Projection::smallest_scale). Where that bound
     /// is within 1e-6 of eps, or over it, the geodesic distance itself
-    /// (ground_distance_m). One violation per chain, at its farthest vertex.
+    /// (ground_distance_m). One violation per chain, at its farthest vertex,
+    /// unless `violation` is null (the planar check reported the chain).
     void check_ground(NodeResult& r, uint64_t id, const chains::ChainStore& store, const chains::ChainInfo& info,
                       std::span<const GridPoint> orig, std::span<const GridPoint> pts, const std::vector<size_t>& at,
-                      uint32_t k, const Emit& violation) const
+                      uint32_t k, const Emit* violation) const
     {
         double eps_m = m_sk.lod_eps_m[k];
         if (!m_opt.class_scale.empty()) {
@@ -1068,13 +1071,13 @@ class Verifier {
             }
         }
         r.ground_ratio = std::max(r.ground_ratio, worst);
-        if (worst > 1) {
+        if (worst > 1 && violation) {
             char detail[256];
             std::snprintf(detail, sizeof detail,
                           "on the ground: original vertex %zu is %.3f m from its shortcut on the ellipsoid, "
                           "%.6f times its eps of %.3f m (the chain's farthest)",
                           worst_at, worst * eps_m, worst, eps_m);
-            violation("eps_exceeded", {id}, orig[worst_at], detail);
+            (*violation)("eps_exceeded", {id}, orig[worst_at], detail);
         }
     }
 
