@@ -308,6 +308,21 @@ std::optional<GridPoint> Projection::to_grid_reference(double lon_deg, double la
     return GridPoint{static_cast<int32_t>(gx), static_cast<int32_t>(gy)};
 }
 
+bool Projection::forward(double lon_deg, double lat_deg, double& gx, double& gy) const noexcept
+{
+    if (!std::isfinite(lon_deg) || !std::isfinite(lat_deg) || std::fabs(lon_deg) > 180 || std::fabs(lat_deg) > 90) {
+        return false;
+    }
+    if (m_impl->transverse && std::fabs(GeographicLib::Math::AngDiff(m_impl->lon0, lon_deg)) > 30) {
+        return false;
+    }
+    double x = 0, y = 0;
+    m_impl->raw_forward(lat_deg, lon_deg, x, y);
+    gx = (x - m_impl->x0) / m_impl->p.grid_m;
+    gy = (y - m_impl->y0) / m_impl->p.grid_m;
+    return std::isfinite(gx) && std::isfinite(gy);
+}
+
 bool Projection::fast_albers() const noexcept
 {
     return m_impl->fast_albers() != nullptr;

@@ -69,6 +69,10 @@ class Projection {
     /// Whether to_grid has Snyder's formulas to go by.
     bool fast_albers() const noexcept;
 
+    /// Project lon/lat onto the grid without rounding (fractional grid
+    /// units); false outside the domain to_grid_reference has.
+    bool forward(double lon_deg, double lat_deg, double& gx, double& gy) const noexcept;
+
     /// Map a grid point (possibly fractional) back to lon/lat in degrees.
     void to_lonlat(double gx, double gy, double& lon_deg, double& lat_deg) const noexcept;
 

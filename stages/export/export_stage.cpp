@@ -1,7 +1,12 @@
 #include "stages/export/export_stage.hpp"
 
 #include "core/fs.hpp"
+#include "core/manifest.hpp"
 #include "reader/tree_view.hpp"
+#include "simplification/stage_options.hpp"
+#include "stages/export/lonlat_line.hpp"
+
+#include <nlohmann/json.hpp>
 
 #include <gdal.h>
 #include <ogr_api.h>
@@ -26,6 +31,15 @@ void ExportStage::add_args(ArgSet& args)
              "NAME");
     args.add("lod", &m_lod, "the LOD, 0 for the original chains", "K");
     args.add("layer", &m_layer, "for GeoJSON, which layer: chains or units", "NAME");
+    args.group("Coordinates");
+    args.add("crs", &m_crs,
+             "tree: the tree's projection in metres, its CRS named (EPSG:5070 for the default CONUS Albers, else "
+             "WKT), straight segments as in the tree; lonlat: NAD83 longitude/latitude, each segment densified",
+             "NAME");
+    args.add("max-bow", &m_max_bow,
+             "with --crs lonlat: how far a lon/lat line may stray from the tree's segment on the ground, as a "
+             "fraction of the LOD's eps (LOD 0: of the ladder's smallest)",
+             "F");
     args.add("overwrite", &m_overwrite, "replace OUTPUT if it exists");
 }
 
@@ -36,6 +50,12 @@ void ExportStage::initialize()
     }
     if (m_lod < 0) {
         throw usage_error("export: option '--lod' must be >= 0");
+    }
+    if (m_crs != "tree" && m_crs != "lonlat") {
+        throw usage_error("export: option '--crs' must be tree or lonlat");
+    }
+    if (!(m_max_bow > 0) || !(m_max_bow <= 1)) {
+        throw usage_error("export: option '--max-bow' must be in (0, 1]");
     }
     if (m_layer != "chains" && m_layer != "units") {
         throw usage_error("export: option '--layer' must be chains or units");
@@ -58,7 +78,8 @@ std::vector<std::string> ExportStage::versions() const
 std::string ExportStage::help_notes() const
 {
     return "Units whose boundary is not complete in a node (neighbours across its border) get no polygon\n"
-           "there; every unit is complete in the node of its parent unit.\n"
+           "there; every unit is complete in the node of its parent unit. A chain's eps_m is its own: the\n"
+           "LOD's tolerance times its feature class's scale, which holds on the ground (README.md).\n"
            "Exit codes: 0 done; 1 bad data in the tree (the message names file, node and fault);\n"
            "  2 usage error; 3 environment (cannot write).\n";
 }
@@ -153,15 +174,64 @@ std::map<std::string, std::pair<size_t, uint32_t>> home_nodes(const reader::Tree
     return home;
 }
 
+/// The tree's projection as a GDAL spatial reference: EPSG:5070 for the
+/// default CONUS Albers on GRS 80, else the projection built from its
+/// parameters (on NAD83 where the ellipsoid is GRS 80). Throws usage_error
+/// for a conic with k0 != 1, which PROJ's conics cannot state.
+OGRSpatialReferenceH tree_srs(const ProjectionParams& p)
+{
+    using K = ProjectionParams::Kind;
+    OGRSpatialReferenceH srs = OSRNewSpatialReference(nullptr);
+    const bool grs80 = p.a_m == 6378137.0 && p.f == 1.0 / 298.257222101;
+    if (p == ProjectionParams{.grid_m = p.grid_m}) {
+        OSRImportFromEPSG(srs, 5070); // NAD83 / Conus Albers: the default, grid aside
+        return srs;
+    }
+    if ((p.kind == K::albers || p.kind == K::lcc) && p.k0 != 1.0) {
+        OSRDestroySpatialReference(srs);
+        throw usage_error("export: the tree's projection (" + std::string(projection_kind_name(p.kind)) +
+                          " with k0 != 1) has no CRS GDAL can state: use --crs lonlat");
+    }
+    OSRSetProjCS(srs, (std::string("tigerlod ") + projection_kind_name(p.kind)).c_str());
+    if (grs80) {
+        OSRSetWellKnownGeogCS(srs, "NAD83");
+    } else {
+        OSRSetGeogCS(srs, "tigerlod", "tigerlod", "tigerlod", p.a_m, 1.0 / p.f, "Greenwich", 0.0, "degree",
+                     0.0174532925199433);
+    }
+    switch (p.kind) {
+    case K::albers:
+        OSRSetACEA(srs, p.stdlat1_deg, p.stdlat2_deg, p.lat0_deg, p.lon0_deg, p.false_easting_m, p.false_northing_m);
+        break;
+    case K::lcc:
+        OSRSetLCC(srs, p.stdlat1_deg, p.stdlat2_deg, p.lat0_deg, p.lon0_deg, p.false_easting_m, p.false_northing_m);
+        break;
+    case K::tm:
+        OSRSetTM(srs, p.lat0_deg, p.lon0_deg, p.k0, p.false_easting_m, p.false_northing_m);
+        break;
+    case K::utm:
+        OSRSetUTM(srs, p.utm_zone, p.utm_north ? TRUE : FALSE);
+        break;
+    }
+    return srs;
+}
+
 /// The layers of the file being written, and what went into them.
 class Writer {
   public:
+    /// `max_bow_m` > 0: lon/lat, densified to it; 0: the tree's projection.
     Writer(GDALDatasetH ds, bool with_chains, bool with_units, const Projection& proj, int lod, double eps_m,
-           fs::path tmp)
-        : m_proj(proj), m_lod(lod), m_eps_m(eps_m), m_tmp(std::move(tmp))
+           double max_bow_m, std::map<std::string, double> class_scale, fs::path tmp)
+        : m_proj(proj), m_lod(lod), m_eps_m(eps_m), m_max_bow_m(max_bow_m), m_class_scale(std::move(class_scale)),
+          m_tmp(std::move(tmp))
     {
-        OGRSpatialReferenceH srs = OSRNewSpatialReference(nullptr);
-        OSRImportFromEPSG(srs, 4269);
+        OGRSpatialReferenceH srs = nullptr;
+        if (m_max_bow_m > 0) {
+            srs = OSRNewSpatialReference(nullptr);
+            OSRImportFromEPSG(srs, 4269);
+        } else {
+            srs = tree_srs(proj.params());
+        }
         OSRSetAxisMappingStrategy(srs, OAMS_TRADITIONAL_GIS_ORDER);
         if (with_chains) {
             m_chains = GDALDatasetCreateLayer(ds, "chains", srs, wkbLineString, nullptr);
@@ -173,6 +243,7 @@ class Writer {
             field(m_chains, "lod", OFTInteger);
             field(m_chains, "eps_m", OFTReal);
         }
+        m_geographic = m_max_bow_m > 0;
         if (with_units) {
             m_units = GDALDatasetCreateLayer(ds, "units", srs, wkbMultiPolygon, nullptr);
             field(m_units, "unit", OFTString);
@@ -202,7 +273,9 @@ class Writer {
             OGR_F_SetFieldString(f, 3, m.table.strings[c.right].c_str());
             OGR_F_SetFieldString(f, 4, m.table.strings[c.feature_class].c_str());
             OGR_F_SetFieldInteger(f, 5, m_lod);
-            OGR_F_SetFieldDouble(f, 6, m_eps_m);
+            // The chain's own eps on the ground: its class's scale applied.
+            const auto cs = m_class_scale.find(m.table.strings[c.feature_class]);
+            OGR_F_SetFieldDouble(f, 6, m_eps_m * (cs == m_class_scale.end() ? 1.0 : cs->second));
             OGR_F_SetGeometryDirectly(f, to_line(m.geometry.chain(i)));
             create(m_chains, f);
             ++chains;
@@ -252,23 +325,34 @@ class Writer {
     size_t chains = 0, units = 0, incomplete = 0;
 
   private:
+    /// The points a line of the file gets for `pts`: projected metres (grid
+    /// units times the grid step), or lon/lat densified.
+    std::vector<std::pair<double, double>> coordinates(std::span<const GridPoint> pts) const
+    {
+        if (m_geographic) {
+            return densify_lonlat(m_proj, pts, m_max_bow_m);
+        }
+        std::vector<std::pair<double, double>> out;
+        out.reserve(pts.size());
+        const double g = m_proj.params().grid_m;
+        for (const auto& p : pts) {
+            out.emplace_back(double(p.x) * g, double(p.y) * g);
+        }
+        return out;
+    }
     OGRGeometryH to_line(std::span<const GridPoint> pts) const
     {
         OGRGeometryH line = OGR_G_CreateGeometry(wkbLineString);
-        for (const auto& p : pts) {
-            double lon = 0, lat = 0;
-            m_proj.to_lonlat(p.x, p.y, lon, lat);
-            OGR_G_AddPoint_2D(line, lon, lat);
+        for (const auto& [x, y] : coordinates(pts)) {
+            OGR_G_AddPoint_2D(line, x, y);
         }
         return line;
     }
     OGRLinearRing* to_ring(const std::vector<GridPoint>& pts) const
     {
         auto* ring = new OGRLinearRing;
-        for (const auto& p : pts) {
-            double lon = 0, lat = 0;
-            m_proj.to_lonlat(p.x, p.y, lon, lat);
-            ring->addPoint(lon, lat);
+        for (const auto& [x, y] : coordinates(pts)) {
+            ring->addPoint(x, y);
         }
         return ring;
     }
@@ -285,6 +369,9 @@ class Writer {
     const Projection& m_proj;
     const int m_lod;
     const double m_eps_m;
+    const double m_max_bow_m;
+    const std::map<std::string, double> m_class_scale;
+    bool m_geographic = false;
     const fs::path m_tmp;
     OGRLayerH m_chains = nullptr, m_units = nullptr;
     std::set<uint64_t> m_written;
@@ -319,7 +406,23 @@ int ExportStage::run(const StageContext& ctx)
     if (g.ds == nullptr) {
         throw environment_error("export: cannot create " + tmp.string() + ": " + CPLGetLastErrorMsg());
     }
-    Writer writer(g.ds, gpkg || m_layer == "chains", gpkg || m_layer == "units", proj, m_lod, s.lod_eps_m[lod], tmp);
+    // The bow allowed in lon/lat: a fraction of the LOD's eps (LOD 0: of the ladder's smallest).
+    const double bow_eps = lod > 0 ? s.lod_eps_m[lod] : s.lod_eps_m.size() > 1 ? s.lod_eps_m[1] : 1.0;
+    const double max_bow_m = m_crs == "lonlat" ? m_max_bow * bow_eps : 0.0;
+    // The class scales simplify had (the tree's manifest), for each chain's own eps.
+    std::map<std::string, double> class_scale;
+    try {
+        const Manifest packed = read_manifest(m_tree, "pack");
+        if (packed.doc.contains("simplify")) {
+            class_scale =
+                simplify::tolerance_contract(packed.doc.at("simplify"), (fs::path(m_tree) / "manifest.json").string())
+                    .class_scale;
+        }
+    } catch (const input_error&) {
+        // A tree without pack's manifest (made by hand): the LOD's eps for every chain.
+    }
+    Writer writer(g.ds, gpkg || m_layer == "chains", gpkg || m_layer == "units", proj, m_lod, s.lod_eps_m[lod],
+                  max_bow_m, std::move(class_scale), tmp);
     const auto home =
         writer.writes_units() ? home_nodes(*tree, nodes) : std::map<std::string, std::pair<size_t, uint32_t>>{};
     for (uint32_t n : nodes) {

@@ -1,0 +1,246 @@
+// tigerlod-export as a GIS reads it: a tree of long segments (a chain from
+// California to Maine, one up Alaska), exported in the tree's CRS and in
+// lon/lat, read back with GDAL and moved between CRSs with PROJ (through
+// GDAL's OGRCoordinateTransformation), none of tigerlod's projection code:
+// in the tree's CRS every vertex comes back as the tree's; in lon/lat
+// every vertex is kept and the lines between the written points stay
+// within the stated bow of the tree's segments.
+#include "core/projection.hpp"
+#include "formats/chains/chain_store.hpp"
+#include "stages/export/lonlat_line.hpp"
+#include "stages/pack/packer.hpp"
+#include "../../support/run_tool.hpp"
+
+#include <gdal.h>
+#include <ogr_api.h>
+#include <ogr_srs_api.h>
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cmath>
+
+namespace fs = std::filesystem;
+using namespace tigerlod;
+using chains::ChainStore;
+using Pts = std::vector<GridPoint>;
+
+namespace {
+
+/// The ground distance in metres from lon/lat point (lon, lat) to the image
+/// of grid segment ab: the geodesic to 400 points of it, refined around the
+/// nearest by ternary search.
+double ground_to_segment_m(const Projection& proj, double lon, double lat, GridPoint a, GridPoint b)
+{
+    auto g = [&](double t) {
+        double slon = 0, slat = 0;
+        proj.to_lonlat(a.x + t * (double(b.x) - a.x), a.y + t * (double(b.y) - a.y), slon, slat);
+        return proj.geodesic_m(lon, lat, slon, slat);
+    };
+    int best = 0;
+    for (int i = 1; i <= 400; ++i) {
+        best = g(i / 400.0) < g(best / 400.0) ? i : best;
+    }
+    double lo = std::max(0.0, (best - 1) / 400.0), hi = std::min(1.0, (best + 1) / 400.0);
+    for (int it = 0; it < 60; ++it) {
+        const double m1 = lo + (hi - lo) / 3, m2 = hi - (hi - lo) / 3;
+        if (g(m1) < g(m2)) {
+            hi = m2;
+        } else {
+            lo = m1;
+        }
+    }
+    return std::min(g(best / 400.0), g(0.5 * (lo + hi)));
+}
+
+Pts long_chain(const Projection& proj, const std::vector<std::pair<double, double>>& lonlat)
+{
+    Pts pts;
+    for (const auto& [lon, lat] : lonlat) {
+        pts.push_back(*proj.to_grid(lon, lat));
+    }
+    return pts;
+}
+
+class Export : public ::testing::Test {
+  protected:
+    fs::path dir;
+    Pts a, b; // the two chains
+    Projection proj{ProjectionParams{}};
+    void SetUp() override
+    {
+        dir = fs::temp_directory_path() /
+              ("tigerlod-export-" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) + "-" +
+               std::to_string(::getpid()));
+        fs::remove_all(dir);
+        a = long_chain(proj, {{-122.4, 37.8}, {-104.99, 39.74}, {-87.6, 41.9}, {-70.3, 43.7}});
+        b = long_chain(proj, {{-149.9, 61.2}, {-147.7, 64.8}, {-156.8, 71.3}});
+        ChainStore s;
+        s.level_name = "lines";
+        s.partition = "all";
+        s.halo_m = 10000;
+        s.add_chain({1, s.intern(""), s.intern(""), s.intern("coast"), 0, 0, 0}, a);
+        s.add_chain({2, s.intern(""), s.intern(""), s.intern("coast"), 0, 0, 0}, b);
+        s.canonicalize();
+        fs::create_directories(dir / "orig" / "lines");
+        fs::create_directories(dir / "simp" / "eps-1000m" / "lines");
+        chains::write(dir / "orig" / "lines" / "all.tlc", s);
+        ChainStore t = s;
+        t.eps_m = 1000;
+        chains::write(dir / "simp" / "eps-1000m" / "lines" / "all.tlc", t);
+        pack::write_tree(dir / "tree", pack::build_tree(dir / "orig", dir / "simp", {}), "{}\n");
+        GDALAllRegister();
+    }
+    void TearDown() override { fs::remove_all(dir); }
+
+    int run(const std::string& args)
+    {
+        return tigerlod::testing::run_tool(TIGERLOD_BIN_DIR, "export", args, dir / "log");
+    }
+
+    /// The chains layer read back: per chain id, its points, in the file's CRS
+    /// or moved into `to_epsg`'s; and the layer's CRS name.
+    std::map<int64_t, std::vector<std::pair<double, double>>> read_back(const fs::path& file, int to_epsg,
+                                                                        std::string& crs)
+    {
+        std::map<int64_t, std::vector<std::pair<double, double>>> out;
+        GDALDatasetH ds = GDALOpenEx(file.c_str(), GDAL_OF_VECTOR, nullptr, nullptr, nullptr);
+        EXPECT_TRUE(ds) << file;
+        if (!ds) {
+            return out;
+        }
+        OGRLayerH layer = GDALDatasetGetLayerByName(ds, "chains");
+        if (!layer) {
+            layer = GDALDatasetGetLayer(ds, 0);
+        }
+        OGRSpatialReferenceH srs = OGR_L_GetSpatialRef(layer);
+        EXPECT_TRUE(srs);
+        const char* name = srs ? OSRGetAttrValue(srs, "PROJCS", 0) : nullptr;
+        if (!name && srs) {
+            name = OSRGetAttrValue(srs, "GEOGCS", 0);
+        }
+        crs = name ? name : "";
+        OGRCoordinateTransformationH ct = nullptr;
+        if (to_epsg != 0 && srs) {
+            OGRSpatialReferenceH target = OSRNewSpatialReference(nullptr);
+            OSRImportFromEPSG(target, to_epsg);
+            OSRSetAxisMappingStrategy(target, OAMS_TRADITIONAL_GIS_ORDER);
+            OGRSpatialReferenceH source = OSRClone(srs);
+            OSRSetAxisMappingStrategy(source, OAMS_TRADITIONAL_GIS_ORDER);
+            ct = OCTNewCoordinateTransformation(source, target);
+            OSRDestroySpatialReference(source);
+            OSRDestroySpatialReference(target);
+        }
+        OGR_L_ResetReading(layer);
+        while (OGRFeatureH f = OGR_L_GetNextFeature(layer)) {
+            const int64_t id = OGR_F_GetFieldAsInteger64(f, OGR_F_GetFieldIndex(f, "chain_id"));
+            OGRGeometryH g = OGR_F_GetGeometryRef(f);
+            for (int i = 0; i < OGR_G_GetPointCount(g); ++i) {
+                double x = OGR_G_GetX(g, i), y = OGR_G_GetY(g, i), z = 0;
+                if (ct) {
+                    EXPECT_TRUE(OCTTransform(ct, 1, &x, &y, &z));
+                }
+                out[id].emplace_back(x, y);
+            }
+            OGR_F_Destroy(f);
+        }
+        if (ct) {
+            OCTDestroyCoordinateTransformation(ct);
+        }
+        GDALClose(ds);
+        return out;
+    }
+};
+
+} // namespace
+
+TEST_F(Export, InTheTreesCrsEveryVertexIsTheTreesAndTheCrsIsNamed)
+{
+    for (const char* file : {"x.gpkg", "x.geojson"}) {
+        SCOPED_TRACE(file);
+        ASSERT_EQ(run("--lod 1 " + (dir / "tree").string() + " " + (dir / file).string()), 0)
+            << tigerlod::testing::slurp(dir / "log");
+        std::string crs;
+        const auto chains = read_back(dir / file, 0, crs);
+        EXPECT_EQ(crs, "NAD83 / Conus Albers"); // EPSG:5070
+        ASSERT_EQ(chains.size(), 2U);
+        for (const auto& [id, want] : {std::pair{int64_t{1}, a}, std::pair{int64_t{2}, b}}) {
+            const auto& got = chains.at(id);
+            ASSERT_EQ(got.size(), want.size());
+            for (size_t i = 0; i < got.size(); ++i) {
+                EXPECT_EQ(std::llround(got[i].first / 0.01), want[i].x);
+                EXPECT_EQ(std::llround(got[i].second / 0.01), want[i].y);
+                EXPECT_NEAR(got[i].first, want[i].x * 0.01, 1e-6);
+            }
+        }
+    }
+}
+
+TEST_F(Export, InLonLatSegmentsAreDensifiedWithinTheStatedBow)
+{
+    // 1 % of the LOD's 1000 m: 10 m.
+    ASSERT_EQ(run("--lod 1 --crs lonlat " + (dir / "tree").string() + " " + (dir / "ll.gpkg").string()), 0)
+        << tigerlod::testing::slurp(dir / "log");
+    std::string crs;
+    const auto chains = read_back(dir / "ll.gpkg", 0, crs);
+    EXPECT_EQ(crs, "NAD83");
+    // PROJ moves the points into EPSG:5070: every vertex of the tree is there.
+    std::string crs5070;
+    const auto moved = read_back(dir / "ll.gpkg", 5070, crs5070);
+    for (const auto& [id, want] : {std::pair{int64_t{1}, a}, std::pair{int64_t{2}, b}}) {
+        SCOPED_TRACE("chain " + std::to_string(id));
+        const auto& ll = chains.at(id);
+        const auto& xy = moved.at(id);
+        EXPECT_GT(ll.size(), 20 * want.size()); // thousands of km: densified
+        size_t next = 0;
+        for (const auto& [x, y] : xy) {
+            if (next < want.size() && std::hypot(x - want[next].x * 0.01, y - want[next].y * 0.01) < 1e-3) {
+                ++next;
+            }
+        }
+        EXPECT_EQ(next, want.size()) << "the tree's vertices, in order, within 1 mm";
+        // The straight lon/lat line between written points, sampled, stays
+        // within 10 m on the ground of the tree's segment it follows.
+        double worst = 0;
+        size_t seg = 0;
+        for (size_t i = 0; i + 1 < ll.size(); ++i) {
+            // The tree's segment this piece lies on: the one whose end comes next.
+            GridPoint p0 = want[seg], p1 = want[seg + 1];
+            for (int j = 1; j < 8; ++j) {
+                const double t = j / 8.0;
+                const double lon = ll[i].first + t * (ll[i + 1].first - ll[i].first);
+                const double lat = ll[i].second + t * (ll[i + 1].second - ll[i].second);
+                worst = std::max(worst, ground_to_segment_m(proj, lon, lat, p0, p1));
+            }
+            double gx = 0, gy = 0;
+            proj.forward(ll[i + 1].first, ll[i + 1].second, gx, gy);
+            if (seg + 2 < want.size() && std::hypot(gx - p1.x, gy - p1.y) < 0.1) {
+                ++seg;
+            }
+        }
+        EXPECT_LE(worst, 10.0);
+        EXPECT_GT(worst, 1.0); // the bound is used, not far too many points
+    }
+}
+
+TEST_F(Export, BadCrsOrBowIsAUsageError)
+{
+    EXPECT_EQ(run("--crs mercator " + (dir / "tree").string() + " " + (dir / "x.gpkg").string()), 2);
+    EXPECT_NE(tigerlod::testing::slurp(dir / "log").find("'--crs' must be tree or lonlat"), std::string::npos);
+    EXPECT_EQ(run("--crs lonlat --max-bow 0 " + (dir / "tree").string() + " " + (dir / "x.gpkg").string()), 2);
+    EXPECT_FALSE(fs::exists(dir / "x.gpkg"));
+}
+
+TEST(LonLatLine, AShortSegmentIsLeftAloneALongOneBisected)
+{
+    const Projection proj{ProjectionParams{}};
+    const Pts short_segment{*proj.to_grid(-96, 40), *proj.to_grid(-95.999, 40.0005)};
+    EXPECT_EQ(exporter::densify_lonlat(proj, short_segment, 1.0).size(), 2U);
+    const Pts long_segment{*proj.to_grid(-124, 48), *proj.to_grid(-68, 45)};
+    const auto pts = exporter::densify_lonlat(proj, long_segment, 1.0);
+    EXPECT_GT(pts.size(), 100U);
+    EXPECT_LT(pts.size(), 5000U);
+    // A bow of kilometres undensified.
+    EXPECT_GT(exporter::lonlat_bow_m(proj, long_segment[0].x, long_segment[0].y, long_segment[1].x, long_segment[1].y),
+              1e4);
+}
