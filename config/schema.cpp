@@ -79,6 +79,10 @@ std::vector<Key> input_keys()
         entry("dataset.code_field", Type::text,
               "polygons: the attribute with each unit's finest code (e.g. `GEOID10`, us-atlas `id`)",
               "required for polygons"),
+        entry("dataset.empty_code", Type::choice,
+              "polygons: a feature whose `code_field` is empty (Natural Earth has some): `error` (ingest stops, "
+              "exit 1, with their count and the first three) or `skip` (left out, counted and named on stderr)",
+              "`error`", {}, {"error", "skip"}),
         entry("dataset.class_field", Type::text,
               "attribute stored as each chain's feature class (the class covering most of the chain)",
               "tiger: `MTFCC`"),

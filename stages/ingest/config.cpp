@@ -119,6 +119,7 @@ IngestConfig load_config(const fs::path& file)
         d.class_field = ctx.get<std::string>("dataset.class_field", "");
         d.intpt_lat_field = ctx.get<std::string>("dataset.intpt_lat_field", "");
         d.intpt_lon_field = ctx.get<std::string>("dataset.intpt_lon_field", "");
+        d.skip_empty_codes = ctx.get<std::string>("dataset.empty_code", "error") == "skip"; // a choice of the schema
     } else {
         ctx.fail(ds, "'dataset.kind' is required: tiger, polygons or lines");
     }

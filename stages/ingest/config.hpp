@@ -28,6 +28,7 @@ struct DatasetSpec {
     std::string code_field;                                  ///< polygons: the finest unit code (e.g. GEOID10)
     std::string class_field;                                 ///< feature class attribute (TIGER: MTFCC)
     std::string intpt_lat_field, intpt_lon_field;            ///< internal point attributes
+    bool skip_empty_codes = false;                           ///< dataset.empty_code: skip (else error)
 };
 
 struct IngestConfig {

@@ -1,4 +1,5 @@
 #include "stages/ingest/map_steps.hpp"
+#include "stages/ingest/sources.hpp"
 
 #include "core/errors.hpp"
 #include "core/memory.hpp"
@@ -97,6 +98,15 @@ std::pair<int32_t, int32_t> project_vertices(Graph& g, const RawMap& raw, const 
         std::snprintf(buf, sizeof buf, "coordinate (%.6f, %.6f) is outside the domain of projection ", ll.lon * 1e-6,
                       ll.lat * 1e-6);
         throw input_error(where + ": " + buf + proj.describe());
+    }
+    // A Data Tree node holds 32-bit steps across: the map's span must fit.
+    GridBox box;
+    for (const GridPoint p : g.grid) {
+        box.extend(p);
+    }
+    if (!box.empty()) {
+        check_grid_span("the config", proj.params().grid_m, double(box.max_x - box.min_x), double(box.max_y - box.min_y),
+                        "the map");
     }
     return {lat_lo, lat_hi};
 }

@@ -2,6 +2,7 @@
 
 #include "core/errors.hpp"
 #include "core/geometry.hpp"
+#include "core/projection.hpp"
 
 #include <cpl_error.h>
 #include <gdal.h>
@@ -10,6 +11,7 @@
 
 #include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <exception>
 #include <thread>
@@ -513,6 +515,21 @@ double ring_area_deg2(const std::vector<LonLatE6>& r)
     return 0.5 * a;
 }
 
+/// A feature for a message: its index, and its name where it has a
+/// `name` or `NAME` attribute (Natural Earth's, GeoJSON's habit).
+std::string feature_name(OGRFeatureH f, int64_t index)
+{
+    std::string out = "feature " + std::to_string(index);
+    for (const char* field : {"name", "NAME"}) {
+        const int i = OGR_F_GetFieldIndex(f, field);
+        if (i >= 0 && OGR_F_IsFieldSetAndNotNull(f, i)) {
+            out += std::string(" '") + OGR_F_GetFieldAsString(f, i) + "'";
+            break;
+        }
+    }
+    return out;
+}
+
 /// One polygon file into `raw` (a part of its own: file index 0).
 void read_polygon_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw)
 {
@@ -521,6 +538,8 @@ void read_polygon_file(const IngestConfig& cfg, const fs::path& path, RawMap& ra
         auto [src, code_i, lat_i, lon_i, cls, fields] = open_polygons(cfg, path);
         const auto file = static_cast<uint32_t>(raw.files.size());
         raw.files.push_back(src.name());
+        uint64_t empty_codes = 0; // features with an empty code, and the first three
+        std::string examples;
         src.for_each([&](OGRFeatureH f, int64_t index) {
             const std::string where = src.name() + ":" + std::to_string(index);
             OGRGeometryH g = OGR_F_GetGeometryRef(f);
@@ -535,7 +554,10 @@ void read_polygon_file(const IngestConfig& cfg, const fs::path& path, RawMap& ra
             }
             const std::string code = OGR_F_GetFieldAsString(f, code_i);
             if (code.empty()) {
-                throw input_error(where + ": empty '" + cfg.dataset.code_field + "'");
+                if (++empty_codes <= 3) {
+                    examples += (examples.empty() ? "" : ", ") + feature_name(f, index);
+                }
+                return;
             }
             RawUnit u;
             for (size_t L = 0; L < cfg.levels.size(); ++L) {
@@ -567,6 +589,15 @@ void read_polygon_file(const IngestConfig& cfg, const fs::path& path, RawMap& ra
             }
             raw.units.push_back(std::move(u));
         });
+        if (empty_codes > 0) {
+            const std::string what = src.name() + ": " + std::to_string(empty_codes) + " feature" +
+                                     (empty_codes == 1 ? "" : "s") + " with an empty '" + cfg.dataset.code_field +
+                                     "' (" + examples + (empty_codes > 3 ? ", ..." : "") + ")";
+            if (!cfg.dataset.skip_empty_codes) {
+                throw input_error(what + ": give each a code, or set dataset.empty_code: skip to leave them out");
+            }
+            std::fprintf(stderr, "tigerlod-ingest: %s left out (dataset.empty_code: skip)\n", what.c_str());
+        }
     }
 }
 
@@ -732,20 +763,82 @@ void read_tiger_parts(const IngestConfig& cfg, unsigned threads, const Log& log,
         take, only);
 }
 
+void check_grid_span(const std::string& where, double grid_m, double span_x, double span_y, const std::string& what)
+{
+    constexpr double most = 2147483647.0; // a node's payload holds steps of 32 bits
+    const double span = std::max(span_x, span_y);
+    if (span <= most) {
+        return;
+    }
+    const double grid = grid_m;
+    // The next step up that fits, as a round figure (1, 2 or 5 times a power of ten).
+    const double need = grid * span / most;
+    double fit = std::pow(10.0, std::floor(std::log10(need)));
+    for (const double m : {1.0, 2.0, 5.0, 10.0}) {
+        if (fit * m >= need) {
+            fit *= m;
+            break;
+        }
+    }
+    char buf[512];
+    std::snprintf(buf, sizeof buf,
+                  "%s: %s spans %.0f km %s in the projection, %.0f steps of projection.grid_m = %g m, more than "
+                  "a Data Tree node holds across (2^31 - 1 steps, %.0f km at this grid): set projection.grid_m to "
+                  "%g or more",
+                  where.c_str(), what.c_str(), span * grid / 1000, span_x >= span_y ? "east-west" : "north-south",
+                  span, grid, most * grid / 1000, fit);
+    throw config_error(buf);
+}
+
 void validate_dataset(const IngestConfig& cfg)
 {
+    OGREnvelope all;
+    bool any = false;
+    auto take = [&](OGRLayerH layer) {
+        OGREnvelope e;
+        if (layer != nullptr && OGR_L_GetExtent(layer, &e, TRUE) == OGRERR_NONE) {
+            all.Merge(e);
+            any = true;
+        }
+    };
     for (const auto& p : cfg.dataset.faces) {
         open_faces(cfg, p);
     }
     for (const auto& p : cfg.dataset.edges) {
-        open_edges(cfg, p);
+        take(open_edges(cfg, p).src.layer());
     }
     for (const auto& p : cfg.dataset.inputs) {
         if (cfg.dataset.kind == DatasetSpec::Kind::polygons) {
-            open_polygons(cfg, p);
+            take(open_polygons(cfg, p).src.layer());
         } else {
-            open_lines(cfg, p);
+            take(open_lines(cfg, p).src.layer());
         }
+    }
+    if (!any) {
+        return;
+    }
+    // The inputs' lon/lat box, its outline projected at 64 points a side
+    // (the conics bend parallels): the map's span on the grid, near enough
+    // to name the key before a run; ingest checks the projected map exactly.
+    const Projection proj(cfg.projection);
+    double lo_x = INFINITY, lo_y = INFINITY, hi_x = -INFINITY, hi_y = -INFINITY;
+    const double lon0 = std::max(-180.0, all.MinX), lon1 = std::min(180.0, all.MaxX);
+    const double lat0 = std::max(-90.0, all.MinY), lat1 = std::min(90.0, all.MaxY);
+    for (int i = 0; i <= 64; ++i) {
+        const double t = i / 64.0;
+        for (const auto& [lon, lat] : {std::pair{lon0 + t * (lon1 - lon0), lat0}, std::pair{lon0 + t * (lon1 - lon0), lat1},
+                                       std::pair{lon0, lat0 + t * (lat1 - lat0)}, std::pair{lon1, lat0 + t * (lat1 - lat0)}}) {
+            double x = 0, y = 0;
+            if (proj.forward(lon, lat, x, y)) {
+                lo_x = std::min(lo_x, x);
+                hi_x = std::max(hi_x, x);
+                lo_y = std::min(lo_y, y);
+                hi_y = std::max(hi_y, y);
+            }
+        }
+    }
+    if (lo_x <= hi_x) {
+        check_grid_span(cfg.file.string(), cfg.projection.grid_m, hi_x - lo_x, hi_y - lo_y, "the inputs' extent");
     }
 }
 

@@ -38,6 +38,12 @@ void read_tiger_parts(const IngestConfig& cfg, unsigned threads, const Log& log,
 /// reading no features. Throws input_error as read_dataset would.
 void validate_dataset(const IngestConfig& cfg);
 
+/// Throws config_error naming `projection.grid_m` (and a grid that fits)
+/// when a map spanning `span_x` by `span_y` steps of `grid_m` is wider than
+/// a Data Tree node holds (2^31 - 1 steps): `where` and `what` name the
+/// config and the map in the message.
+void check_grid_span(const std::string& where, double grid_m, double span_x, double span_y, const std::string& what);
+
 /// Versions of the libraries the readers use, for --version.
 std::string gdal_version();
 
