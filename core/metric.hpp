@@ -23,6 +23,16 @@ std::optional<Metric> parse_metric(const std::string& name) noexcept;
 /// Radius of the smallest L2 disc holding the metric's unit ball (1 or sqrt 2).
 double l2_reach(Metric m) noexcept;
 
+/// The halo a partition's store needs so that partitions simplified apart
+/// cannot cross: every chain within eps_i + eps_j of its own, the largest
+/// tolerance `eps_max_m` times the largest class scale, each reaching
+/// l2_reach(metric) times as far in L2. The one rule for ingest --validate
+/// and simplify.
+inline double halo_needed_m(double eps_max_m, double max_class_scale, Metric metric) noexcept
+{
+    return 2 * eps_max_m * max_class_scale * l2_reach(metric);
+}
+
 /// A tolerance in grid units with its exact integer threshold.
 struct Tolerance {
     double eps = 0;       ///< grid units

@@ -219,6 +219,13 @@ IngestConfig load_config(const fs::path& file)
     p.false_northing_m = ctx.get<double>("projection.false_northing", p.false_northing_m);
     p.grid_m = ctx.get<double>("projection.grid_m", p.grid_m);
     cfg.halo_m = ctx.get<double>("ingest.halo_m", cfg.halo_m);
+    if (const auto ladder = ctx.get<std::vector<double>>("simplify.tolerances_m", {}); !ladder.empty()) {
+        cfg.ladder_max_m = ladder.back(); // the schema checked that it increases
+    }
+    cfg.ladder_metric = parse_metric(ctx.get<std::string>("simplify.metric", "l2")).value_or(Metric::l2);
+    for (const auto& [cls, f] : ctx.get<std::map<std::string, double>>("simplify.class_scale", {})) {
+        cfg.ladder_class_scale = std::max(cfg.ladder_class_scale, f);
+    }
     cfg.line_tile_km = ctx.get<double>("ingest.line_tile_km", cfg.line_tile_km);
     if (root["ingest"] && root["ingest"]["line_tile_km"] && d.kind != DatasetSpec::Kind::lines) {
         ctx.fail(root["ingest"]["line_tile_km"], "'ingest.line_tile_km' applies to lines datasets only");

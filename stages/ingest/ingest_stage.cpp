@@ -1338,6 +1338,17 @@ int IngestStage::run(const StageContext& ctx)
     const Projection projection(cfg.projection);
     ctx.log.info("config " + cfg.file.string() + ": " + projection.describe());
     if (m_validate) {
+        // The halo rule for the config's own ladder (simplify would refuse it later).
+        if (const double need = halo_needed_m(cfg.ladder_max_m, cfg.ladder_class_scale, cfg.ladder_metric);
+            cfg.halo_m < need) {
+            std::ostringstream msg;
+            msg << cfg.file.string() << ": 'ingest.halo_m' (" << cfg.halo_m << " m) is below the " << need
+                << " m that simplify.tolerances_m's largest, " << cfg.ladder_max_m
+                << " m, needs (twice it, times the largest class scale and the " << metric_name(cfg.ladder_metric)
+                << " metric's reach) so that partitions simplified apart cannot cross: raise ingest.halo_m or "
+                   "lower the ladder";
+            throw config_error(msg.str());
+        }
         validate_dataset(cfg);
         std::printf("%s: valid; dataset %s, %zu input files, levels", cfg.file.c_str(), cfg.name.c_str(),
                     cfg.dataset.edges.size() + cfg.dataset.faces.size() + cfg.dataset.inputs.size());

@@ -105,8 +105,8 @@ std::pair<int32_t, int32_t> project_vertices(Graph& g, const RawMap& raw, const 
         box.extend(p);
     }
     if (!box.empty()) {
-        check_grid_span("the config", proj.params().grid_m, double(box.max_x - box.min_x), double(box.max_y - box.min_y),
-                        "the map");
+        check_grid_span("the config", proj.params().grid_m, double(box.max_x - box.min_x),
+                        double(box.max_y - box.min_y), "the map");
     }
     return {lat_lo, lat_hi};
 }

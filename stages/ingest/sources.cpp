@@ -785,60 +785,50 @@ void check_grid_span(const std::string& where, double grid_m, double span_x, dou
                   "%s: %s spans %.0f km %s in the projection, %.0f steps of projection.grid_m = %g m, more than "
                   "a Data Tree node holds across (2^31 - 1 steps, %.0f km at this grid): set projection.grid_m to "
                   "%g or more",
-                  where.c_str(), what.c_str(), span * grid / 1000, span_x >= span_y ? "east-west" : "north-south",
-                  span, grid, most * grid / 1000, fit);
+                  where.c_str(), what.c_str(), span * grid / 1000, span_x >= span_y ? "east-west" : "north-south", span,
+                  grid, most * grid / 1000, fit);
     throw config_error(buf);
 }
 
 void validate_dataset(const IngestConfig& cfg)
 {
-    OGREnvelope all;
-    bool any = false;
-    auto take = [&](OGRLayerH layer) {
-        OGREnvelope e;
-        if (layer != nullptr && OGR_L_GetExtent(layer, &e, TRUE) == OGRERR_NONE) {
-            all.Merge(e);
-            any = true;
-        }
-    };
     for (const auto& p : cfg.dataset.faces) {
         open_faces(cfg, p);
     }
     for (const auto& p : cfg.dataset.edges) {
-        take(open_edges(cfg, p).src.layer());
+        open_edges(cfg, p);
     }
-    for (const auto& p : cfg.dataset.inputs) {
-        if (cfg.dataset.kind == DatasetSpec::Kind::polygons) {
-            take(open_polygons(cfg, p).src.layer());
-        } else {
-            take(open_lines(cfg, p).src.layer());
-        }
-    }
-    if (!any) {
-        return;
-    }
-    // The inputs' lon/lat box, its outline projected at 64 points a side
-    // (the conics bend parallels): the map's span on the grid, near enough
-    // to name the key before a run; ingest checks the projected map exactly.
+    // A polygons or lines dataset's span on the grid, from every vertex
+    // projected (a lon/lat box would not do: a map across the antimeridian
+    // spans every longitude), so that a map wider than a node can hold is a
+    // config error now rather than pack's. TIGER's many files are left to
+    // ingest, which checks the projected map exactly.
     const Projection proj(cfg.projection);
     double lo_x = INFINITY, lo_y = INFINITY, hi_x = -INFINITY, hi_y = -INFINITY;
-    const double lon0 = std::max(-180.0, all.MinX), lon1 = std::min(180.0, all.MaxX);
-    const double lat0 = std::max(-90.0, all.MinY), lat1 = std::min(90.0, all.MaxY);
-    for (int i = 0; i <= 64; ++i) {
-        const double t = i / 64.0;
-        for (const auto& [lon, lat] : {std::pair{lon0 + t * (lon1 - lon0), lat0}, std::pair{lon0 + t * (lon1 - lon0), lat1},
-                                       std::pair{lon0, lat0 + t * (lat1 - lat0)}, std::pair{lon1, lat0 + t * (lat1 - lat0)}}) {
+    auto take = [&](auto&& self, OGRGeometryH g) -> void {
+        if (g == nullptr) {
+            return;
+        }
+        for (int i = 0; i < OGR_G_GetGeometryCount(g); ++i) {
+            self(self, OGR_G_GetGeometryRef(g, i));
+        }
+        for (int i = 0; i < OGR_G_GetPointCount(g); ++i) {
             double x = 0, y = 0;
-            if (proj.forward(lon, lat, x, y)) {
+            if (proj.forward(OGR_G_GetX(g, i), OGR_G_GetY(g, i), x, y)) {
                 lo_x = std::min(lo_x, x);
                 hi_x = std::max(hi_x, x);
                 lo_y = std::min(lo_y, y);
                 hi_y = std::max(hi_y, y);
             }
         }
+    };
+    for (const auto& p : cfg.dataset.inputs) {
+        Source src = cfg.dataset.kind == DatasetSpec::Kind::polygons ? std::move(open_polygons(cfg, p).src)
+                                                                     : std::move(open_lines(cfg, p).src);
+        src.for_each([&](OGRFeatureH f, int64_t) { take(take, OGR_F_GetGeometryRef(f)); });
     }
     if (lo_x <= hi_x) {
-        check_grid_span(cfg.file.string(), cfg.projection.grid_m, hi_x - lo_x, hi_y - lo_y, "the inputs' extent");
+        check_grid_span(cfg.file.string(), cfg.projection.grid_m, hi_x - lo_x, hi_y - lo_y, "the inputs' map");
     }
 }
 

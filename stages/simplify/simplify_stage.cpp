@@ -179,7 +179,7 @@ std::vector<ToleranceStats> SimplifyStage::simplify_one(const StoreFile& sf, con
     check_store(store, sf);
     // Partitions are simplified independently only if each sees every
     // chain within eps_i + eps_j of its own: its halo must be that wide.
-    const double need = 2 * m_common.tolerances.back() * max_scale * l2_reach(so.metric);
+    const double need = halo_needed_m(m_common.tolerances.back(), max_scale, so.metric);
     if (store.partition != "all" && store.halo_m < need) {
         throw usage_error(sf.path.string() + ": cut with a halo of " + std::to_string(store.halo_m) +
                           " m, but tolerance " + std::to_string(m_common.tolerances.back()) + " m needs at least " +
