@@ -224,6 +224,272 @@ void snap_points(OGRGeometryH g, std::vector<LonLatE6>& out, const std::string& 
     }
 }
 
+/// A ring or line of lon/lat points made fit for the plane of a conic
+/// (Albers, LCC), which tears the globe along its cut, the meridian
+/// opposite its central one (lon0 + 180): a point exactly on the cut maps to
+/// one edge of the map only, whichever side its neighbours are on.
+///  1. A run of points on the cut between points on one side of it (data
+///     cut at the antimeridian, as Natural Earth's, for a map centred on
+///     Greenwich) moves a micro-degree into that side, the snapping step:
+///     its segments then stay on their side instead of crossing the map.
+///  2. A run between the two sides crosses the cut: refused, naming the
+///     place and the fix, unless it is at a pole (within 0.1 degree), where
+///     a ring around the pole is closed (Antarctica's closure from -180 to
+///     180), its segments kept as they are.
+///  3. A segment crossing the cut the short way round is refused too.
+/// Other projections are left as they are (Transverse Mercator's domain
+/// ends 30 degrees from its central meridian).
+void fit_to_globe(std::vector<LonLatE6>& pts, const ProjectionParams& proj, const std::string& where)
+{
+    if (proj.kind != ProjectionParams::Kind::albers && proj.kind != ProjectionParams::Kind::lcc) {
+        return;
+    }
+    constexpr int64_t half = 180000000, turn = 2 * half, pole = 89900000;
+    const int64_t lon0 = std::llround(proj.lon0_deg * 1e6);
+    // Longitude east of the central meridian, in (-180, 180] degrees (micro).
+    auto east = [&](int64_t lon) {
+        int64_t d = (lon - lon0) % turn;
+        d += d <= -half ? turn : d > half ? -turn : 0;
+        return d;
+    };
+    auto on_cut = [&](const LonLatE6& p) { return east(p.lon) == half; };
+    int64_t cut = lon0 + half; // for messages, in (-180, 180]
+    cut += cut > half ? -turn : 0;
+    auto polar = [&](const LonLatE6& p) { return std::abs(int64_t{p.lat}) >= pole; };
+    auto refuse = [&](const LonLatE6& p, const LonLatE6& q) {
+        char buf[400];
+        std::snprintf(buf, sizeof buf,
+                      ": from (%.6f, %.6f) to (%.6f, %.6f) it crosses longitude %.6f, where the projection (lon0 %g) "
+                      "cuts the globe, and would be drawn across the whole map: choose a projection.lon0 whose "
+                      "opposite meridian misses the map, or split the feature there",
+                      p.lon * 1e-6, p.lat * 1e-6, q.lon * 1e-6, q.lat * 1e-6, double(cut) * 1e-6, proj.lon0_deg);
+        throw input_error(where + buf);
+    };
+    const bool closed = pts.size() > 2 && pts.front() == pts.back();
+    const size_t n = closed ? pts.size() - 1 : pts.size(); // a ring's points once
+    for (size_t i = 0; i < n;) {
+        if (!on_cut(pts[i])) {
+            ++i;
+            continue;
+        }
+        size_t e = i;
+        while (e < n && on_cut(pts[e])) {
+            ++e;
+        }
+        // The side of the nearest point off the cut before and after the run
+        // (around a ring), 0 where there is none.
+        auto side_at = [&](size_t k) { return east(pts[k].lon) > 0 ? 1 : -1; };
+        int before = 0, after = 0;
+        if (i > 0 || closed) {
+            for (size_t k = 1; k <= n && before == 0; ++k) {
+                const size_t j = (i + n - k) % n;
+                if (!closed && j >= i) {
+                    break;
+                }
+                before = on_cut(pts[j]) ? 0 : side_at(j);
+            }
+        }
+        for (size_t k = e; (k < n || closed) && after == 0 && k < e + n; ++k) {
+            const size_t j = k % n;
+            after = on_cut(pts[j]) ? 0 : side_at(j);
+        }
+        bool at_pole = false;
+        for (size_t k = i; k < e; ++k) {
+            at_pole = at_pole || polar(pts[k]);
+        }
+        if (before != 0 && after != 0 && before != after) {
+            if (!at_pole) {
+                refuse(pts[i > 0 ? i - 1 : n - 1], pts[e < n ? e : 0]);
+            }
+        } else if (const int side = before != 0 ? before : after; side != 0) {
+            for (size_t k = i; k < e; ++k) { // a micro-degree into its side
+                int64_t lon = pts[k].lon - side;
+                lon += lon < -half ? turn : lon > half ? -turn : 0;
+                pts[k].lon = static_cast<int32_t>(lon);
+            }
+        }
+        i = e;
+    }
+    if (closed) {
+        pts.back() = pts.front();
+    }
+    for (size_t i = 1; i < pts.size(); ++i) {
+        const LonLatE6 p = pts[i - 1], q = pts[i];
+        if (polar(p) && polar(q)) {
+            continue;
+        }
+        // The short way from p, by s in (-180, 180]: across the cut when the
+        // eastings of p and p + s lie on two sides of it.
+        int64_t s = (int64_t{q.lon} - p.lon) % turn;
+        s += s <= -half ? turn : s > half ? -turn : 0;
+        const int64_t a = east(p.lon);
+        if (a + s > half || a + s < -half) {
+            refuse(p, q);
+        }
+    }
+}
+
+/// A ring that winds once round the globe (Antarctica's, closed along its
+/// pole from -180 to 180), unwrapped as `u` (winding: +-360 degrees, in
+/// micro-degrees), as a ring of the plane: from where it crosses a cut
+/// meridian once round to the same meridian a turn on, then along that
+/// meridian to the pole, along the pole (a degree a step: the conics draw a
+/// pole as an arc) back to the first crossing's meridian and to it; its
+/// points on the cut a micro-degree inside. The original ring if it crosses
+/// a cut more than once.
+std::vector<LonLatE6> around_pole(const std::vector<LonLatE6>& ring, const std::vector<std::pair<double, double>>& u,
+                                  int64_t winding, int64_t lon0)
+{
+    constexpr int64_t half = 180000000, turn = 2 * half, step = 1000000;
+    const size_t n = u.size() - 1; // the ring's points once; u[n] is u[0] a turn on
+    // Where the ring crosses a cut meridian x = half + k turn: once.
+    size_t at = n;
+    double c = 0;
+    int crossings = 0;
+    for (size_t i = 0; i < n; ++i) {
+        const double x0 = u[i].first, x1 = u[i + 1].first;
+        const double k0 = std::floor((x0 - double(half)) / double(turn)),
+                     k1 = std::floor((x1 - double(half)) / double(turn));
+        if (k0 != k1) {
+            crossings += int(std::fabs(k1 - k0));
+            if (at == n) {
+                at = i;
+                c = double(half) + std::max(k0, k1) * double(turn);
+            }
+        }
+    }
+    if (crossings != 1) {
+        return ring;
+    }
+    const double sign = winding > 0 ? 1.0 : -1.0;
+    const double pole = (ring[0].lat < 0 ? -90.0 : 90.0) * 1e6;
+    std::vector<std::pair<double, double>> path;
+    auto cross = [&](size_t i, double x) {
+        const double t = (x - u[i].first) / (u[i + 1].first - u[i].first);
+        return std::pair{x, u[i].second + t * (u[i + 1].second - u[i].second)};
+    };
+    const auto start = cross(at, c);
+    path.push_back(start);
+    for (size_t k = 1; k <= n; ++k) { // u[at + 1] ... round to u[at], a turn on
+        const size_t j = (at + k) % n;
+        const double shift = at + k >= n ? double(winding) : 0.0;
+        path.emplace_back(u[j].first + shift, u[j].second);
+    }
+    path.back() = cross(at, c); // the crossing again: replaced below a turn on
+    path.back().first = c + double(winding);
+    // Along the meridian to the pole, along the pole back, and up to the start.
+    const double end_x = path.back().first;
+    path.emplace_back(end_x, pole);
+    for (double x = end_x - sign * double(step); sign * (x - c) > 0; x -= sign * double(step)) {
+        path.emplace_back(x, pole);
+    }
+    path.emplace_back(c, pole);
+    path.push_back(start);
+    // Into longitudes: the strip between c and c + winding, its meridians a micro-degree inside.
+    const double lo = std::min(c, end_x), hi = std::max(c, end_x);
+    std::vector<LonLatE6> out;
+    for (const auto& [x, y] : path) {
+        const double xi = x <= lo ? lo + 1 : x >= hi ? hi - 1 : x;
+        int64_t lon = (lon0 + std::llround(xi)) % turn;
+        lon += lon > half ? -turn : lon < -half ? turn : 0;
+        const LonLatE6 pt{static_cast<int32_t>(lon), static_cast<int32_t>(std::llround(y))};
+        if (out.empty() || !(out.back() == pt)) {
+            out.push_back(pt);
+        }
+    }
+    return out;
+}
+
+/// A polygon ring cut along a conic's cut (the meridian opposite its
+/// central one), where the plane tears: the ring unwrapped the short way
+/// round from its first point, clipped to each strip of 360 degrees of
+/// longitude it reaches (Sutherland-Hodgman against the strip's two
+/// meridians, the clip points on the line straight in lon/lat), each piece
+/// a ring of its own moved back into [-180, 180], its points on the cut a
+/// micro-degree inside their side so that each maps to its own edge of the
+/// map. A ring that crosses nothing comes back alone (points that lie on
+/// the cut from its west side moved a micro-degree west of it too); a ring
+/// around a pole (it winds once round the globe) too, as it was. A piece
+/// that leaves and enters a strip more than once keeps its parts joined
+/// along the cut (ingest then reports the overlap).
+std::vector<std::vector<LonLatE6>> split_at_cut(const std::vector<LonLatE6>& ring, const ProjectionParams& proj)
+{
+    if ((proj.kind != ProjectionParams::Kind::albers && proj.kind != ProjectionParams::Kind::lcc) || ring.size() < 4 ||
+        !(ring.front() == ring.back())) {
+        return {ring};
+    }
+    constexpr int64_t half = 180000000, turn = 2 * half;
+    const int64_t lon0 = std::llround(proj.lon0_deg * 1e6);
+    auto wrap = [&](int64_t d) {
+        d %= turn;
+        return d + (d <= -half ? turn : d > half ? -turn : 0);
+    };
+    // Unwrapped eastings (micro-degrees east of lon0) and latitudes.
+    std::vector<std::pair<double, double>> u;
+    u.reserve(ring.size());
+    int64_t e = wrap(ring[0].lon - lon0);
+    u.emplace_back(double(e), double(ring[0].lat));
+    for (size_t i = 1; i < ring.size(); ++i) {
+        e += wrap(int64_t{ring[i].lon} - ring[i - 1].lon);
+        u.emplace_back(double(e), double(ring[i].lat));
+    }
+    if (const int64_t winding = std::llround(u.back().first - u.front().first); winding != 0) {
+        return {around_pole(ring, u, winding, lon0)};
+    }
+    double lo = INFINITY, hi = -INFINITY;
+    for (const auto& [x, y] : u) {
+        lo = std::min(lo, x);
+        hi = std::max(hi, x);
+    }
+    const auto k_lo = int64_t(std::floor((lo + double(half)) / double(turn)));
+    auto k_hi = int64_t(std::floor((hi + double(half)) / double(turn)));
+    if (hi == double(half) + double(k_hi - 1) * double(turn) + double(turn) && k_hi > k_lo) {
+        --k_hi; // a ring touching a strip's east meridian from the west lies in that strip
+    }
+    std::vector<std::vector<LonLatE6>> out;
+    for (int64_t k = k_lo; k <= k_hi; ++k) {
+        const double a = double(-half + k * turn), b = double(half + k * turn);
+        auto clip = [](const std::vector<std::pair<double, double>>& in, double x, bool keep_above) {
+            std::vector<std::pair<double, double>> res;
+            auto inside = [&](const std::pair<double, double>& p) { return keep_above ? p.first >= x : p.first <= x; };
+            for (size_t i = 0; i + 1 < in.size(); ++i) {
+                const auto& p = in[i];
+                const auto& q = in[i + 1];
+                if (inside(p)) {
+                    res.push_back(p);
+                }
+                if (inside(p) != inside(q)) {
+                    const double t = (x - p.first) / (q.first - p.first);
+                    res.emplace_back(x, p.second + t * (q.second - p.second));
+                }
+            }
+            if (!res.empty()) {
+                res.push_back(res.front());
+            }
+            return res;
+        };
+        const auto piece = clip(clip(u, a, true), b, false);
+        if (piece.size() < 4) {
+            continue;
+        }
+        std::vector<LonLatE6> r;
+        for (const auto& [x, y] : piece) {
+            // On a strip's meridian: a micro-degree inside it.
+            const double xi = x <= a ? a + 1 : x >= b ? b - 1 : x;
+            int64_t lon = lon0 + std::llround(xi) - k * turn;
+            lon += lon > half ? -turn : lon < -half ? turn : 0;
+            const LonLatE6 pt{static_cast<int32_t>(lon), static_cast<int32_t>(std::llround(y))};
+            if (r.empty() || !(r.back() == pt)) {
+                r.push_back(pt);
+            }
+        }
+        if (r.size() >= 4 && r.front() == r.back()) {
+            out.push_back(std::move(r));
+        }
+    }
+    return out.empty() ? std::vector<std::vector<LonLatE6>>{ring} : out;
+}
+
 std::optional<LonLatE6> intpt(OGRFeatureH f, int lat_i, int lon_i)
 {
     if (lat_i < 0 || lon_i < 0 || !OGR_F_IsFieldSetAndNotNull(f, lat_i) || !OGR_F_IsFieldSetAndNotNull(f, lon_i)) {
@@ -580,11 +846,16 @@ void read_polygon_file(const IngestConfig& cfg, const fs::path& path, RawMap& ra
                     if (!(ring.front() == ring.back())) {
                         ring.push_back(ring.front());
                     }
-                    // Exterior rings counter-clockwise, holes clockwise: the unit is on the left.
-                    const int o = ring_orientation(ring);
-                    const bool unit_left = ri == 0 ? o >= 0 : o <= 0;
-                    u.weight += (ri == 0 ? 1 : -1) * std::fabs(ring_area_deg2(ring));
-                    raw.add_polyline(ring, unit_left ? unit : no_unit, unit_left ? no_unit : unit, c, 0, {file, index});
+                    // Cut where the projection tears the globe, then checked.
+                    for (auto& piece : split_at_cut(ring, cfg.projection)) {
+                        fit_to_globe(piece, cfg.projection, where);
+                        // Exterior rings counter-clockwise, holes clockwise: the unit is on the left.
+                        const int o = ring_orientation(piece);
+                        const bool unit_left = ri == 0 ? o >= 0 : o <= 0;
+                        u.weight += (ri == 0 ? 1 : -1) * std::fabs(ring_area_deg2(piece));
+                        raw.add_polyline(piece, unit_left ? unit : no_unit, unit_left ? no_unit : unit, c, 0,
+                                         {file, index});
+                    }
                 }
             }
             raw.units.push_back(std::move(u));
@@ -626,6 +897,7 @@ void read_line_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw)
             for (int part = 0; part < nparts; ++part) {
                 snap_points(type == wkbLineString ? g : OGR_G_GetGeometryRef(g, part), pts, where);
                 raw.points_read += pts.size();
+                fit_to_globe(pts, cfg.projection, where);
                 raw.add_polyline(pts, no_unit, no_unit, c, 0, {file, index});
             }
         });
