@@ -238,14 +238,24 @@ void snap_points(OGRGeometryH g, std::vector<LonLatE6>& out, const std::string& 
 ///     180), its segments kept as they are.
 ///  3. A segment crossing the cut the short way round is refused too.
 /// Other projections are left as they are (Transverse Mercator's domain
-/// ends 30 degrees from its central meridian).
+/// ends 30 degrees from its central meridian). Everywhere but on a conic
+/// cut there, longitude -180 is written 180 first (one meridian, one key).
 void fit_to_globe(std::vector<LonLatE6>& pts, const ProjectionParams& proj, const std::string& where)
 {
-    if (proj.kind != ProjectionParams::Kind::albers && proj.kind != ProjectionParams::Kind::lcc) {
-        return;
-    }
     constexpr int64_t half = 180000000, turn = 2 * half, pole = 89900000;
     const int64_t lon0 = std::llround(proj.lon0_deg * 1e6);
+    const bool conic = proj.kind == ProjectionParams::Kind::albers || proj.kind == ProjectionParams::Kind::lcc;
+    // -180 and 180 are one meridian: where it is not the cut, one key, so
+    // that the parts of a unit cut there (Fiji, the Aleutians, Antarctica's
+    // seam) share their edges along it, which then are inner edges, gone.
+    if (!conic || std::llabs((180000000 - lon0) % turn) != half) {
+        for (auto& p : pts) {
+            p.lon = p.lon == -half ? static_cast<int32_t>(half) : p.lon;
+        }
+    }
+    if (!conic) {
+        return;
+    }
     // Longitude east of the central meridian, in (-180, 180] degrees (micro).
     auto east = [&](int64_t lon) {
         int64_t d = (lon - lon0) % turn;
@@ -329,77 +339,6 @@ void fit_to_globe(std::vector<LonLatE6>& pts, const ProjectionParams& proj, cons
     }
 }
 
-/// A ring that winds once round the globe (Antarctica's, closed along its
-/// pole from -180 to 180), unwrapped as `u` (winding: +-360 degrees, in
-/// micro-degrees), as a ring of the plane: from where it crosses a cut
-/// meridian once round to the same meridian a turn on, then along that
-/// meridian to the pole, along the pole (a degree a step: the conics draw a
-/// pole as an arc) back to the first crossing's meridian and to it; its
-/// points on the cut a micro-degree inside. The original ring if it crosses
-/// a cut more than once.
-std::vector<LonLatE6> around_pole(const std::vector<LonLatE6>& ring, const std::vector<std::pair<double, double>>& u,
-                                  int64_t winding, int64_t lon0)
-{
-    constexpr int64_t half = 180000000, turn = 2 * half, step = 1000000;
-    const size_t n = u.size() - 1; // the ring's points once; u[n] is u[0] a turn on
-    // Where the ring crosses a cut meridian x = half + k turn: once.
-    size_t at = n;
-    double c = 0;
-    int crossings = 0;
-    for (size_t i = 0; i < n; ++i) {
-        const double x0 = u[i].first, x1 = u[i + 1].first;
-        const double k0 = std::floor((x0 - double(half)) / double(turn)),
-                     k1 = std::floor((x1 - double(half)) / double(turn));
-        if (k0 != k1) {
-            crossings += int(std::fabs(k1 - k0));
-            if (at == n) {
-                at = i;
-                c = double(half) + std::max(k0, k1) * double(turn);
-            }
-        }
-    }
-    if (crossings != 1) {
-        return ring;
-    }
-    const double sign = winding > 0 ? 1.0 : -1.0;
-    const double pole = (ring[0].lat < 0 ? -90.0 : 90.0) * 1e6;
-    std::vector<std::pair<double, double>> path;
-    auto cross = [&](size_t i, double x) {
-        const double t = (x - u[i].first) / (u[i + 1].first - u[i].first);
-        return std::pair{x, u[i].second + t * (u[i + 1].second - u[i].second)};
-    };
-    const auto start = cross(at, c);
-    path.push_back(start);
-    for (size_t k = 1; k <= n; ++k) { // u[at + 1] ... round to u[at], a turn on
-        const size_t j = (at + k) % n;
-        const double shift = at + k >= n ? double(winding) : 0.0;
-        path.emplace_back(u[j].first + shift, u[j].second);
-    }
-    path.back() = cross(at, c); // the crossing again: replaced below a turn on
-    path.back().first = c + double(winding);
-    // Along the meridian to the pole, along the pole back, and up to the start.
-    const double end_x = path.back().first;
-    path.emplace_back(end_x, pole);
-    for (double x = end_x - sign * double(step); sign * (x - c) > 0; x -= sign * double(step)) {
-        path.emplace_back(x, pole);
-    }
-    path.emplace_back(c, pole);
-    path.push_back(start);
-    // Into longitudes: the strip between c and c + winding, its meridians a micro-degree inside.
-    const double lo = std::min(c, end_x), hi = std::max(c, end_x);
-    std::vector<LonLatE6> out;
-    for (const auto& [x, y] : path) {
-        const double xi = x <= lo ? lo + 1 : x >= hi ? hi - 1 : x;
-        int64_t lon = (lon0 + std::llround(xi)) % turn;
-        lon += lon > half ? -turn : lon < -half ? turn : 0;
-        const LonLatE6 pt{static_cast<int32_t>(lon), static_cast<int32_t>(std::llround(y))};
-        if (out.empty() || !(out.back() == pt)) {
-            out.push_back(pt);
-        }
-    }
-    return out;
-}
-
 /// A polygon ring cut along a conic's cut (the meridian opposite its
 /// central one), where the plane tears: the ring unwrapped the short way
 /// round from its first point, clipped to each strip of 360 degrees of
@@ -408,8 +347,9 @@ std::vector<LonLatE6> around_pole(const std::vector<LonLatE6>& ring, const std::
 /// a ring of its own moved back into [-180, 180], its points on the cut a
 /// micro-degree inside their side so that each maps to its own edge of the
 /// map. A ring that crosses nothing comes back alone (points that lie on
-/// the cut from its west side moved a micro-degree west of it too); a ring
-/// around a pole (it winds once round the globe) too, as it was. A piece
+/// the cut from its west side moved a micro-degree west of it too). A ring
+/// round a pole (it winds once round the globe) is first closed along the
+/// pole, a degree a step (the cones draw a pole as an arc). A piece
 /// that leaves and enters a strip more than once keeps its parts joined
 /// along the cut (ingest then reports the overlap).
 std::vector<std::vector<LonLatE6>> split_at_cut(const std::vector<LonLatE6>& ring, const ProjectionParams& proj)
@@ -434,7 +374,17 @@ std::vector<std::vector<LonLatE6>> split_at_cut(const std::vector<LonLatE6>& rin
         u.emplace_back(double(e), double(ring[i].lat));
     }
     if (const int64_t winding = std::llround(u.back().first - u.front().first); winding != 0) {
-        return {around_pole(ring, u, winding, lon0)};
+        // Round a pole: closed along it (a degree a step, an arc on the
+        // cones) back to where it started, it winds no more, and is cut as
+        // any other ring.
+        constexpr int64_t step = 1000000;
+        const double pole = (ring[0].lat < 0 ? -90.0 : 90.0) * 1e6, x0 = u.front().first, x1 = u.back().first;
+        const double dir = x1 > x0 ? -1.0 : 1.0; // from x1 back to x0
+        for (double x = x1; dir * (x0 - x) > 0; x += dir * double(step)) {
+            u.emplace_back(x, pole);
+        }
+        u.emplace_back(x0, pole);
+        u.push_back(u.front());
     }
     double lo = INFINITY, hi = -INFINITY;
     for (const auto& [x, y] : u) {
