@@ -392,10 +392,8 @@ std::vector<std::vector<LonLatE6>> split_at_cut(const std::vector<LonLatE6>& rin
         hi = std::max(hi, x);
     }
     const auto k_lo = int64_t(std::floor((lo + double(half)) / double(turn)));
-    auto k_hi = int64_t(std::floor((hi + double(half)) / double(turn)));
-    if (hi == double(half) + double(k_hi - 1) * double(turn) + double(turn) && k_hi > k_lo) {
-        --k_hi; // a ring touching a strip's east meridian from the west lies in that strip
-    }
+    // A strip the ring only touches gives a piece of under 4 points, left out below.
+    const auto k_hi = int64_t(std::floor((hi + double(half)) / double(turn)));
     std::vector<std::vector<LonLatE6>> out;
     for (int64_t k = k_lo; k <= k_hi; ++k) {
         const double a = double(-half + k * turn), b = double(half + k * turn);

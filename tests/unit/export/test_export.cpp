@@ -9,6 +9,7 @@
 #include "formats/chains/chain_store.hpp"
 #include "stages/export/lonlat_line.hpp"
 #include "stages/pack/packer.hpp"
+#include "../../support/ground_distance.hpp"
 #include "../../support/run_tool.hpp"
 
 #include <gdal.h>
@@ -26,32 +27,6 @@ using chains::ChainStore;
 using Pts = std::vector<GridPoint>;
 
 namespace {
-
-/// The ground distance in metres from lon/lat point (lon, lat) to the image
-/// of grid segment ab: the geodesic to 400 points of it, refined around the
-/// nearest by ternary search.
-double ground_to_segment_m(const Projection& proj, double lon, double lat, GridPoint a, GridPoint b)
-{
-    auto g = [&](double t) {
-        double slon = 0, slat = 0;
-        proj.to_lonlat(a.x + t * (double(b.x) - a.x), a.y + t * (double(b.y) - a.y), slon, slat);
-        return proj.geodesic_m(lon, lat, slon, slat);
-    };
-    int best = 0;
-    for (int i = 1; i <= 400; ++i) {
-        best = g(i / 400.0) < g(best / 400.0) ? i : best;
-    }
-    double lo = std::max(0.0, (best - 1) / 400.0), hi = std::min(1.0, (best + 1) / 400.0);
-    for (int it = 0; it < 60; ++it) {
-        const double m1 = lo + (hi - lo) / 3, m2 = hi - (hi - lo) / 3;
-        if (g(m1) < g(m2)) {
-            hi = m2;
-        } else {
-            lo = m1;
-        }
-    }
-    return std::min(g(best / 400.0), g(0.5 * (lo + hi)));
-}
 
 Pts long_chain(const Projection& proj, const std::vector<std::pair<double, double>>& lonlat)
 {
@@ -210,7 +185,7 @@ TEST_F(Export, InLonLatSegmentsAreDensifiedWithinTheStatedBow)
                 const double t = j / 8.0;
                 const double lon = ll[i].first + t * (ll[i + 1].first - ll[i].first);
                 const double lat = ll[i].second + t * (ll[i + 1].second - ll[i].second);
-                worst = std::max(worst, ground_to_segment_m(proj, lon, lat, p0, p1));
+                worst = std::max(worst, tigerlod::testing::ground_to_segment_m(proj, lon, lat, p0, p1, 400));
             }
             double gx = 0, gy = 0;
             proj.forward(ll[i + 1].first, ll[i + 1].second, gx, gy);

@@ -12,6 +12,7 @@
 #include "simplification/simplifier.hpp"
 #include "stages/pack/packer.hpp"
 #include "stages/verify/verifier.hpp"
+#include "../../support/ground_distance.hpp"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -63,34 +64,12 @@ ChainStore alaska_line(bool north_leg = true, double east_deg = 25)
 }
 
 /// The least geodesic distance from grid point v to the ground image of
-/// grid segment ab, by sampling 200 points of it and refining around the
-/// best: the projection's lon/lat and GeographicLib's geodesic alone.
+/// grid segment ab, by brute force (200 samples, refined).
 double brute_ground_m(const Projection& proj, GridPoint v, GridPoint a, GridPoint b)
 {
     double vlon = 0, vlat = 0;
     proj.to_lonlat(v.x, v.y, vlon, vlat);
-    auto g = [&](double t) {
-        double lon = 0, lat = 0;
-        proj.to_lonlat(a.x + t * (double(b.x) - a.x), a.y + t * (double(b.y) - a.y), lon, lat);
-        return proj.geodesic_m(vlon, vlat, lon, lat);
-    };
-    constexpr int n = 200;
-    int best = 0;
-    for (int i = 1; i <= n; ++i) {
-        if (g(double(i) / n) < g(double(best) / n)) {
-            best = i;
-        }
-    }
-    double lo = std::max(0.0, double(best - 1) / n), hi = std::min(1.0, double(best + 1) / n);
-    for (int it = 0; it < 60; ++it) {
-        const double m1 = lo + (hi - lo) / 3, m2 = hi - (hi - lo) / 3;
-        if (g(m1) < g(m2)) {
-            hi = m2;
-        } else {
-            lo = m1;
-        }
-    }
-    return std::min(g(double(best) / n), g(0.5 * (lo + hi)));
+    return tigerlod::testing::ground_to_segment_m(proj, vlon, vlat, a, b, 200);
 }
 
 /// The largest ground distance over eps of any vertex `simp` skips.
