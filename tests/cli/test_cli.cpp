@@ -990,6 +990,8 @@ TEST_F(Cli, VerifyByPartitionsMergesToTheWholeRunsReport)
     expect_failure(run("verify", "--partitions 'tract/*'" + plan + "--report " + a + " --compare " + a + tail), 2,
                    "'--compare' goes with a whole run or '--finish'");
     expect_failure(run("verify", "--finish" + tail), 2, "'--finish' and '--shares LIST' go together");
+    expect_failure(run("verify", "--cgal --partitions 'tract/*'" + plan + "--report " + a + tail), 2,
+                   "'--cgal' checks the whole tree: with a whole run or '--finish', not '--partitions'");
     expect_failure(run("verify", "--partitions 'tract/99999'" + plan + "--report " + a + tail), 2,
                    "'tract/99999', which matches no chain store");
 }
