@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <optional>
 #include <sstream>
 
@@ -76,6 +77,30 @@ std::optional<double> number_of(const YAML::Node& n)
     } catch (const YAML::Exception&) {
     }
     return std::nullopt;
+}
+
+/// Throws config_error at the second of two equal keys in any mapping of
+/// the document: yaml-cpp reads the first, PyYAML (the workflow) the last,
+/// so a duplicate would give the stages and the workflow two ladders.
+void refuse_duplicate_keys(const ConfigFile& cfg, const YAML::Node& node)
+{
+    if (node.IsSequence()) {
+        for (const auto& item : node) {
+            refuse_duplicate_keys(cfg, item);
+        }
+    } else if (node.IsMap()) {
+        std::map<std::string, int> first_line;
+        for (const auto& kv : node) {
+            if (kv.first.IsScalar()) {
+                const auto [it, fresh] = first_line.emplace(kv.first.Scalar(), kv.first.Mark().line + 1);
+                if (!fresh) {
+                    cfg.fail(kv.first, "duplicate key '" + kv.first.Scalar() + "' (first at line " +
+                                           std::to_string(it->second) + "): give each key once");
+                }
+            }
+            refuse_duplicate_keys(cfg, kv.second);
+        }
+    }
 }
 
 class Checker {
@@ -240,6 +265,7 @@ ConfigFile ConfigFile::load(const fs::path& file)
     } catch (const YAML::Exception& e) {
         throw config_error(file.string() + ": cannot read: " + e.what());
     }
+    refuse_duplicate_keys(cfg, cfg.m_root);
     Checker(cfg).mapping(cfg.m_root, "");
     return cfg;
 }

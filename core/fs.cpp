@@ -2,6 +2,8 @@
 
 #include "core/errors.hpp"
 
+#include <nlohmann/json.hpp>
+
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
@@ -266,7 +268,69 @@ void refuse_to_replace_inputs(const fs::path& output, const std::vector<fs::path
                               (i == in.end() ? std::string("is the input ") : std::string("holds the input ")) +
                               input.string() + ", which this stage reads; write the output elsewhere");
         }
+        // in is one of out's parents: the output would be written into an
+        // input's folder (a level folder of an ingest output, a tree's
+        // tiles/), replacing or adding to what the stage reads.
+        std::error_code ec;
+        if ((i == in.end() || (std::next(i) == in.end() && i->empty())) && fs::is_directory(in, ec)) {
+            throw usage_error(output.string() + ": lies inside the input " + input.string() +
+                              ", which this stage reads; write the output elsewhere");
+        }
     }
+}
+
+bool is_stage_output(const fs::path& folder)
+{
+    // Each stage's output folder holds manifest.json (tigerlod.manifest/1),
+    // render's summary.json (tigerlod.render-summary/1); read only their
+    // "schema", small files, so a damaged or foreign file is simply "not".
+    const std::pair<const char*, const char*> marks[] = {{"manifest.json", "tigerlod.manifest/"},
+                                                         {"summary.json", "tigerlod.render-summary/"}};
+    for (const auto& [file, schema] : marks) {
+        std::error_code ec;
+        const fs::path p = folder / file;
+        if (!fs::is_regular_file(p, ec) || fs::file_size(p, ec) > (1U << 24)) {
+            continue;
+        }
+        try {
+            const auto doc = nlohmann::json::parse(read_file(p));
+            if (doc.is_object() && doc.contains("schema") && doc["schema"].is_string() &&
+                doc["schema"].get<std::string>().rfind(schema, 0) == 0) {
+                return true;
+            }
+        } catch (const std::exception&) {
+            // not JSON, or unreadable: not a stage's mark
+        }
+    }
+    return false;
+}
+
+void refuse_to_replace_foreign(const fs::path& output)
+{
+    std::error_code ec;
+    if (!fs::is_directory(output, ec)) {
+        throw usage_error(output.string() + " exists and is not a folder: --overwrite replaces only a tigerlod "
+                                            "stage's output folder or an empty folder; remove it yourself or write "
+                                            "elsewhere");
+    }
+    if (is_stage_output(output)) {
+        return;
+    }
+    std::vector<std::string> names;
+    for (fs::directory_iterator it(output, ec), end; !ec && it != end; it.increment(ec)) {
+        names.push_back(it->path().filename().string());
+    }
+    if (ec) {
+        throw environment_error(output.string() + ": cannot list: " + ec.message());
+    }
+    if (names.empty()) {
+        return;
+    }
+    std::sort(names.begin(), names.end());
+    throw usage_error(output.string() + " is not a tigerlod stage's output (it holds " + names.front() +
+                      (names.size() > 1 ? " and " + std::to_string(names.size() - 1) + " more" : std::string()) +
+                      ", and no tigerlod manifest.json): --overwrite replaces only a stage's output or an empty "
+                      "folder; remove it yourself or write elsewhere");
 }
 
 namespace {
@@ -323,6 +387,9 @@ OutputDir::OutputDir(fs::path final_path, bool overwrite, const std::vector<fs::
     refuse_to_replace_inputs(m_final, inputs);
     if (fs::exists(m_final) && !overwrite) {
         throw usage_error(m_final.string() + " exists. Use --overwrite to replace it.");
+    }
+    if (fs::exists(m_final)) {
+        refuse_to_replace_foreign(m_final);
     }
     m_tmp = temp_sibling(m_final, ".tmp-");
     m_removed = remove_dead_leftovers(m_final.parent_path(), m_final.filename().string());

@@ -63,10 +63,22 @@ std::string read_file(const std::filesystem::path& path);
 bool write_file_if_changed(const std::filesystem::path& path, std::string_view data);
 
 /// Throws usage_error if writing `output` would replace or remove one of
-/// `inputs`: the same file or folder, or a folder that holds it (symbolic
-/// links and `..` resolved). A stage checks this before anything else, so
+/// `inputs` or write into it: the same file or folder, a folder that holds
+/// it, or a path inside an input folder (symbolic links and `..` resolved). A stage checks this before anything else,
+/// so
 /// `--overwrite` can never delete what the stage reads.
 void refuse_to_replace_inputs(const std::filesystem::path& output, const std::vector<std::filesystem::path>& inputs);
+
+/// Whether `folder` is a tigerlod stage's output: it holds manifest.json
+/// with the schema tigerlod.manifest/1 (render: summary.json,
+/// tigerlod.render-summary/1).
+bool is_stage_output(const std::filesystem::path& folder);
+
+/// Throws usage_error unless `output`, which exists, is a folder that
+/// --overwrite may replace: a tigerlod stage's output (is_stage_output) or
+/// an empty folder. The message names a file found there, so a folder of the
+/// user's (notes, a thesis) is never deleted by a mistyped OUTPUT.
+void refuse_to_replace_foreign(const std::filesystem::path& output);
 
 /// An output folder built under a temporary name and renamed into place by
 /// commit(). Destroyed without commit(), it removes what it wrote.
@@ -74,8 +86,9 @@ class OutputDir {
   public:
     /// Prepare `final_path`, removing what dead runs left beside it
     /// (remove_dead_leftovers). Throws usage_error if it would replace one of
-    /// `inputs` (refuse_to_replace_inputs) or if it exists and `overwrite` is
-    /// false ("Use --overwrite to replace it."), environment_error if the
+    /// `inputs` (refuse_to_replace_inputs), if it exists and `overwrite` is
+    /// false ("Use --overwrite to replace it."), or if it exists and is not a
+    /// stage's output or an empty folder (refuse_to_replace_foreign), environment_error if the
     /// temporary folder cannot be made.
     OutputDir(std::filesystem::path final_path, bool overwrite, const std::vector<std::filesystem::path>& inputs = {});
     OutputDir(const OutputDir&) = delete;

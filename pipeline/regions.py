@@ -1,6 +1,8 @@
 """pipeline/regions.py CONFIG CODES | --out CONFIG: for scripts/workflow.
 
-CONFIG CODES: the outputs of the jobs a region rebuild forces, one a line:
+CONFIG CODES: first the config is checked as the stages read it (a key
+given twice, a document that is not a mapping: one line and exit 2); then
+the outputs of the jobs a region rebuild forces, one a line:
 the color job (the simplify job where simplify.shortcut_test is exact) of
 every group of stores holding a store whose partition
 begins with one of the codes (its own stores and those below) or is part of
@@ -25,6 +27,54 @@ import sys
 import yaml
 
 
+class ConfigError(Exception):
+    pass
+
+
+class UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, refusing a key given twice in one mapping: the
+    stages (yaml-cpp) read the first, PyYAML the last, so a duplicate would
+    give the workflow and the stages two values."""
+
+    def construct_mapping(self, node, deep=False):
+        first = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            try:
+                line = first.setdefault(key, key_node.start_mark.line + 1)
+            except TypeError:  # an unhashable key: the stages refuse it
+                continue
+            if line != key_node.start_mark.line + 1:
+                raise ConfigError(f"{key_node.start_mark.line + 1}: duplicate key '{key}' "
+                                  f"(first at line {line}): give each key once")
+        return super().construct_mapping(node, deep)
+
+
+def die(message):
+    print(message, file=sys.stderr)
+    sys.exit(2)
+
+
+def check_config(path):
+    """The config as a dict, or a one-line message and exit 2 (the README's
+    promise for a bad config): not YAML, a key given twice, not a mapping."""
+    try:
+        with open(path) as f:
+            cfg = yaml.load(f, Loader=UniqueKeyLoader)
+    except OSError as e:
+        die(f"workflow: {path}: cannot read: {e.strerror}")
+    except ConfigError as e:
+        die(f"workflow: {path}:{e}")
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f":{mark.line + 1}" if mark is not None else ""
+        die(f"workflow: {path}{where}: not valid YAML: {getattr(e, 'problem', None) or e}")
+    if not isinstance(cfg, dict):
+        kind = "empty" if cfg is None else f"a {type(cfg).__name__}"
+        die(f"workflow: {path}: the config must be a mapping of keys (name, dataset, levels, ...), not {kind}")
+    return cfg
+
+
 def config_of(path):
     try:
         with open(path) as f:
@@ -39,7 +89,7 @@ def main():
         name = config_of(sys.argv[2]).get("name")
         print(f"out/{name}" if isinstance(name, str) and re.fullmatch(r"[a-z0-9_-]+", name) else "")
         return 0
-    cfg = config_of(sys.argv[1])
+    cfg = check_config(sys.argv[1])
     codes = sys.argv[2] if len(sys.argv) > 2 else ""
     if codes:
         regions = [c.strip() for c in codes.split(",") if c.strip()]

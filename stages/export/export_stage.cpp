@@ -1,6 +1,7 @@
 #include "stages/export/export_stage.hpp"
 
 #include "core/fs.hpp"
+#include "core/gdal_output.hpp"
 #include "core/manifest.hpp"
 #include "reader/tree_view.hpp"
 #include "simplification/stage_options.hpp"
@@ -16,6 +17,7 @@
 #include <filesystem>
 #include <map>
 #include <set>
+#include <utility>
 
 namespace fs = std::filesystem;
 
@@ -221,9 +223,9 @@ class Writer {
   public:
     /// `max_bow_m` > 0: lon/lat, densified to it; 0: the tree's projection.
     Writer(GDALDatasetH ds, bool with_chains, bool with_units, const Projection& proj, int lod, double eps_m,
-           double max_bow_m, std::map<std::string, double> class_scale, fs::path tmp)
+           double max_bow_m, std::map<std::string, double> class_scale, fs::path tmp, const GdalErrorTrap& trap)
         : m_proj(proj), m_lod(lod), m_eps_m(eps_m), m_max_bow_m(max_bow_m), m_class_scale(std::move(class_scale)),
-          m_tmp(std::move(tmp))
+          m_tmp(std::move(tmp)), m_trap(trap)
     {
         OGRSpatialReferenceH srs = nullptr;
         if (m_max_bow_m > 0) {
@@ -234,7 +236,7 @@ class Writer {
         }
         OSRSetAxisMappingStrategy(srs, OAMS_TRADITIONAL_GIS_ORDER);
         if (with_chains) {
-            m_chains = GDALDatasetCreateLayer(ds, "chains", srs, wkbLineString, nullptr);
+            m_chains = layer(ds, "chains", srs, wkbLineString);
             field(m_chains, "chain_id", OFTInteger64);
             field(m_chains, "node", OFTString);
             field(m_chains, "left", OFTString);
@@ -245,7 +247,7 @@ class Writer {
         }
         m_geographic = m_max_bow_m > 0;
         if (with_units) {
-            m_units = GDALDatasetCreateLayer(ds, "units", srs, wkbMultiPolygon, nullptr);
+            m_units = layer(ds, "units", srs, wkbMultiPolygon);
             field(m_units, "unit", OFTString);
             field(m_units, "node", OFTString);
             field(m_units, "lod", OFTInteger);
@@ -356,13 +358,25 @@ class Writer {
         }
         return ring;
     }
+    /// A new layer; throws environment_error (with GDAL's reason) if it cannot be made.
+    OGRLayerH layer(GDALDatasetH ds, const char* name, OGRSpatialReferenceH srs, OGRwkbGeometryType type) const
+    {
+        OGRLayerH l = GDALDatasetCreateLayer(ds, name, srs, type, nullptr);
+        if (l == nullptr) {
+            OSRDestroySpatialReference(srs);
+            throw environment_error("export: cannot create the layer " + std::string(name) + " in " + m_tmp.string() +
+                                    ": " + m_trap.first());
+        }
+        return l;
+    }
     /// Write feature `f` to `layer` and destroy it.
     void create(OGRLayerH layer, OGRFeatureH f) const
     {
-        const bool ok = OGR_L_CreateFeature(layer, f) == OGRERR_NONE;
+        const bool ok = layer != nullptr && OGR_L_CreateFeature(layer, f) == OGRERR_NONE;
         OGR_F_Destroy(f);
         if (!ok) {
-            throw environment_error("export: cannot write to " + m_tmp.string());
+            throw environment_error("export: cannot write to " + m_tmp.string() + ": " +
+                                    (m_trap.failed() ? m_trap.first() : std::string("GDAL refused a feature")));
         }
     }
 
@@ -373,6 +387,7 @@ class Writer {
     const std::map<std::string, double> m_class_scale;
     bool m_geographic = false;
     const fs::path m_tmp;
+    const GdalErrorTrap& m_trap;
     OGRLayerH m_chains = nullptr, m_units = nullptr;
     std::set<uint64_t> m_written;
 };
@@ -400,11 +415,12 @@ int ExportStage::run(const StageContext& ctx)
     log_removed_leftovers(ctx.log, remove_dead_leftovers(out.parent_path(), out.stem().string()));
     GDALAllRegister();
     GDALDriverH driver = GDALGetDriverByName(gpkg ? "GPKG" : "GeoJSON");
+    GdalErrorTrap trap; // every write's and the close's errors (a full disk), checked at the close
     TempDataset g;
     g.path = tmp;
     g.ds = GDALCreate(driver, tmp.c_str(), 0, 0, 0, GDT_Unknown, nullptr);
     if (g.ds == nullptr) {
-        throw environment_error("export: cannot create " + tmp.string() + ": " + CPLGetLastErrorMsg());
+        throw environment_error("export: cannot create " + tmp.string() + ": " + trap.first());
     }
     // The bow allowed in lon/lat: a fraction of the LOD's eps (LOD 0: of the ladder's smallest).
     const double bow_eps = lod > 0 ? s.lod_eps_m[lod] : s.lod_eps_m.size() > 1 ? s.lod_eps_m[1] : 1.0;
@@ -422,7 +438,7 @@ int ExportStage::run(const StageContext& ctx)
         // A tree without pack's manifest (made by hand): the LOD's eps for every chain.
     }
     Writer writer(g.ds, gpkg || m_layer == "chains", gpkg || m_layer == "units", proj, m_lod, s.lod_eps_m[lod],
-                  max_bow_m, std::move(class_scale), tmp);
+                  max_bow_m, std::move(class_scale), tmp, trap);
     const auto home =
         writer.writes_units() ? home_nodes(*tree, nodes) : std::map<std::string, std::pair<size_t, uint32_t>>{};
     for (uint32_t n : nodes) {
@@ -431,8 +447,15 @@ int ExportStage::run(const StageContext& ctx)
         writer.write_chains(m, code);
         writer.write_units(m, code, n, home);
     }
-    GDALClose(g.ds);
-    g.ds = nullptr;
+    std::map<std::string, int64_t> expected;
+    if (gpkg || m_layer == "chains") {
+        expected["chains"] = static_cast<int64_t>(writer.chains);
+    }
+    if (writer.writes_units()) {
+        expected["units"] = static_cast<int64_t>(writer.units);
+    }
+    GDALDatasetH ds = std::exchange(g.ds, nullptr);
+    close_and_check(ds, tmp, expected, trap, "export");
     sync_to_disk(tmp);
     std::error_code ec;
     fs::rename(tmp, out, ec);

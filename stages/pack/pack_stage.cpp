@@ -283,6 +283,22 @@ int PackStage::run(const StageContext& ctx)
     add_input(manifest, "simplify", simplified);
     manifest["options"] = {{"tile_mb", m_tile_mb}, {"draco_speed", m_draco_speed}};
     manifest["simplify"] = simplified.doc.at("options");
+    // A tree this run began (there was no OUTPUT) is removed whole if the
+    // run fails before its report is written (a full disk): nothing
+    // half-written is left. An existing tree keeps its old tiles
+    // (write_tree removes only the tiles it added).
+    struct FreshTree {
+        fs::path path;
+        bool fresh;
+        bool done = false;
+        ~FreshTree()
+        {
+            if (fresh && !done) {
+                std::error_code ec;
+                fs::remove_all(path, ec);
+            }
+        }
+    } fresh_tree{m_output, !fs::exists(m_output)};
     const WriteStats ws = write_tree(m_output, tree, manifest_text(manifest));
     log_removed_leftovers(ctx.log, ws.leftovers_removed);
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -325,6 +341,7 @@ int PackStage::run(const StageContext& ctx)
     report["skeleton_fraction"] = ws.tree_bytes ? double(ws.skeleton_bytes) / double(ws.tree_bytes) : 0.0;
     report["seconds"] = seconds;
     write_file_atomic(fs::path(m_output) / "pack-report.json", report.dump(2) + "\n");
+    fresh_tree.done = true;
 
     std::printf("pack: %zu nodes, %zu tiles (%zu written, %zu kept, %zu repaired, %zu removed), %llu bytes\n",
                 tree.skeleton.nodes.size(), tree.skeleton.tiles.size(), ws.tiles_written, ws.tiles_kept,

@@ -4,6 +4,7 @@
 #include "config/schema.hpp"
 #include "core/digest.hpp"
 #include "core/fs.hpp"
+#include "core/gdal_output.hpp"
 #include "core/manifest.hpp"
 #include "core/partitions.hpp"
 #include "simplification/stage_options.hpp"
@@ -139,9 +140,10 @@ std::string key_of(const json& item)
 void write_gpkg(const fs::path& path, const Report& r)
 {
     GDALAllRegister();
+    GdalErrorTrap trap;
     GDALDatasetH ds = GDALCreate(GDALGetDriverByName("GPKG"), path.c_str(), 0, 0, 0, GDT_Unknown, nullptr);
     if (ds == nullptr) {
-        throw environment_error("verify: cannot create " + path.string() + ": " + CPLGetLastErrorMsg());
+        throw environment_error("verify: cannot create " + path.string() + ": " + trap.first());
     }
     OGRSpatialReferenceH srs = OSRNewSpatialReference(nullptr);
     OSRImportFromEPSG(srs, 4269);
@@ -152,12 +154,20 @@ void write_gpkg(const fs::path& path, const Report& r)
                                                            {"lod", OFTInteger},   {"node", OFTString},
                                                            {"chains", OFTString}, {"detail", OFTString}};
     for (const auto& [name, type] : fields) {
+        if (layer == nullptr) {
+            break;
+        }
         OGRFieldDefnH fd = OGR_Fld_Create(name, type);
         OGR_L_CreateField(layer, fd, TRUE);
         OGR_Fld_Destroy(fd);
     }
-    bool ok = true;
+    // One transaction for all the points: the file is whole or the error is seen.
+    const bool in_transaction = layer != nullptr && GDALDatasetStartTransaction(ds, FALSE) == OGRERR_NONE;
+    bool ok = layer != nullptr;
     for (const auto& v : r.items) {
+        if (!ok || trap.failed()) {
+            break;
+        }
         OGRFeatureH f = OGR_F_Create(OGR_L_GetLayerDefn(layer));
         OGR_F_SetFieldString(f, 0, v.kind.c_str());
         OGR_F_SetFieldString(f, 1, v.level.c_str());
@@ -168,13 +178,16 @@ void write_gpkg(const fs::path& path, const Report& r)
         OGRGeometryH pt = OGR_G_CreateGeometry(wkbPoint);
         OGR_G_SetPoint_2D(pt, 0, v.lon, v.lat);
         OGR_F_SetGeometryDirectly(f, pt);
-        ok = ok && OGR_L_CreateFeature(layer, f) == OGRERR_NONE;
+        ok = OGR_L_CreateFeature(layer, f) == OGRERR_NONE;
         OGR_F_Destroy(f);
     }
-    GDALClose(ds);
+    ok = ok && (!in_transaction || GDALDatasetCommitTransaction(ds) == OGRERR_NONE);
     if (!ok) {
-        throw environment_error("verify: cannot write " + path.string());
+        GDALClose(ds);
+        throw environment_error("verify: cannot write " + path.string() + ": " +
+                                (trap.failed() ? trap.first() : std::string("GDAL refused the layer or a point")));
     }
+    close_and_check(ds, path, {{"violations", static_cast<int64_t>(r.items.size())}}, trap, "verify");
 }
 
 } // namespace

@@ -1199,12 +1199,66 @@ TEST_F(Cli, NoStageWritesOverItsInputs)
     refused("verify", tree + " " + in + " " + tree, "is the input " + tree);
     refused("verify", tree + " " + in + " " + in, "is the input " + in);
     refused("export", tree + " " + tree, "is the input " + tree);
+    // An output inside an input folder would replace part of what it reads.
+    std::string level;
+    for (const auto& e : fs::directory_iterator(m_dir / "in")) {
+        if (e.is_directory()) {
+            level = e.path().string();
+        }
+    }
+    ASSERT_FALSE(level.empty());
+    refused("color", in + " " + level + " --tolerances 8", "lies inside the input " + in);
+    refused("simplify", in + " " + colors + "/x --tolerances 8 --colors " + colors, "lies inside the input " + colors);
+    refused("verify", tree + " " + in + " " + tree + "/tiles", "lies inside the input " + tree);
+    refused("render", tree + " " + tree + "/tiles", "lies inside the input " + tree);
     // Everything is still there and still reads.
     EXPECT_TRUE(fs::exists(cfg));
     EXPECT_TRUE(fs::exists(m_dir / "in" / "manifest.json"));
     EXPECT_TRUE(fs::exists(m_dir / "colors" / "color-report.json"));
     EXPECT_TRUE(fs::exists(m_dir / "simp" / "simplify-report.json"));
     EXPECT_EQ(run("verify", tree + " " + in + " " + out()).code, 0) << slurp(m_dir / "stderr");
+}
+
+TEST_F(Cli, OverwriteReplacesOnlyAStagesOutputOrAnEmptyFolder)
+{
+    // --overwrite onto a folder of the user's (no tigerlod manifest): exit 2
+    // naming a file found there, the folder untouched, for every stage that
+    // writes a folder; onto an empty folder or a stage's output: done.
+    make_tiger();
+    const fs::path cfg = tiger_config();
+    const std::string in = (m_dir / "in").string(), simp = (m_dir / "simp").string(), tree = (m_dir / "tree").string();
+    ASSERT_EQ(run("ingest", cfg.string() + " " + in).code, 0);
+    ASSERT_EQ(run("simplify", in + " " + simp + " --tolerances 8").code, 0);
+    ASSERT_EQ(run("pack", in + " " + simp + " " + tree).code, 0) << slurp(m_dir / "stderr");
+    const fs::path mine = m_dir / "thesis";
+    fs::create_directories(mine / "chapters");
+    std::ofstream(mine / "notes.txt") << "years of work";
+    const std::vector<std::pair<std::string, std::string>> stages = {
+        {"ingest", cfg.string() + " "},
+        {"color", in + " --tolerances 8 "},
+        {"simplify", in + " --tolerances 8 "},
+        {"verify", tree + " " + in + " "},
+        {"render", "--mode none --frames 2 --size 32x32 " + tree + " "},
+        {"synth", "--states 1 --counties-per-state 2 "},
+    };
+    for (const auto& [tool, args] : stages) {
+        const Result r = run(tool, args + mine.string() + " --overwrite");
+        EXPECT_EQ(r.code, 2) << tool << ": " << r.err;
+        EXPECT_NE(r.err.find(mine.string() + " is not a tigerlod stage's output (it holds chapters and 1 more"),
+                  std::string::npos)
+            << tool << ": " << r.err;
+        EXPECT_EQ(slurp(mine / "notes.txt"), "years of work") << tool;
+        EXPECT_TRUE(fs::is_directory(mine / "chapters")) << tool;
+    }
+    // An empty folder is replaced, and then (a stage's output) again.
+    for (const auto& [tool, args] : stages) {
+        const fs::path dest = m_dir / ("empty-" + tool);
+        fs::create_directories(dest);
+        for (int twice = 0; twice < 2; ++twice) {
+            const Result r = run(tool, args + dest.string() + " --overwrite");
+            EXPECT_EQ(r.code, 0) << tool << ": " << r.err;
+        }
+    }
 }
 
 TEST_F(Cli, EveryConfigKeyOfAStageIsOneOfItsOptions)

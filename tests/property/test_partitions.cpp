@@ -42,7 +42,14 @@ std::pair<uint64_t, uint64_t> seed_range()
 {
     const char* env = std::getenv("TIGERLOD_PROPERTY_SEEDS");
     if (!env || !*env) {
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+        // Under the sanitizers one seed: they look for memory and thread
+        // faults, which the same code shows on any map (the line layers'
+        // three seeds took 632 s under ASan); the dev pass runs all three.
+        return {1, 1};
+#else
         return {1, 3};
+#endif
     }
     const std::string s = env;
     const auto dash = s.find('-');

@@ -71,6 +71,15 @@ if [ "$merged" != "1.0 3 5 9 6.0" ] || [ -e "$work/jobs/tract/bad.json" ]; then
   failures=$((failures + 1))
 fi
 
+# scripts/workflow on a bad config: one line naming the file (and line), exit 2, before Snakemake.
+printf 'name: a\ndataset: {kind: polygons, inputs: [x.shp]}\nname: b\n' >"$work/dup.yaml"
+printf -- '- name: a\n' >"$work/list.yaml"
+printf 'name: [\n' >"$work/bad.yaml"
+cd "$work" || exit 1
+expect 2 "dup.yaml:3: duplicate key 'name' \(first at line 1\)" "$repo/scripts/workflow" "$work/dup.yaml"
+expect 2 "list.yaml: the config must be a mapping of keys .*, not a list" "$repo/scripts/workflow" "$work/list.yaml"
+expect 2 "bad.yaml:2: not valid YAML" "$repo/scripts/workflow" "$work/bad.yaml"
+cd - >/dev/null || exit 1
 expect 2 "usage: scripts/bench-partitions" "$repo/scripts/bench-partitions"
 expect 2 "must be a finished scripts/workflow output" "$repo/scripts/bench-partitions" "$work/none"
 expect 2 "THREADS must be an integer >= 1, not '0'" "$repo/scripts/bench-partitions" "$work/none" 0

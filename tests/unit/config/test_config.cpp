@@ -149,4 +149,11 @@ TEST_F(ConfigFiles, ABadValueIsNamedByFileLineAndKey)
               f + ":2: unknown key 'dataset.fetch.from' (known: npm, into)");
     EXPECT_EQ(error_of("- a\n"), f + ":1: 'the config' must be a mapping");
     EXPECT_EQ(error_of("name: [\n").rfind(f + ":2: not valid YAML: ", 0), 0U); // yaml-cpp's words follow
+    // A key given twice (yaml-cpp reads the first, the workflow's PyYAML the
+    // last): refused at the second, anywhere in the document.
+    EXPECT_EQ(error_of("name: a\nname: b\n"), f + ":2: duplicate key 'name' (first at line 1): give each key once");
+    EXPECT_EQ(error_of("simplify:\n  tolerances_m: [1, 2]\n  threads: 1\n  tolerances_m: [4]\n"),
+              f + ":4: duplicate key 'tolerances_m' (first at line 2): give each key once");
+    EXPECT_EQ(error_of("levels:\n  - {name: a, code: X, name: b}\n"),
+              f + ":2: duplicate key 'name' (first at line 2): give each key once");
 }

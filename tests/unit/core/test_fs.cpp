@@ -132,6 +132,64 @@ TEST_F(Fs, AnOutputFolderCleansWhatADeadRunLeftBesideIt)
     EXPECT_THROW(OutputDir(m_dir / "out", false), usage_error);
 }
 
+TEST_F(Fs, OverwriteReplacesOnlyAStagesOutputOrAnEmptyFolder)
+{
+    // A folder of the user's is refused, naming a file in it, and kept.
+    fs::create_directories(m_dir / "thesis");
+    write_file(m_dir / "thesis" / "notes.txt", "years of work");
+    write_file(m_dir / "thesis" / "manifest.json", R"({"schema": "someone-else/1"})");
+    try {
+        OutputDir out(m_dir / "thesis", true);
+        FAIL() << "a folder that is no stage's output was accepted";
+    } catch (const usage_error& e) {
+        EXPECT_NE(std::string(e.what()).find("is not a tigerlod stage's output (it holds manifest.json and 1 more"),
+                  std::string::npos)
+            << e.what();
+    }
+    EXPECT_EQ(read_file(m_dir / "thesis" / "notes.txt"), "years of work");
+    // A file is refused too.
+    write_file(m_dir / "file", "x");
+    EXPECT_THROW(OutputDir(m_dir / "file", true), usage_error);
+    EXPECT_EQ(read_file(m_dir / "file"), "x");
+    // An empty folder, a stage's output (its manifest) and render's (its summary) are replaced.
+    fs::create_directories(m_dir / "empty");
+    fs::create_directories(m_dir / "stage");
+    write_file(m_dir / "stage" / "manifest.json", R"({"schema": "tigerlod.manifest/1", "stage": "color"})");
+    write_file(m_dir / "stage" / "store.tlc", "old");
+    fs::create_directories(m_dir / "render");
+    write_file(m_dir / "render" / "summary.json", R"({"schema": "tigerlod.render-summary/1"})");
+    for (const char* name : {"empty", "stage", "render"}) {
+        OutputDir out(m_dir / name, true);
+        write_file(out.path() / "new", "1");
+        out.commit();
+        EXPECT_EQ(read_file(m_dir / name / "new"), "1") << name;
+        EXPECT_FALSE(fs::exists(m_dir / name / "store.tlc")) << name;
+    }
+    // A damaged manifest is no stage's mark.
+    fs::create_directories(m_dir / "damaged");
+    write_file(m_dir / "damaged" / "manifest.json", R"({"schema": "tigerlod.manif)");
+    EXPECT_THROW(OutputDir(m_dir / "damaged", true), usage_error);
+}
+
+TEST_F(Fs, AnOutputInsideAnInputFolderIsRefused)
+{
+    fs::create_directories(m_dir / "ingest" / "county");
+    write_file(m_dir / "ingest" / "county" / "a.tlc", "store");
+    for (const fs::path& out :
+         {m_dir / "ingest" / "county", m_dir / "ingest" / "new", m_dir / "ingest" / "county" / "x"}) {
+        try {
+            refuse_to_replace_inputs(out, {m_dir / "ingest"});
+            FAIL() << out << " inside the input was accepted";
+        } catch (const usage_error& e) {
+            EXPECT_NE(std::string(e.what()).find("lies inside the input"), std::string::npos) << e.what();
+        }
+    }
+    EXPECT_EQ(read_file(m_dir / "ingest" / "county" / "a.tlc"), "store");
+    // A sibling, and a folder beside an input file, are fine.
+    EXPECT_NO_THROW(refuse_to_replace_inputs(m_dir / "color", {m_dir / "ingest"}));
+    EXPECT_NO_THROW(refuse_to_replace_inputs(m_dir / "ingest" / "out", {m_dir / "ingest" / "county" / "a.tlc"}));
+}
+
 TEST_F(Fs, AnOutputFolderKeepsTheTimesOfFilesWhoseBytesDidNotChange)
 {
     // A workflow engine reruns the jobs whose input files are newer than
@@ -142,7 +200,7 @@ TEST_F(Fs, AnOutputFolderKeepsTheTimesOfFilesWhoseBytesDidNotChange)
         write_file(out.path() / "same.tlc", "abc");
         write_file(out.path() / "changed.tlc", "abc");
         write_file(out.path() / "longer.tlc", "abc");
-        write_file(out.path() / "manifest.json", "{}");
+        write_file(out.path() / "manifest.json", R"({"schema": "tigerlod.manifest/1"})");
         fs::create_directories(out.path() / "level");
         write_file(out.path() / "level" / "deep.tlc", "deep");
         out.commit();
@@ -154,7 +212,7 @@ TEST_F(Fs, AnOutputFolderKeepsTheTimesOfFilesWhoseBytesDidNotChange)
     OutputDir out(m_dir / "out", true);
     out.keep_times_of_unchanged_files(".tlc");
     write_file(out.path() / "same.tlc", "abc");
-    write_file(out.path() / "manifest.json", "{}"); // the same bytes, another name: a new time
+    write_file(out.path() / "manifest.json", R"({"schema": "tigerlod.manifest/1"})"); // the same bytes: a new time
     write_file(out.path() / "changed.tlc", "abd");
     write_file(out.path() / "longer.tlc", "abcd");
     write_file(out.path() / "new.tlc", "abc");

@@ -1,0 +1,78 @@
+#include "core/gdal_output.hpp"
+
+#include "core/errors.hpp"
+
+#include <cpl_error.h>
+#include <ogr_api.h>
+
+namespace fs = std::filesystem;
+
+namespace tigerlod {
+
+namespace {
+
+void CPL_STDCALL trap_handler(CPLErr level, CPLErrorNum, const char* message)
+{
+    if (level == CE_Failure || level == CE_Fatal) {
+        static_cast<GdalErrorTrap*>(CPLGetErrorHandlerUserData())->record(message);
+    }
+}
+
+} // namespace
+
+GdalErrorTrap::GdalErrorTrap()
+{
+    CPLPushErrorHandlerEx(trap_handler, this);
+}
+
+GdalErrorTrap::~GdalErrorTrap()
+{
+    CPLPopErrorHandler();
+}
+
+void GdalErrorTrap::record(const char* message)
+{
+    if (m_count++ == 0) {
+        m_first = message != nullptr ? message : "";
+    }
+}
+
+void close_and_check(GDALDatasetH ds, const fs::path& path, const std::map<std::string, int64_t>& expected,
+                     const GdalErrorTrap& trap, const std::string& who)
+{
+    GDALClose(ds);
+    if (trap.failed()) {
+        throw environment_error(who + ": cannot write " + path.string() + ": " + trap.first());
+    }
+    // Read back: a writer that lost bytes without a word (a short write
+    // its driver did not check) leaves a file that does not open or holds
+    // fewer features.
+    GdalErrorTrap reading;
+    GDALDatasetH back = GDALOpenEx(path.c_str(), GDAL_OF_VECTOR | GDAL_OF_READONLY, nullptr, nullptr, nullptr);
+    if (back == nullptr) {
+        throw environment_error(who + ": " + path.string() +
+                                " was written but does not read back (a full disk or a failed device?): " +
+                                (reading.failed() ? reading.first() : std::string("GDAL cannot open it")));
+    }
+    std::string fault;
+    for (const auto& [name, count] : expected) {
+        OGRLayerH layer = GDALDatasetGetLayerByName(back, name.c_str());
+        const int64_t got = layer == nullptr ? -1 : OGR_L_GetFeatureCount(layer, TRUE);
+        if (got != count && fault.empty()) {
+            fault = layer == nullptr ? "no layer '" + name + "'"
+                                     : "layer '" + name + "' reads back " + std::to_string(got) + " features of " +
+                                           std::to_string(count);
+        }
+    }
+    GDALClose(back);
+    if (fault.empty() && reading.failed()) {
+        fault = reading.first();
+    }
+    if (!fault.empty()) {
+        throw environment_error(
+            who + ": " + path.string() +
+            " was written but does not read back whole (a full disk or a failed device?): " + fault);
+    }
+}
+
+} // namespace tigerlod

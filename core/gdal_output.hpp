@@ -1,0 +1,51 @@
+#pragma once
+/// @file gdal_output.hpp
+/// Writing a vector file with GDAL so that a failed write cannot pass:
+/// GDAL's C API drops some failures (GDALClose returns nothing before 3.7,
+/// and the GeoJSON and GeoPackage writers report a full disk, if at all,
+/// only through the error handler), so a writer that trusted return values
+/// alone would leave a cut-off file behind an exit 0. A GdalErrorTrap
+/// records every error GDAL raises on its thread while it lives, and
+/// close_and_check() closes the dataset, then reads the file back and
+/// compares each layer's feature count with what was written.
+
+#include <gdal.h>
+
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <string>
+
+namespace tigerlod {
+
+/// While it lives, the errors GDAL raises on this thread (CE_Failure and
+/// CE_Fatal) are kept here instead of printed; warnings are dropped.
+/// Nested traps each see their own errors only.
+class GdalErrorTrap {
+  public:
+    GdalErrorTrap();
+    ~GdalErrorTrap();
+    GdalErrorTrap(const GdalErrorTrap&) = delete;
+    GdalErrorTrap& operator=(const GdalErrorTrap&) = delete;
+
+    bool failed() const noexcept { return m_count > 0; }
+    /// The first error's message ("" if none).
+    const std::string& first() const noexcept { return m_first; }
+    /// Called by GDAL's handler; not for other use.
+    void record(const char* message);
+
+  private:
+    int m_count = 0;
+    std::string m_first;
+}; // class GdalErrorTrap
+
+/// Close `ds` (written to `path`) and make sure the file holds what was
+/// written: no error GDAL raised while `trap` lived (the writes and the
+/// close), the file opens again, and each layer named in `expected` has
+/// that many features. Throws environment_error naming `path` and the fault
+/// otherwise (exit 3: a full disk, a failed device); `who` prefixes the
+/// message ("export", "verify").
+void close_and_check(GDALDatasetH ds, const std::filesystem::path& path, const std::map<std::string, int64_t>& expected,
+                     const GdalErrorTrap& trap, const std::string& who);
+
+} // namespace tigerlod

@@ -1,0 +1,141 @@
+#!/usr/bin/env bash
+# A full disk under every stage and export format: each stage writes its
+# output onto a small tmpfs, at sizes from a few pages to nine tenths of
+# what the output needs, and must then exit 3 naming a path on that disk
+# with nothing left there (no temporary, no half-written output), or, where
+# the output fit, exit 0 with exactly the bytes of a run on a roomy disk.
+# Each stage must fail at one size at least and pass on a roomy tmpfs, so
+# the test cannot pass without running into the fault. Needs mount(8) for
+# tmpfs (root); skips (77) with a reason without it.
+#   tests/faults/test_full_disk.sh REPO BIN_DIR
+set -uo pipefail
+repo=$(cd "$1" && pwd)
+bin=$(cd "$2" && pwd)
+work=$(mktemp -d "${TMPDIR:-/tmp}/tigerlod-disk-XXXXXX")
+mnt=$work/disk
+mkdir -p "$mnt"
+cleanup() {
+  mountpoint -q "$mnt" && umount "$mnt"
+  rm -rf "$work"
+}
+trap cleanup EXIT
+fail() {
+  echo "full disk: FAILED: $*"
+  exit 1
+}
+if ! mount -t tmpfs -o size=64k tmpfs "$mnt" 2>/dev/null; then
+  echo "full disk: skipped: cannot mount a tmpfs here (needs root and mount(8))"
+  exit 77
+fi
+umount "$mnt"
+# A hand-made map: 6 x 6 counties in 2 states, wavy borders (many vertices).
+python3 - "$work" <<'PY'
+import json, math, sys
+d = sys.argv[1]
+n, size, wave = 6, 0.5, 0.01
+def x(i, j): return -100 + i * size + (wave * math.sin(j * 7.3 + i) if 0 < i < n else 0)
+def y(i, j): return 40 + j * size + (wave * math.cos(i * 5.1 + j) if 0 < j < n else 0)
+def edge(a, b, steps=40):
+    return [(a[0] + (b[0] - a[0]) * t / steps, a[1] + (b[1] - a[1]) * t / steps) for t in range(steps)]
+def wobble(p, i, j):
+    return [p[0] + 0.002 * math.sin(p[1] * 97), p[1] + 0.002 * math.sin(p[0] * 89)]
+feats = []
+for i in range(n):
+    for j in range(n):
+        c = [(x(i, j), y(i, j)), (x(i + 1, j), y(i + 1, j)), (x(i + 1, j + 1), y(i + 1, j + 1)), (x(i, j + 1), y(i, j + 1))]
+        ring = []
+        for k in range(4):
+            ring += edge(c[k], c[(k + 1) % 4])
+        ring.append(ring[0])
+        code = ("01" if i < 3 else "02") + "%03d" % (i * n + j)
+        feats.append({"type": "Feature", "properties": {"code": code},
+                      "geometry": {"type": "Polygon", "coordinates": [[list(p) for p in ring]]}})
+json.dump({"type": "FeatureCollection", "features": feats}, open(f"{d}/map.geojson", "w"))
+open(f"{d}/map.yaml", "w").write(
+    "name: disk\ndataset: {kind: polygons, inputs: [map.geojson], code_field: code}\n"
+    "levels:\n  - {name: state, prefix: 2}\n  - {name: county, prefix: 5}\n"
+    "simplify: {tolerances_m: [50, 200], shortcut_test: exact}\n"
+    "render: {frames: 4, size: 64x64}\n")
+PY
+cfg=$work/map.yaml
+ref=$work/ref
+mkdir -p "$ref"
+# The stages as "NAME|COMMAND" with OUT where the output goes; each reads
+# the reference run's outputs of the stages before it.
+stages=(
+  "ingest|$bin/tigerlod-ingest $cfg OUT"
+  "color|$bin/tigerlod-color --config $cfg $ref/ingest OUT"
+  "simplify|$bin/tigerlod-simplify --config $cfg $ref/ingest OUT"
+  "pack|$bin/tigerlod-pack $ref/ingest $ref/simplify OUT"
+  "verify|$bin/tigerlod-verify $ref/pack $ref/ingest OUT"
+  "export.gpkg|$bin/tigerlod-export $ref/pack OUT"
+  "export.geojson|$bin/tigerlod-export --layer chains $ref/pack OUT"
+  "render|$bin/tigerlod-render --config $cfg --mode none $ref/pack OUT"
+)
+# What of an output must match the roomy run: every file's bytes, except a
+# GeoPackage's (its tables carry the time of writing), whose features must,
+# and the files that hold measured times (the stages' reports and ingest's
+# timings: JSON that must parse; render's frame times).
+canonical() {
+  local p=$1
+  if [ -d "$p" ]; then
+    (cd "$p" && find . -type f | LC_ALL=C sort | while read -r f; do
+      case "$f" in
+      *.gpkg) echo "$f"; ogrinfo -ro -al -q "$f" | grep -v "^INFO: Open" ;;
+      *-report.json | *-timings.json | ./summary.json) echo "$f"; python3 -c "import json,sys; json.load(open(sys.argv[1]))" "$f" || echo "not JSON" ;;
+      ./frames-*.csv) echo "$f" ;;
+      *) sha256sum "$f" ;;
+      esac
+    done)
+  else
+    case "$p" in
+    *.gpkg) ogrinfo -ro -al -q "$p" | grep -v "^INFO: Open" ;;
+    *) sha256sum <"$p" ;;
+    esac
+  fi
+}
+out_name() { # the output's name: a file for export
+  case "$1" in
+  export.gpkg) echo "out.gpkg" ;;
+  export.geojson) echo "out.geojson" ;;
+  *) echo "out" ;;
+  esac
+}
+passed=0
+for entry in "${stages[@]}"; do
+  name=${entry%%|*}
+  cmd=${entry#*|}
+  o=$(out_name "$name")
+  # The roomy run: the reference.
+  ${cmd//OUT/$ref/$o} >"$work/$name.log" 2>&1 || fail "$name on a roomy disk: $(cat "$work/$name.log")"
+  [ "$o" = out ] && mv "$ref/out" "$ref/$name" || mv "$ref/$o" "$ref/$name-$o"
+  refout=$ref/$name
+  [ "$o" = out ] || refout=$ref/$name-$o
+  want=$(canonical "$refout")
+  need=$(du -sb "$refout" | cut -f1)
+  failed_once=0
+  for size in 4096 $((need / 10)) $((need * 3 / 10)) $((need * 6 / 10)) $((need * 9 / 10)) $((need * 4 + 1048576)); do
+    [ "$size" -ge 4096 ] || size=4096
+    mount -t tmpfs -o "size=$size" tmpfs "$mnt" || fail "cannot mount a tmpfs of $size bytes"
+    ${cmd//OUT/$mnt/$o} >"$work/run.log" 2>&1
+    rc=$?
+    if [ "$rc" = 0 ]; then
+      [ "$(canonical "$mnt/$o")" = "$want" ] ||
+        fail "$name on $size bytes: exit 0 but not the roomy run's output: $(cat "$work/run.log")"
+      left=$(cd "$mnt" && find . -mindepth 1 -maxdepth 1 ! -name "$o")
+      [ -z "$left" ] || fail "$name on $size bytes: exit 0 but left beside the output: $left"
+    else
+      [ "$rc" = 3 ] || fail "$name on $size bytes: exit $rc, not 3: $(cat "$work/run.log")"
+      grep -q "$mnt" "$work/run.log" || fail "$name on $size bytes: the message names no path on the full disk: $(cat "$work/run.log")"
+      left=$(cd "$mnt" && find . -mindepth 1)
+      [ -z "$left" ] || fail "$name on $size bytes: exit 3 but left: $left ($(cat "$work/run.log"))"
+      failed_once=1
+    fi
+    umount "$mnt"
+  done
+  [ "$rc" = 0 ] || fail "$name: failed on a tmpfs four times its output's size"
+  [ "$failed_once" = 1 ] || fail "$name: never met the full disk (the test did not test it)"
+  echo "full disk: $name: exit 3 and nothing left where it did not fit, the same bytes where it did"
+  passed=$((passed + 1))
+done
+echo "$passed passed, 0 failed"
