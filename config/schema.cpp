@@ -137,8 +137,9 @@ std::vector<Key> stage_keys()
     return {
         section("simplify", "tigerlod-color and tigerlod-simplify"),
         entry("simplify.tolerances_m", Type::numbers,
-              "the ladder: increasing tolerances in ground metres; at most half of `ingest.halo_m`", "`[1, 4, 16, 64]`",
-              {0, inf, true}, {}, "tolerances", both),
+              "the ladder: increasing tolerances in ground metres, none below `projection.grid_m`; at most half of "
+              "`ingest.halo_m`",
+              "`[1, 4, 16, 64]`", {0.0001, 1e6}, {}, "tolerances", both),
         entry("simplify.metric", Type::choice, "distance metric of the tolerance", "`l2`", {}, {"l2", "l1", "linf"},
               "metric", both),
         entry("simplify.class_scale", Type::class_map, "feature class -> eps multiplier, e.g. `{S1400: 0.5}`", "none",

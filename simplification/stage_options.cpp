@@ -67,8 +67,11 @@ void CommonOptions::initialize(const std::string& stage)
         if (item.empty() || ec != std::errc() || p != item.data() + item.size()) {
             fail("tolerances", "has '" + item + "', not a number");
         }
-        if (!(v > 0) || !std::isfinite(v)) {
-            fail("tolerances", "has " + item + "; every tolerance must be > 0");
+        // The config's limits (config::key), so that the command line and
+        // the config refuse the same ladders: a kilometre-scale world map
+        // fits under 1e6 m, and nothing needs less than the finest grid.
+        if (const Limits& limits = config::key("simplify.tolerances_m").limits; !limits.contains(v)) {
+            fail("tolerances", "has " + item + "; every tolerance must be " + limits.text() + " metres");
         }
         if (!tolerances.empty() && v <= tolerances.back()) {
             fail("tolerances", "must increase: " + item + " follows " + previous);
@@ -266,6 +269,32 @@ void check_store(const chains::ChainStore& store, const StoreFile& file)
     if (!file.projection.empty() && p != file.projection) {
         throw input_error(file.path.string() + ": projection " + p + ", but tigerlod-ingest wrote the others in " +
                           file.projection + "; re-run tigerlod-ingest");
+    }
+}
+
+void check_ladder(const chains::ChainStore& store, const StoreFile& file, const std::vector<double>& tolerances,
+                  const SimplifyOptions& options)
+{
+    // Below the grid step a tolerance keeps every vertex, and its raster
+    // tiles (a few tolerances wide) would number in the trillions.
+    const double grid_m = store.projection.grid_m;
+    if (!tolerances.empty() && tolerances.front() < grid_m) {
+        throw usage_error(file.path.string() + ": tolerance " + std::to_string(tolerances.front()) +
+                          " m is below the store's grid step of " + std::to_string(grid_m) +
+                          " m (projection.grid_m): give tolerances of one grid step or more");
+    }
+    // Partitions are simplified independently only if each sees every
+    // chain within eps_i + eps_j of its own: its halo must be that wide.
+    double max_scale = 1.0;
+    for (const auto& [cls, f] : options.class_scale) {
+        max_scale = std::max(max_scale, f);
+    }
+    const double need = halo_needed_m(tolerances.back(), max_scale, options.metric);
+    if (store.partition != "all" && store.halo_m < need) {
+        throw usage_error(file.path.string() + ": cut with a halo of " + std::to_string(store.halo_m) +
+                          " m, but tolerance " + std::to_string(tolerances.back()) + " m needs at least " +
+                          std::to_string(need) + " m so that partitions cannot cross; re-run tigerlod-ingest " +
+                          "with a larger ingest.halo_m (or --halo-m), or lower the tolerances");
     }
 }
 

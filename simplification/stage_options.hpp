@@ -84,6 +84,14 @@ std::vector<StoreFile> list_stores(const std::filesystem::path& input, const std
 /// or grid than ingest wrote the others in.
 void check_store(const chains::ChainStore& store, const StoreFile& file);
 
+/// The ladder's rules that need the store, one check for color and
+/// simplify (the range is checked where the ladder is read): usage_error
+/// naming `file` if the smallest tolerance is below the store's grid step,
+/// or if the store is a partition whose halo is narrower than the largest
+/// tolerance needs (halo_needed_m).
+void check_ladder(const chains::ChainStore& store, const StoreFile& file, const std::vector<double>& tolerances,
+                  const SimplifyOptions& options);
+
 /// Read user point constraints: GeoJSON (Point / MultiPoint features) or CSV
 /// with lon and lat columns (header names lon/lng/longitude/x and lat/latitude/y).
 /// Throws input_error naming the file and line or feature.

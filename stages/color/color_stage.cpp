@@ -69,6 +69,7 @@ int ColorStage::run(const StageContext& ctx)
     for (const auto& sf : stores) {
         const auto store = chains::read(sf.path);
         simplify::check_store(store, sf);
+        simplify::check_ladder(store, sf, m_common.tolerances, m_common.options);
         for (size_t ti = 0; ti < m_common.tolerances.size(); ++ti) {
             const double eps_m = m_common.tolerances[ti];
             simplify::ColorResult r;

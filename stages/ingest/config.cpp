@@ -220,6 +220,7 @@ IngestConfig load_config(const fs::path& file)
     p.grid_m = ctx.get<double>("projection.grid_m", p.grid_m);
     cfg.halo_m = ctx.get<double>("ingest.halo_m", cfg.halo_m);
     if (const auto ladder = ctx.get<std::vector<double>>("simplify.tolerances_m", {}); !ladder.empty()) {
+        cfg.ladder_min_m = ladder.front();
         cfg.ladder_max_m = ladder.back(); // the schema checked that it increases
     }
     cfg.ladder_metric = parse_metric(ctx.get<std::string>("simplify.metric", "l2")).value_or(Metric::l2);

@@ -39,9 +39,10 @@ struct IngestConfig {
     std::vector<LevelSpec> levels;
     ProjectionParams projection;
     double halo_m = 1000.0;
-    /// The config's ladder (`simplify`), for --validate's halo rule: its
-    /// largest tolerance, its largest class scale (1 at least), its metric.
-    double ladder_max_m = 64.0, ladder_class_scale = 1.0;
+    /// The config's ladder (`simplify`), for --validate's rules: its
+    /// smallest and largest tolerance, its largest class scale (1 at least),
+    /// its metric.
+    double ladder_min_m = 1.0, ladder_max_m = 64.0, ladder_class_scale = 1.0;
     Metric ladder_metric = Metric::l2;
     /// A lines dataset is cut into square grid tiles of this side, in
     /// projected kilometres, each a partition; 0: one partition, `all`.

@@ -1338,7 +1338,16 @@ int IngestStage::run(const StageContext& ctx)
     const Projection projection(cfg.projection);
     ctx.log.info("config " + cfg.file.string() + ": " + projection.describe());
     if (m_validate) {
-        // The halo rule for the config's own ladder (simplify would refuse it later).
+        // The rules color and simplify hold the config's own ladder to
+        // (simplify::check_ladder; they would refuse it later): no
+        // tolerance below the grid step, and the halo rule.
+        if (cfg.ladder_min_m < cfg.projection.grid_m) {
+            std::ostringstream msg;
+            msg << cfg.file.string() << ": simplify.tolerances_m's smallest, " << cfg.ladder_min_m
+                << " m, is below projection.grid_m (" << cfg.projection.grid_m
+                << " m): give tolerances of one grid step or more";
+            throw config_error(msg.str());
+        }
         if (const double need = halo_needed_m(cfg.ladder_max_m, cfg.ladder_class_scale, cfg.ladder_metric);
             cfg.halo_m < need) {
             std::ostringstream msg;

@@ -170,22 +170,10 @@ int SimplifyStage::run(const StageContext& ctx)
 std::vector<ToleranceStats> SimplifyStage::simplify_one(const StoreFile& sf, const SimplifyOptions& so, Raster* raster,
                                                         const StageOutput& out) const
 {
-    double max_scale = 1.0;
-    for (const auto& [cls, f] : so.class_scale) {
-        max_scale = std::max(max_scale, f);
-    }
     std::vector<ToleranceStats> stats(m_common.tolerances.size());
     const auto store = chains::read(sf.path);
     check_store(store, sf);
-    // Partitions are simplified independently only if each sees every
-    // chain within eps_i + eps_j of its own: its halo must be that wide.
-    const double need = halo_needed_m(m_common.tolerances.back(), max_scale, so.metric);
-    if (store.partition != "all" && store.halo_m < need) {
-        throw usage_error(sf.path.string() + ": cut with a halo of " + std::to_string(store.halo_m) +
-                          " m, but tolerance " + std::to_string(m_common.tolerances.back()) + " m needs at least " +
-                          std::to_string(need) + " m so that partitions cannot cross; re-run tigerlod-ingest " +
-                          "with a larger ingest.halo_m (or --halo-m), or lower the tolerances");
-    }
+    check_ladder(store, sf, m_common.tolerances, so);
     if (so.point_constraints) {
         if (const auto fault = partition_contract_fault(store)) {
             throw input_error(sf.path.string() + ": " + *fault);

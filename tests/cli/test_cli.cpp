@@ -1092,8 +1092,16 @@ TEST_F(Cli, ColorAndSimplifyRejectBadInput)
     for (const char* tool : {"color", "simplify"}) {
         expect_failure(run(tool, in + " --tolerances ''"), 2, "is empty: give at least one tolerance");
         expect_failure(run(tool, in + " --tolerances 4,2"), 2, "must increase: 2 follows");
-        expect_failure(run(tool, in + " --tolerances 0,2"), 2, "every tolerance must be > 0");
-        expect_failure(run(tool, in + " --tolerances -1"), 2, "every tolerance must be > 0");
+        // One range for the command line and the config (the schema's), and
+        // the store's rules (simplify::check_ladder) in both stages alike.
+        for (const char* t : {"0,2", "-1", "1,1e308", "1e20", "1e-300", "2e6"}) {
+            expect_failure(run(tool, in + " --tolerances " + t), 2,
+                           "every tolerance must be in [0.0001, 1e+06] metres");
+        }
+        expect_failure(run(tool, in + " --tolerances 0.001,1"), 2,
+                       ".tlc: tolerance 0.001000 m is below the store's grid step of 0.010000 m");
+        expect_failure(run(tool, in + " --tolerances 1,600"), 2,
+                       ".tlc: cut with a halo of 1000.000000 m, but tolerance 600.000000 m needs at least");
         expect_failure(run(tool, in + " --tolerances 1,x"), 2, "has 'x', not a number");
         expect_failure(run(tool, in + " --metric l3"), 2, "must be l2, l1 or linf");
         expect_failure(run(tool, in + " --class-scale S1400"), 2, "expected CLASS=FACTOR");

@@ -140,7 +140,7 @@ TEST_F(ConfigFiles, ABadValueIsNamedByFileLineAndKey)
               f + ":3: 'simplify.tile_pixels' must be in 64..16384");
     EXPECT_EQ(error_of("simplify:\n  tolerances_m: [4, 1]\n"),
               f + ":2: 'simplify.tolerances_m' must increase: 1 follows 4");
-    EXPECT_EQ(error_of("simplify:\n  tolerances_m: [0, 1]\n"), f + ":2: 'simplify.tolerances_m'[0] must be > 0");
+    EXPECT_EQ(error_of("simplify:\n  tolerances_m: [0, 1]\n"), f + ":2: 'simplify.tolerances_m'[0] must be in [0.0001, 1e+06]");
     EXPECT_EQ(error_of("simplify:\n  class_scale: {S1400: 0}\n"), f + ":2: 'simplify.class_scale'[S1400] must be > 0");
     EXPECT_EQ(error_of("simplify:\n  metric: l3\n"), f + ":2: 'simplify.metric' must be l2, l1 or linf, got 'l3'");
     EXPECT_EQ(error_of("verify: {threads: 2000}\n"), f + ":1: 'verify.threads' must be in 0..1024");
