@@ -17,6 +17,8 @@
 #include <string>
 #include <system_error>
 #include <fcntl.h>
+#include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 namespace fs = std::filesystem;
@@ -377,6 +379,56 @@ void keep_times(const fs::path& fresh, const fs::path& old_root, const std::stri
 }
 
 } // namespace
+
+FolderLock::FolderLock(const fs::path& folder, const std::string& who)
+{
+    for (;;) {
+        std::error_code ec;
+        fs::create_directories(folder, ec);
+        if (ec) {
+            throw environment_error(folder.string() + ": cannot create: " + ec.message());
+        }
+        m_fd = ::open(folder.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+        if (m_fd < 0) {
+            throw environment_error(folder.string() + ": cannot open to lock it: " + std::strerror(errno));
+        }
+        if (::flock(m_fd, LOCK_EX | LOCK_NB) != 0) {
+            if (errno != EWOULDBLOCK) {
+                const int err = errno;
+                ::close(m_fd);
+                throw environment_error(folder.string() + ": cannot lock: " + std::strerror(err));
+            }
+            std::fprintf(stderr, "%s: another run is updating %s; waiting for it\n", who.c_str(), folder.c_str());
+            int rc = 0;
+            while ((rc = ::flock(m_fd, LOCK_EX)) != 0 && errno == EINTR) {
+            }
+            if (rc != 0) {
+                const int err = errno;
+                ::close(m_fd);
+                throw environment_error(folder.string() + ": cannot lock: " + std::strerror(err));
+            }
+        }
+        // Still the folder of that name? The run we waited for may have
+        // removed it (a new output it could not finish).
+        struct stat held {
+        }, named{};
+        if (::fstat(m_fd, &held) == 0 && ::stat(folder.c_str(), &named) == 0 && held.st_dev == named.st_dev &&
+            held.st_ino == named.st_ino) {
+            break;
+        }
+        ::close(m_fd);
+        m_fd = -1;
+    }
+    std::error_code ec;
+    m_was_empty = fs::is_empty(folder, ec) && !ec;
+}
+
+FolderLock::~FolderLock()
+{
+    if (m_fd >= 0) {
+        ::close(m_fd); // releases the flock
+    }
+}
 
 OutputDir::OutputDir(fs::path final_path, bool overwrite, const std::vector<fs::path>& inputs)
     : m_final(std::move(final_path))

@@ -80,6 +80,29 @@ bool is_stage_output(const std::filesystem::path& folder);
 /// user's (notes, a thesis) is never deleted by a mistyped OUTPUT.
 void refuse_to_replace_foreign(const std::filesystem::path& output);
 
+/// An exclusive lock on a folder a stage updates in place (pack's tree),
+/// held while it lives: flock(2) on the folder itself, so no lock file is
+/// left in or beside it, and a run killed anywhere releases it. The folder
+/// is made if missing. A second run waits for the first (saying so on
+/// stderr) rather than interleaving its files with the first's; if the
+/// first removed the folder meanwhile (a new tree whose run failed), the
+/// lock is taken again on a fresh one.
+class FolderLock {
+  public:
+    /// Throws environment_error naming `folder` if it cannot be made,
+    /// opened or locked. `who` names the stage in the waiting message.
+    FolderLock(const std::filesystem::path& folder, const std::string& who);
+    FolderLock(const FolderLock&) = delete;
+    FolderLock& operator=(const FolderLock&) = delete;
+    ~FolderLock();
+    /// Whether the folder was empty when the lock was taken (a new output).
+    bool was_empty() const noexcept { return m_was_empty; }
+
+  private:
+    int m_fd = -1;
+    bool m_was_empty = false;
+}; // class FolderLock
+
 /// An output folder built under a temporary name and renamed into place by
 /// commit(). Destroyed without commit(), it removes what it wrote.
 class OutputDir {

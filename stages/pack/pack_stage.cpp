@@ -236,6 +236,25 @@ int PackStage::run(const StageContext& ctx)
         return run_partitions(ctx);
     }
     const auto t0 = std::chrono::steady_clock::now();
+    // One pack at a time on a tree: two interleaved would each remove the
+    // tiles the other's skeleton names.
+    const FolderLock lock(m_output, "pack");
+    // A tree this run began (no OUTPUT, or an empty folder, when the lock
+    // was taken) is removed whole if the run fails before its report is
+    // written (a full disk): nothing half-written is left. An existing tree
+    // keeps its old tiles (write_tree removes only the tiles it added).
+    struct FreshTree {
+        fs::path path;
+        bool fresh;
+        bool done = false;
+        ~FreshTree()
+        {
+            if (fresh && !done) {
+                std::error_code ec;
+                fs::remove_all(path, ec);
+            }
+        }
+    } fresh_tree{m_output, lock.was_empty()};
     PackOptions options;
     options.tile_bytes = static_cast<uint64_t>(m_tile_mb * 1024 * 1024);
     options.draco_speed = m_draco_speed;
@@ -283,22 +302,6 @@ int PackStage::run(const StageContext& ctx)
     add_input(manifest, "simplify", simplified);
     manifest["options"] = {{"tile_mb", m_tile_mb}, {"draco_speed", m_draco_speed}};
     manifest["simplify"] = simplified.doc.at("options");
-    // A tree this run began (there was no OUTPUT) is removed whole if the
-    // run fails before its report is written (a full disk): nothing
-    // half-written is left. An existing tree keeps its old tiles
-    // (write_tree removes only the tiles it added).
-    struct FreshTree {
-        fs::path path;
-        bool fresh;
-        bool done = false;
-        ~FreshTree()
-        {
-            if (fresh && !done) {
-                std::error_code ec;
-                fs::remove_all(path, ec);
-            }
-        }
-    } fresh_tree{m_output, !fs::exists(m_output)};
     const WriteStats ws = write_tree(m_output, tree, manifest_text(manifest));
     log_removed_leftovers(ctx.log, ws.leftovers_removed);
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
