@@ -44,6 +44,27 @@ std::vector<fs::path> store_files(const fs::path& dir)
     return out;
 }
 
+/// What differs between a tolerance folder's stores and ORIGINAL's (both
+/// sorted): the first store it lacks and the first it has beyond them, each
+/// with how many more.
+std::string store_difference(const std::vector<fs::path>& have, const std::vector<fs::path>& want)
+{
+    std::vector<fs::path> missing, extra;
+    std::set_difference(want.begin(), want.end(), have.begin(), have.end(), std::back_inserter(missing));
+    std::set_difference(have.begin(), have.end(), want.begin(), want.end(), std::back_inserter(extra));
+    auto named = [](const std::vector<fs::path>& v) {
+        return v.front().string() + (v.size() > 1 ? " and " + std::to_string(v.size() - 1) + " more" : "");
+    };
+    std::string text;
+    if (!missing.empty()) {
+        text = "it lacks " + named(missing);
+    }
+    if (!extra.empty()) {
+        text += (text.empty() ? "it has " : ", and has ") + named(extra) + ", which ORIGINAL has not";
+    }
+    return text;
+}
+
 /// Largest distance of an original vertex from the simplified chain, which must be a
 /// subsequence with the same endpoints; -1 if it is not.
 double deviation(std::span<const GridPoint> orig, std::span<const GridPoint> simp)
@@ -264,7 +285,8 @@ class TreeContext {
                 if (!m_some && files != m_rel) {
                     throw input_error(d.path().string() + ": its chain stores are not those of " + m_original.string() +
                                       " (" + std::to_string(files.size()) + " against " + std::to_string(m_rel.size()) +
-                                      ")");
+                                      "): " + store_difference(files, m_rel) +
+                                      "; re-run tigerlod-simplify on this ingest output");
                 }
                 eps_dirs.emplace_back(first.eps_m, d.path());
             }
