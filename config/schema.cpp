@@ -83,6 +83,11 @@ std::vector<Key> input_keys()
               "polygons: a feature whose `code_field` is empty (Natural Earth has some): `error` (ingest stops, "
               "exit 1, with their count and the first three) or `skip` (left out, counted and named on stderr)",
               "`error`", {}, {"error", "skip"}),
+        entry("dataset.duplicate_code", Type::choice,
+              "polygons: one code on several features of a file (a territory filed under its country's code): "
+              "`error` (ingest stops, exit 1, with their count and the first three) or `merge` (one unit in parts, "
+              "its borders between them gone, each named on stderr)",
+              "`error`", {}, {"error", "merge"}),
         entry("dataset.class_field", Type::text,
               "attribute stored as each chain's feature class (the class covering most of the chain)",
               "tiger: `MTFCC`"),

@@ -120,6 +120,7 @@ IngestConfig load_config(const fs::path& file)
         d.intpt_lat_field = ctx.get<std::string>("dataset.intpt_lat_field", "");
         d.intpt_lon_field = ctx.get<std::string>("dataset.intpt_lon_field", "");
         d.skip_empty_codes = ctx.get<std::string>("dataset.empty_code", "error") == "skip"; // a choice of the schema
+        d.merge_duplicate_codes = ctx.get<std::string>("dataset.duplicate_code", "error") == "merge";
     } else {
         ctx.fail(ds, "'dataset.kind' is required: tiger, polygons or lines");
     }

@@ -30,6 +30,7 @@ struct DatasetSpec {
     std::string class_field;                                 ///< feature class attribute (TIGER: MTFCC)
     std::string intpt_lat_field, intpt_lon_field;            ///< internal point attributes
     bool skip_empty_codes = false;                           ///< dataset.empty_code: skip (else error)
+    bool merge_duplicate_codes = false;                      ///< dataset.duplicate_code: merge (else error)
 };
 
 struct IngestConfig {

@@ -19,6 +19,7 @@
 #include <memory>
 #include <mutex>
 #include <numeric>
+#include <optional>
 #include <stdexcept>
 #include <unordered_map>
 
@@ -451,14 +452,52 @@ std::optional<LonLatE6> intpt(OGRFeatureH f, int lat_i, int lon_i)
     return snap_e6(lon, lat);
 }
 
+/// The first `n` characters of UTF-8 `text` (whole characters, never a
+/// byte inside one), or nullopt if it has fewer or is not UTF-8.
+std::optional<std::string> utf8_prefix(const std::string& text, size_t n)
+{
+    size_t i = 0;
+    for (size_t chars = 0; chars < n; ++chars) {
+        if (i >= text.size()) {
+            return std::nullopt;
+        }
+        const auto lead = static_cast<unsigned char>(text[i]);
+        const size_t len = lead < 0x80           ? 1
+                           : (lead >> 5) == 0x6  ? 2
+                           : (lead >> 4) == 0xE  ? 3
+                           : (lead >> 3) == 0x1E ? 4
+                                                 : 0;
+        if (len == 0 || i + len > text.size()) {
+            return std::nullopt;
+        }
+        for (size_t k = 1; k < len; ++k) {
+            if ((static_cast<unsigned char>(text[i + k]) & 0xC0) != 0x80) {
+                return std::nullopt;
+            }
+        }
+        i += len;
+    }
+    return text.substr(0, i);
+}
+
+/// A unit's code at `level`: the constant, the first `prefix` characters of
+/// the code field's `code_value` (input_error naming `where` if it is
+/// shorter: a prefix of it would be a made-up unit), or the fields joined.
 std::string level_code(const LevelSpec& level, OGRFeatureH f, const std::vector<int>& field_index,
-                       const std::string& code_value)
+                       const std::string& code_value, const std::string& where = "")
 {
     if (!level.code.empty()) {
         return level.code;
     }
     if (level.prefix > 0) {
-        return code_value.substr(0, static_cast<size_t>(level.prefix));
+        const auto prefix = utf8_prefix(code_value, static_cast<size_t>(level.prefix));
+        if (!prefix) {
+            throw input_error(where + ": code '" + code_value + "' is shorter than level '" + level.name +
+                              "' needs (its first " + std::to_string(level.prefix) +
+                              " characters), or not UTF-8: a shorter prefix would be a made-up unit; fix the code or "
+                              "the level's prefix");
+        }
+        return *prefix;
     }
     std::string s;
     for (int i : field_index) {
@@ -754,6 +793,11 @@ void read_polygon_file(const IngestConfig& cfg, const fs::path& path, RawMap& ra
         raw.files.push_back(src.name());
         uint64_t empty_codes = 0; // features with an empty code, and the first three
         std::string examples;
+        // Codes on more than one feature: the first feature of each code,
+        // how many features repeat one, and the first three.
+        std::unordered_map<std::string, std::string> first_of_code;
+        uint64_t repeated = 0;
+        std::string repeats;
         src.for_each([&](OGRFeatureH f, int64_t index) {
             const std::string where = src.name() + ":" + std::to_string(index);
             OGRGeometryH g = OGR_F_GetGeometryRef(f);
@@ -773,9 +817,15 @@ void read_polygon_file(const IngestConfig& cfg, const fs::path& path, RawMap& ra
                 }
                 return;
             }
+            if (const auto [it, fresh] = first_of_code.emplace(code, feature_name(f, index)); !fresh) {
+                if (++repeated <= 3) {
+                    repeats += (repeats.empty() ? "'" : ", '") + code + "' on " + it->second + " and " +
+                               feature_name(f, index);
+                }
+            }
             RawUnit u;
             for (size_t L = 0; L < cfg.levels.size(); ++L) {
-                u.codes.push_back(level_code(cfg.levels[L], f, fields[L], code));
+                u.codes.push_back(level_code(cfg.levels[L], f, fields[L], code, where));
             }
             u.intpt = intpt(f, lat_i, lon_i);
             u.source = {file, index};
@@ -808,6 +858,17 @@ void read_polygon_file(const IngestConfig& cfg, const fs::path& path, RawMap& ra
             }
             raw.units.push_back(std::move(u));
         });
+        if (repeated > 0) {
+            const std::string what = src.name() + ": " + std::to_string(repeated) + " feature" +
+                                     (repeated == 1 ? " repeats" : "s repeat") + " the '" + cfg.dataset.code_field +
+                                     "' of another (" + repeats + (repeated > 3 ? ", ..." : "") + ")";
+            if (!cfg.dataset.merge_duplicate_codes) {
+                throw input_error(what + ": give each unit its own code, or set dataset.duplicate_code: merge to "
+                                         "make each code one unit in parts");
+            }
+            std::fprintf(stderr, "tigerlod-ingest: %s merged, one unit a code (dataset.duplicate_code: merge)\n",
+                         what.c_str());
+        }
         if (empty_codes > 0) {
             const std::string what = src.name() + ": " + std::to_string(empty_codes) + " feature" +
                                      (empty_codes == 1 ? "" : "s") + " with an empty '" + cfg.dataset.code_field +

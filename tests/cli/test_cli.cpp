@@ -22,6 +22,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <regex>
 #include <sstream>
 #include <sys/wait.h>
 
@@ -1267,6 +1268,55 @@ TEST_F(Cli, OverwriteReplacesOnlyAStagesOutputOrAnEmptyFolder)
             EXPECT_EQ(r.code, 0) << tool << ": " << r.err;
         }
     }
+}
+
+TEST_F(Cli, UnitCodesAreCheckedNotMadeUp)
+{
+    // Squares 0.1 degree wide, each a feature with its code.
+    auto write_map = [&](const std::vector<std::pair<double, std::string>>& squares) {
+        std::ofstream out(m_dir / "map.geojson");
+        out << R"({"type": "FeatureCollection", "features": [)";
+        for (size_t i = 0; i < squares.size(); ++i) {
+            const double x = squares[i].first;
+            out << (i ? "," : "") << R"({"type": "Feature", "properties": {"code": ")" << squares[i].second
+                << R"("}, "geometry": {"type": "Polygon", "coordinates": [[[)" << x << ",40],[" << x + 0.1 << ",40],["
+                << x + 0.1 << ",40.1],[" << x << ",40.1],[" << x << ",40]]]}}";
+        }
+        out << "]}";
+    };
+    const std::string levels = "dataset: {kind: polygons, inputs: [map.geojson], code_field: code}\n"
+                               "levels:\n  - {name: state, prefix: 2}\n  - {name: county, prefix: 5}\n";
+    // One code on two features, apart or adjacent: stopped, both named.
+    for (const double second : {-99.0, -99.9}) {
+        write_map({{-100, "01001"}, {second, "01001"}});
+        expect_failure(run("ingest", config(levels).string() + " " + out()), 1,
+                       "map.geojson: 1 feature repeats the 'code' of another ('01001' on feature 0 and feature 1): "
+                       "give each unit its own code, or set dataset.duplicate_code: merge");
+    }
+    // Merged on request: one county in two parts, and said so.
+    std::ofstream(m_dir / "config.yaml") << "name: t\ndataset: {kind: polygons, inputs: [map.geojson], code_field: "
+                                            "code, duplicate_code: merge}\nlevels:\n  - {name: state, prefix: 2}\n"
+                                            "  - {name: county, prefix: 5}\n";
+    write_map({{-100, "01001"}, {-99.0, "01001"}});
+    const Result ok = run("ingest", (m_dir / "config.yaml").string() + " " + out());
+    ASSERT_EQ(ok.code, 0) << ok.err;
+    EXPECT_NE(ok.err.find("1 feature repeats the 'code' of another ('01001' on feature 0 and feature 1) merged"),
+              std::string::npos)
+        << ok.err;
+    EXPECT_TRUE(std::regex_search(ok.out, std::regex("county +1 +"))) << ok.out;
+    fs::remove_all(out());
+    // A code shorter than a level's prefix would make up a unit.
+    write_map({{-100, "01001"}, {-99.9, "0100"}});
+    expect_failure(run("ingest", config(levels).string() + " " + out()), 1,
+                   "map.geojson:1: code '0100' is shorter than level 'county' needs (its first 5 characters)");
+    // Prefixes count characters: a two-byte letter is never cut.
+    write_map({{-100, "\xc3\xa9"
+                      "1001"},
+               {-99.9, "\xc3\xa9"
+                       "1002"}});
+    const Result utf = run("ingest", config(levels).string() + " " + out());
+    ASSERT_EQ(utf.code, 0) << utf.err;
+    EXPECT_TRUE(fs::exists(m_dir / "out" / "county" / "%C3%A91.tlc")); // the state code is "\xc3\xa9" "1", whole
 }
 
 TEST_F(Cli, EveryConfigKeyOfAStageIsOneOfItsOptions)
