@@ -9,6 +9,7 @@
 #include <ogr_api.h>
 #include <ogr_srs_api.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstdio>
@@ -172,7 +173,10 @@ class Source {
         }
         throw input_error(where() + ": geometry type is " + OGRGeometryTypeToName(t) + ", " + what);
     }
-    /// Visit every feature; GDAL read errors become input_error naming the feature.
+    /// Visit every feature; GDAL read errors become input_error naming the
+    /// feature, and a layer without features is input_error too: every
+    /// input names part of the map, and an empty one (a cut-off download,
+    /// the wrong layer) would map nothing there with exit 0.
     template <class F> void for_each(F&& f)
     {
         ErrorCapture errors;
@@ -189,6 +193,10 @@ class Source {
             }
             f(feat.get(), index);
             ++index;
+        }
+        if (index == 0) {
+            throw input_error(where() + ": no features: an empty layer (a cut-off file, or the wrong layer?) maps "
+                                        "nothing; give inputs that hold features");
         }
     }
 
@@ -733,6 +741,60 @@ void read_edges_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw,
     }
 }
 
+/// Every face's boundary closes: at each end point of the edges that have
+/// the face on one side only, an even number of them meet. An edge missing
+/// from EDGES (a cut-off file, another vintage than FACES) leaves the
+/// faces on its sides open, which ingest would map as a wrong boundary and
+/// a later stage fail on; input_error names the face, the place and the
+/// EDGES files.
+void check_faces_close(const RawMap& raw, const std::string& edges_from)
+{
+    // (face, end point) once for each boundary edge of the face ending
+    // there; sorted, a point of the face is open where its run is odd.
+    std::vector<std::pair<uint32_t, uint64_t>> ends;
+    for (size_t p = 0; p < raw.polyline_count(); ++p) {
+        const uint32_t l = raw.left[p], r = raw.right[p];
+        if (l == r) {
+            continue; // inside one face (or outside every face given)
+        }
+        for (const uint32_t face : {l, r}) {
+            if (face != no_unit) {
+                ends.emplace_back(face, pack_key(raw.coords[raw.offsets[p]]));
+                ends.emplace_back(face, pack_key(raw.coords[raw.offsets[p + 1] - 1]));
+            }
+        }
+    }
+    std::sort(ends.begin(), ends.end());
+    // The first open face in unit order, at its smallest open point.
+    for (size_t i = 0; i < ends.size();) {
+        size_t j = i;
+        while (j < ends.size() && ends[j] == ends[i]) {
+            ++j;
+        }
+        if ((j - i) % 2 == 1) {
+            const uint32_t face = ends[i].first;
+            size_t count = 0;
+            for (size_t k = i; k < ends.size() && ends[k].first == face;) {
+                size_t m = k;
+                while (m < ends.size() && ends[m] == ends[k]) {
+                    ++m;
+                }
+                count += (m - k) % 2;
+                k = m;
+            }
+            const LonLatE6 at = unpack_key(ends[i].second);
+            const RawUnit& u = raw.units[face];
+            char where[96];
+            std::snprintf(where, sizeof where, "(%.6f, %.6f)", at.lon * 1e-6, at.lat * 1e-6);
+            throw input_error(edges_from + ": the boundary of face TFID " + std::to_string(u.sid) + " (" +
+                              raw.files[u.source.file] + ":" + std::to_string(u.source.feature) +
+                              ") does not close: " + std::to_string(count) + " loose ends, the first at " + where +
+                              ": an edge is missing (EDGES cut off, or of another vintage than FACES?)");
+        }
+        i = j;
+    }
+}
+
 void read_tiger(const IngestConfig& cfg, RawMap& raw, const Log& log)
 {
     std::unordered_map<int64_t, uint32_t> face_unit;
@@ -747,6 +809,8 @@ void read_tiger(const IngestConfig& cfg, RawMap& raw, const Log& log)
         read_edges_file(cfg, path, raw, face_unit, seen_tlid, false, faces_from);
         log.info("read " + path.string() + ": " + std::to_string(raw.polyline_count()) + " edges so far");
     }
+    check_faces_close(raw, cfg.dataset.edges.size() == 1 ? cfg.dataset.edges.front().filename().string()
+                                                         : "the EDGES files given");
 }
 
 /// Signed area sign of a ring in micro-degrees (exact).
@@ -1040,6 +1104,7 @@ void read_tiger_parts(const IngestConfig& cfg, unsigned threads, const Log& log,
             std::unordered_map<int64_t, uint32_t> face_unit, seen_tlid;
             read_faces_file(cfg, cfg.dataset.faces[i], part, face_unit);
             read_edges_file(cfg, cfg.dataset.edges[i], part, face_unit, seen_tlid, true, "");
+            check_faces_close(part, cfg.dataset.edges[i].filename().string());
         },
         take, only);
 }

@@ -609,6 +609,20 @@ TEST_F(Cli, EdgesAndFacesThatDoNotBelongTogetherAreRefused)
                    "edges.zip layer 'edges' and faces.zip share no face");
 }
 
+TEST_F(Cli, AFaceWhoseBoundaryDoesNotCloseIsRefused)
+{
+    // EDGES without edge 10 (between faces 102 and 103): both open, ingest
+    // exited 0 and a later stage failed.
+    make_tiger();
+    m_edges.pop_back();
+    const std::vector<std::string> ef = {"TLID", "TFIDL", "TFIDR", "MTFCC"};
+    write_shp(m_dir / "edges.shp", wkbLineString, ef, m_edges);
+    zip(m_dir / "edges.zip", shp_files(m_dir / "edges.shp"));
+    expect_failure(run("ingest", tiger_config().string() + " " + out()), 1,
+                   "edges.zip: the boundary of face TFID 102 (faces.zip:1) does not close: 2 loose ends, the first at "
+                   "(-95.999000, 40.001000): an edge is missing");
+}
+
 TEST_F(Cli, LevelsThatDoNotNestAreRefused)
 {
     make_tiger();
@@ -1317,6 +1331,15 @@ TEST_F(Cli, UnitCodesAreCheckedNotMadeUp)
     const Result utf = run("ingest", config(levels).string() + " " + out());
     ASSERT_EQ(utf.code, 0) << utf.err;
     EXPECT_TRUE(fs::exists(m_dir / "out" / "county" / "%C3%A91.tlc")); // the state code is "\xc3\xa9" "1", whole
+}
+
+TEST_F(Cli, AnInputWithoutFeaturesIsRefused)
+{
+    // An empty layer (a cut-off download, the wrong layer) would map nothing
+    // there with exit 0: exit 1 naming it, nothing written.
+    std::ofstream(m_dir / "empty.geojson") << R"({"type": "FeatureCollection", "features": []})";
+    expect_failure(run("ingest", config("dataset: {kind: lines, inputs: [empty.geojson]}\n").string() + " " + out()), 1,
+                   "empty.geojson layer 'empty': no features: an empty layer");
 }
 
 TEST_F(Cli, EveryConfigKeyOfAStageIsOneOfItsOptions)
