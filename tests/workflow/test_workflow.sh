@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The workflow as a user meets it after a bad night: a run killed with
 # SIGKILL resumes with scripts/workflow alone, a failing stage shows its
-# last log lines on the terminal, a config the pipeline cannot expand
+# last log lines on the terminal, a bad input file fixed recovers with the
+# same command, a config the pipeline cannot expand
 # says so in one line, and a synthetic nation runs from its config alone.
 # Needs Floyd from ../shared/data (skips, exit 77).
 #
@@ -105,6 +106,24 @@ fi
 grep -q "pipeline: ingest:whole failed (exit [0-9]); the last lines of out/bad/logs/ingest/whole.log:" bad.out ||
   fail "no log tail on the terminal: $(cat bad.out)"
 grep -q "tigerlod-ingest: .*tl_2020_51063_edges.zip" bad.out || fail "the stage's own message is not on the terminal"
+
+# 3b. A bad input file, then the file fixed: the same command recovers,
+# twice over (issue 54: a one-file dataset's plan kept the bad file's
+# digest, and its job refused the fixed file until --plan was run by hand).
+mkdir fix && python3 "$repo/tests/faults/make_map.py" fix && sed -i 's/^name: disk/name: fix/' fix/map.yaml
+cp fix/map.geojson fix/good.geojson
+for round in 1 2; do
+  head -c 1000 fix/good.geojson >fix/map.geojson
+  (cd fix && "$repo/scripts/workflow" map.yaml >"bad$round.out" 2>&1) && fail "round $round: a cut-off input file ran"
+  grep -q "tigerlod-ingest: map.geojson: " "fix/bad$round.out" || fail "round $round: no message naming the file: $(cat "fix/bad$round.out")"
+  cp fix/good.geojson fix/map.geojson
+  if ! (cd fix && "$repo/scripts/workflow" map.yaml >"fixed$round.out" 2>&1); then
+    fail "round $round: the run after the file was fixed failed: $(tail -20 "fix/fixed$round.out")"
+  fi
+  grep -q '"clean": true' fix/out/fix/reports/verify-report.json || fail "round $round: the fixed run's tree is not clean"
+done
+touch fix/map.geojson
+(cd fix && "$repo/scripts/workflow" map.yaml >touched.out 2>&1) || fail "a run after a touch failed: $(tail -20 fix/touched.out)"
 
 # 4. Configs the pipeline cannot expand: one line each, no traceback.
 grep -v '^name:' wf.yaml >noname.yaml
