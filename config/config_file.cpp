@@ -42,6 +42,8 @@ std::string wanted(const Key& k)
         return "a non-empty list";
     case Type::codes:
         return "a code or a list of codes, e.g. [51063, 51067]";
+    case Type::viewport:
+        return "WIDTHxHEIGHT, each " + k.limits.text();
     }
     return {};
 }
@@ -152,6 +154,11 @@ class Checker {
         case Type::path:
             if (!v.IsScalar()) {
                 wrong(v, k);
+            }
+            return;
+        case Type::viewport:
+            if (!v.IsScalar() || !parse_viewport(v.as<std::string>(), k.limits)) {
+                wrong(v, k, v.IsScalar() ? " (got '" + v.as<std::string>() + "')" : "");
             }
             return;
         case Type::choice: {

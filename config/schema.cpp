@@ -233,7 +233,8 @@ std::vector<Key> stage_keys()
         entry("render.budget_mb", Type::number,
               "out of core: a hard limit on every byte the reader holds, the skeleton included (MiB)", "25",
               {0, 1e6, true}, {}, "budget-mb", "render"),
-        entry("render.size", Type::text, "the viewport, `WIDTHxHEIGHT` pixels", "`1280x720`", {}, {}, "size", "render"),
+        entry("render.size", Type::viewport, "the viewport, `WIDTHxHEIGHT` pixels", "`1280x720`", integer(16, 16384),
+              {}, "size", "render"),
         entry("render.fps", Type::number,
               "frames a second the camera moves at (each frame starts on its slot; 0: back to back)", "30", {0, 1000},
               {}, "fps", "render"),
@@ -280,6 +281,8 @@ std::string type_text(const Key& k)
         return "list of levels";
     case Type::codes:
         return "code or list of codes";
+    case Type::viewport:
+        return "`WIDTHxHEIGHT`, each " + k.limits.text();
     }
     return {};
 }
@@ -308,6 +311,29 @@ const Key& key(std::string_view name)
     return *k;
 }
 
+std::optional<std::pair<unsigned, unsigned>> parse_viewport(std::string_view text, const Limits& limits)
+{
+    // Digits, one 'x', digits: nothing else (no sign, space or suffix).
+    const auto number = [&](std::string_view s) -> std::optional<unsigned> {
+        if (s.empty() || s.size() > 9 ||
+            !std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; })) {
+            return std::nullopt;
+        }
+        const auto n = static_cast<unsigned>(std::stoul(std::string(s)));
+        return limits.contains(n) ? std::optional<unsigned>(n) : std::nullopt;
+    };
+    const auto x = text.find('x');
+    if (x == std::string_view::npos) {
+        return std::nullopt;
+    }
+    const auto w = number(text.substr(0, x));
+    const auto h = number(text.substr(x + 1));
+    if (!w || !h) {
+        return std::nullopt;
+    }
+    return std::pair{*w, *h};
+}
+
 void add_option(ArgSet& args, std::string_view name, ArgSet::Target target)
 {
     const Key& k = key(name);
@@ -332,6 +358,9 @@ void add_option(ArgSet& args, std::string_view name, ArgSet::Target target)
     case Type::text:
         value_name = "TEXT";
         break;
+    case Type::viewport:
+        value_name = "WxH";
+        break;
     default:
         break;
     }
@@ -347,7 +376,7 @@ void add_option(ArgSet& args, std::string_view name, ArgSet::Target target)
     } else if (k.type == Type::choice) {
         help += ", one of " + choices_text(k.choices);
     } else if (!k.limits.text().empty()) {
-        help += (k.type == Type::numbers ? ", each " : ", ") + k.limits.text();
+        help += (k.type == Type::numbers || k.type == Type::viewport ? ", each " : ", ") + k.limits.text();
     }
     args.add(k.flag, target, help, value_name, k.type == Type::integer || k.type == Type::number ? k.limits : Limits{},
              k.type == Type::choice ? k.choices : std::vector<std::string>{});

@@ -11,8 +11,10 @@
 
 #include "core/stage.hpp"
 
+#include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 namespace tigerlod::config {
@@ -30,6 +32,7 @@ enum class Type {
     mapping,   ///< a section holding further keys
     levels,    ///< the list of semantic levels (checked by ingest, which knows the data)
     codes,     ///< a unit code or a list of them (strings or integers)
+    viewport,  ///< `WIDTHxHEIGHT` pixels, each an integer within Key::limits
 };
 
 struct Key {
@@ -62,6 +65,12 @@ const Key& key(std::string_view name);
 /// doc line as help, its limits and choices. A `boolean` key's target is the
 /// flag (true when given).
 void add_option(ArgSet& args, std::string_view name, ArgSet::Target target);
+
+/// A `viewport` value (`1280x720`): its width and height, each within
+/// `limits`; nullopt for anything else. The config loader and the stage
+/// option that mirrors the key (tigerlod-render --size) both use it, so they
+/// take the same values.
+std::optional<std::pair<unsigned, unsigned>> parse_viewport(std::string_view text, const Limits& limits);
 
 /// configs/README.md: the reference of every key, generated from the table.
 std::string reference_markdown();

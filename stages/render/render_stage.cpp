@@ -377,14 +377,14 @@ void RenderStage::add_args(ArgSet& args)
 
 void RenderStage::initialize()
 {
-    unsigned w = 0, h = 0;
-    char x = 0, extra = 0;
-    if (std::sscanf(m_size.c_str(), "%u%c%u%c", &w, &x, &h, &extra) != 3 || x != 'x' || w < 16 || h < 16 || w > 16384 ||
-        h > 16384) {
-        throw usage_error("render: option '--size' must be WIDTHxHEIGHT, each in 16..16384 (got '" + m_size + "')");
+    const auto& limits = config::key("render.size").limits;
+    const auto size = config::parse_viewport(m_size, limits);
+    if (!size) {
+        throw usage_error("render: option '--size' must be WIDTHxHEIGHT, each " + limits.text() + " (got '" + m_size +
+                          "')");
     }
-    m_width = w;
-    m_height = h;
+    m_width = size->first;
+    m_height = size->second;
     refuse_to_replace_inputs(m_output, {m_tree});
 }
 

@@ -507,6 +507,11 @@ TEST_F(Cli, EveryValidatedConfigKeyRejectsBadValues)
         {"simplify: {pixel_fraction: a}\n", "'simplify.pixel_fraction' must be a number"},
         {"pack: {tile_mb: big}\n", "'pack.tile_mb' must be a number"},
         {"pack: {threads: ~}\n", "'pack.threads' must be an integer"},
+        // Checked where the config is read (file and line), not left to
+        // render's option parser to blame `--size`.
+        {"render: {size: big}\n", "'render.size' must be WIDTHxHEIGHT, each in 16..16384 (got 'big')"},
+        {"render: {size: 10x10}\n", "'render.size' must be WIDTHxHEIGHT, each in 16..16384 (got '10x10')"},
+        {"render: {size: [1280, 720]}\n", "'render.size' must be WIDTHxHEIGHT, each in 16..16384"},
     };
     for (const auto& [extra, fragment] : cases) {
         SCOPED_TRACE(extra);

@@ -109,6 +109,19 @@ TEST(ConfigSchema, LimitsSayWhatTheyAllow)
     EXPECT_EQ(Limits{}.text(), "");
 }
 
+TEST(ConfigSchema, AViewportIsTwoIntegersInItsLimitsAndNothingElse)
+{
+    const auto& limits = config::key("render.size").limits;
+    using P = std::pair<unsigned, unsigned>;
+    EXPECT_EQ(config::parse_viewport("1280x720", limits), P(1280, 720));
+    EXPECT_EQ(config::parse_viewport("16x16384", limits), P(16, 16384));
+    for (const char* bad : {"big", "15x720", "1280x16385", "1280x", "x720", "1280X720", "1280x720x3", " 1280x720",
+                            "1280 x 720", "+1280x720", "-1x720", "1280.5x720", "99999999999x720", ""}) {
+        SCOPED_TRACE(bad);
+        EXPECT_FALSE(config::parse_viewport(bad, limits));
+    }
+}
+
 TEST_F(ConfigFiles, ASectionBecomesExactlyItsStagesFlags)
 {
     const fs::path file = write("name: t\n"
@@ -140,7 +153,8 @@ TEST_F(ConfigFiles, ABadValueIsNamedByFileLineAndKey)
               f + ":3: 'simplify.tile_pixels' must be in 64..16384");
     EXPECT_EQ(error_of("simplify:\n  tolerances_m: [4, 1]\n"),
               f + ":2: 'simplify.tolerances_m' must increase: 1 follows 4");
-    EXPECT_EQ(error_of("simplify:\n  tolerances_m: [0, 1]\n"), f + ":2: 'simplify.tolerances_m'[0] must be in [0.0001, 1e+06]");
+    EXPECT_EQ(error_of("simplify:\n  tolerances_m: [0, 1]\n"),
+              f + ":2: 'simplify.tolerances_m'[0] must be in [0.0001, 1e+06]");
     EXPECT_EQ(error_of("simplify:\n  class_scale: {S1400: 0}\n"), f + ":2: 'simplify.class_scale'[S1400] must be > 0");
     EXPECT_EQ(error_of("simplify:\n  metric: l3\n"), f + ":2: 'simplify.metric' must be l2, l1 or linf, got 'l3'");
     EXPECT_EQ(error_of("verify: {threads: 2000}\n"), f + ":1: 'verify.threads' must be in 0..1024");
