@@ -182,13 +182,6 @@ std::map<std::string, double> parse_class_scale(const std::string& list, const s
     return out;
 }
 
-std::string tolerance_dir(double eps_m)
-{
-    char buf[64];
-    std::snprintf(buf, sizeof buf, "eps-%gm", eps_m);
-    return buf;
-}
-
 std::vector<StoreFile> list_stores(const fs::path& input, const std::string& level)
 {
     std::error_code ec;

@@ -4,6 +4,7 @@
 /// their inputs and outputs.
 
 #include "core/manifest.hpp"
+#include "formats/chains/chain_store.hpp"
 #include "core/stage.hpp"
 #include "simplification/tolerances.hpp"
 
@@ -66,8 +67,8 @@ class CommonOptions {
 /// input_error naming the manifest if one is missing or malformed.
 SimplifyOptions tolerance_contract(const nlohmann::ordered_json& simplify_options, const std::string& where);
 
-/// Folder name of a tolerance: "eps-1m", "eps-0.5m".
-std::string tolerance_dir(double eps_m);
+/// Folder name of a tolerance: "eps-1m", "eps-0.5m" (the chain-store format's).
+using chains::tolerance_dir;
 
 /// Parse `--class-scale` (CLASS=FACTOR,...; FACTOR > 0). Throws usage_error naming `stage`.
 std::map<std::string, double> parse_class_scale(const std::string& list, const std::string& stage);

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <numeric>
@@ -376,6 +377,13 @@ std::string to_text(const ChainStore& s)
             << "\n";
     }
     return out.str();
+}
+
+std::string tolerance_dir(double eps_m)
+{
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "eps-%gm", eps_m);
+    return buf;
 }
 
 } // namespace tigerlod::chains

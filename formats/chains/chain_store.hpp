@@ -122,6 +122,11 @@ ChainStore read(const std::filesystem::path& path);
 /// "internal", "user" or "neighbour" (the text dump's and messages' name of a ConstraintKind).
 const char* constraint_kind_name(uint32_t kind) noexcept;
 
+/// The folder of a simplify output that holds the stores simplified at
+/// `eps_m`: "eps-1m", "eps-0.5m" (simplify writes there, pack reads a
+/// folder's tolerance from its name and holds each store to it).
+std::string tolerance_dir(double eps_m);
+
 /// Canonical sorted text of a store, one item per line, for diffs and goldens.
 std::string to_text(const ChainStore& store);
 

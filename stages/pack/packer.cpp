@@ -4,6 +4,7 @@
 #include "core/digest.hpp"
 #include "core/errors.hpp"
 #include "core/fs.hpp"
+#include "core/metric.hpp"
 #include "core/parallel.hpp"
 #include "formats/chains/chain_store.hpp"
 
@@ -229,9 +230,24 @@ class TreeContext {
             const auto stores = read_all(paths, m_options.threads);
             std::map<std::string, size_t> store_of;
             for (size_t s = 0; s < stores.size(); ++s) {
+                // As at LOD 0: a store holds the partition its name says (two
+                // files swapped would pack the same tree, but would leave
+                // simplify's next incremental run comparing the wrong stores).
+                if (stores[s].partition != paths[s].stem().string()) {
+                    throw input_error(paths[s].string() + ": holds partition " + stores[s].partition +
+                                      ", not the one its name says; re-run tigerlod-simplify on this ingest output");
+                }
                 store_of[stores[s].partition] = s;
-                if (stores[s].eps_m != m_lod_eps[k] || stores[s].metric != stores.front().metric) {
-                    throw input_error(paths[s].string() + ": tolerance or metric differs from its folder's");
+                // The folder's tolerance is its name's (find_lods), so a
+                // store that differs is itself the odd one out.
+                if (stores[s].eps_m != m_lod_eps[k]) {
+                    throw input_error(misplaced(paths[s], stores[s].eps_m, m_lod_dirs[k]));
+                }
+                if (stores[s].metric != stores.front().metric) {
+                    throw input_error(paths[s].string() + ": simplified in the metric " +
+                                      metric_name(Metric(stores[s].metric)) + ", " + paths.front().string() + " in " +
+                                      metric_name(Metric(stores.front().metric)) +
+                                      "; re-run tigerlod-simplify on this ingest output");
                 }
             }
             if (!stores.empty()) {
@@ -261,6 +277,35 @@ class TreeContext {
     uint8_t metric() const noexcept { return m_metric; }
 
   private:
+    /// "DIR/F.tlc: simplified at 200 m, not at the 50 m of its folder".
+    static std::string misplaced(const fs::path& file, double eps, const fs::path& folder)
+    {
+        return file.string() + ": simplified at " + chains::tolerance_dir(eps).substr(4) + ", not at the " +
+               folder.filename().string().substr(4) + " its folder's name says (moved or copied from " +
+               chains::tolerance_dir(eps) + "?); re-run tigerlod-simplify on this ingest output";
+    }
+
+    /// The tolerance of an eps folder: that of its stores, which must be the
+    /// one its name says (tolerance_dir). Read from the first store whose
+    /// tolerance the name says, so that a store moved in from another
+    /// folder is named as the odd one, not an intact store beside it.
+    static double folder_tolerance(const fs::path& dir, const std::vector<fs::path>& files)
+    {
+        const std::string name = dir.filename().string();
+        const auto first = chains::read(dir / files.front());
+        if (chains::tolerance_dir(first.eps_m) == name) {
+            return first.eps_m;
+        }
+        for (size_t i = 1; i < files.size(); ++i) {
+            if (chains::tolerance_dir(chains::read(dir / files[i]).eps_m) == name) {
+                throw input_error(misplaced(dir / files.front(), first.eps_m, dir));
+            }
+        }
+        throw input_error(dir.string() + ": its stores are simplified at " +
+                          chains::tolerance_dir(first.eps_m).substr(4) +
+                          ", not at what the folder's name says; not a folder tigerlod-simplify wrote");
+    }
+
     /// LOD 0 from ORIGINAL, LOD k from the k-th smallest eps folder (of
     /// options.lods, if given).
     void find_lods()
@@ -277,9 +322,9 @@ class TreeContext {
                 if (files.empty()) {
                     continue; // a tolerance of no store: an earlier ladder's folder that simplify --finish removes
                 }
-                const auto first = chains::read(d.path() / files.front());
+                const auto eps = folder_tolerance(d.path(), files);
                 const auto& want = m_options.lods;
-                if (!want.empty() && std::find(want.begin(), want.end(), first.eps_m) == want.end()) {
+                if (!want.empty() && std::find(want.begin(), want.end(), eps) == want.end()) {
                     continue;
                 }
                 if (!m_some && files != m_rel) {
@@ -288,7 +333,7 @@ class TreeContext {
                                       "): " + store_difference(files, m_rel) +
                                       "; re-run tigerlod-simplify on this ingest output");
                 }
-                eps_dirs.emplace_back(first.eps_m, d.path());
+                eps_dirs.emplace_back(eps, d.path());
             }
         }
         if (eps_dirs.empty()) {

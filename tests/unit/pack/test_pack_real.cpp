@@ -305,6 +305,50 @@ TEST_F(PackReal, BadInputIsNamed)
         << slurp(dir / "log");
     EXPECT_FALSE(fs::exists(dir / "tree3" / "skeleton.tls"));
     fs::remove_all(dir / "ingest3");
+    // Simplified stores swapped, within a tolerance and across two: the
+    // message names a swapped store, never an intact one beside it.
+    const auto swap = [&](const fs::path& a, const fs::path& b) {
+        fs::rename(a, dir / "swap.tlc");
+        fs::rename(b, a);
+        fs::rename(dir / "swap.tlc", b);
+    };
+    fs::remove_all(dir / "simp3");
+    fs::copy(dir / "simp", dir / "simp3", fs::copy_options::recursive);
+    std::vector<fs::path> simplified;
+    for (const auto& e : fs::directory_iterator(dir / "simp3" / "eps-4m" / "block_group")) {
+        simplified.push_back(e.path());
+    }
+    std::sort(simplified.begin(), simplified.end());
+    ASSERT_GE(simplified.size(), 2U);
+    swap(simplified[0], simplified[1]);
+    EXPECT_EQ(run("pack", d + "/ingest " + d + "/simp3 " + d + "/tree3", dir / "log"), 1);
+    EXPECT_NE(slurp(dir / "log")
+                  .find(simplified[0].filename().string() + ": holds partition " + simplified[1].stem().string() +
+                        ", not the one its name says"),
+              std::string::npos)
+        << slurp(dir / "log");
+    swap(simplified[0], simplified[1]);
+    // Across tolerances, the first store of each folder (pack once took a
+    // folder's tolerance from its first store, and then blamed the intact
+    // stores beside it).
+    std::vector<fs::path> rel;
+    for (const auto& e : fs::recursive_directory_iterator(dir / "simp3" / "eps-4m")) {
+        if (e.path().extension() == ".tlc") {
+            rel.push_back(fs::relative(e.path(), dir / "simp3" / "eps-4m"));
+        }
+    }
+    std::sort(rel.begin(), rel.end());
+    ASSERT_FALSE(rel.empty());
+    const fs::path in4 = dir / "simp3" / "eps-4m" / rel.front();
+    const fs::path in64 = dir / "simp3" / "eps-64m" / rel.front();
+    swap(in4, in64);
+    EXPECT_EQ(run("pack", d + "/ingest " + d + "/simp3 " + d + "/tree3", dir / "log"), 1);
+    const std::string log = slurp(dir / "log");
+    EXPECT_TRUE(
+        log.find(in4.string() + ": simplified at 64m, not at the 4m its folder's name says") != std::string::npos ||
+        log.find(in64.string() + ": simplified at 4m, not at the 64m its folder's name says") != std::string::npos)
+        << log;
+    EXPECT_FALSE(fs::exists(dir / "tree3" / "skeleton.tls"));
     // OUTPUT that is something else.
     fs::create_directories(dir / "other");
     std::ofstream(dir / "other" / "x") << "x";
