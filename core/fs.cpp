@@ -13,6 +13,7 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <system_error>
@@ -380,8 +381,9 @@ void keep_times(const fs::path& fresh, const fs::path& old_root, const std::stri
 
 } // namespace
 
-FolderLock::FolderLock(const fs::path& folder, const std::string& who)
+FolderLock::FolderLock(const fs::path& folder, const std::string& who, Mode mode)
 {
+    const int op = mode == Mode::shared ? LOCK_SH : LOCK_EX;
     for (;;) {
         std::error_code ec;
         fs::create_directories(folder, ec);
@@ -392,7 +394,17 @@ FolderLock::FolderLock(const fs::path& folder, const std::string& who)
         if (m_fd < 0) {
             throw environment_error(folder.string() + ": cannot open to lock it: " + std::strerror(errno));
         }
-        if (::flock(m_fd, LOCK_EX | LOCK_NB) != 0) {
+        if (::flock(m_fd, op | LOCK_NB) != 0) {
+            if (errno == ENOLCK || errno == ENOSYS || errno == EOPNOTSUPP) {
+                static std::once_flag said;
+                std::call_once(said, [&] {
+                    std::fprintf(stderr, "%s: %s cannot be locked (%s): concurrent runs on it are not guarded\n",
+                                 who.c_str(), folder.c_str(), std::strerror(errno));
+                });
+                ::close(m_fd);
+                m_fd = -1;
+                break;
+            }
             if (errno != EWOULDBLOCK) {
                 const int err = errno;
                 ::close(m_fd);
@@ -400,7 +412,7 @@ FolderLock::FolderLock(const fs::path& folder, const std::string& who)
             }
             std::fprintf(stderr, "%s: another run is updating %s; waiting for it\n", who.c_str(), folder.c_str());
             int rc = 0;
-            while ((rc = ::flock(m_fd, LOCK_EX)) != 0 && errno == EINTR) {
+            while ((rc = ::flock(m_fd, op)) != 0 && errno == EINTR) {
             }
             if (rc != 0) {
                 const int err = errno;
@@ -431,7 +443,7 @@ FolderLock::~FolderLock()
 }
 
 OutputDir::OutputDir(fs::path final_path, bool overwrite, const std::vector<fs::path>& inputs)
-    : m_final(std::move(final_path))
+    : m_final(std::move(final_path)), m_overwrite(overwrite)
 {
     if (m_final.filename().empty()) {
         m_final = m_final.parent_path();
@@ -477,6 +489,15 @@ void OutputDir::commit()
     }
     for (const fs::path& f : folders) {
         sync_to_disk(f);
+    }
+    // The swap under an exclusive lock on the output: a run beside this one
+    // on the same OUTPUT (another whole run, a --finish, partition jobs)
+    // neither swaps at the same instant nor writes into the folder being
+    // moved aside. The lock makes OUTPUT if missing (an empty folder, moved
+    // aside and removed below like an old output).
+    const FolderLock lock(m_final, program_invocation_short_name);
+    if (!m_overwrite && !fs::is_empty(m_final, ec)) {
+        throw usage_error(m_final.string() + " was made by another run meanwhile. Use --overwrite to replace it.");
     }
     if (!m_keep_times.empty()) {
         keep_times(m_tmp, m_final, m_keep_times);

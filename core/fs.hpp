@@ -80,18 +80,25 @@ bool is_stage_output(const std::filesystem::path& folder);
 /// user's (notes, a thesis) is never deleted by a mistyped OUTPUT.
 void refuse_to_replace_foreign(const std::filesystem::path& output);
 
-/// An exclusive lock on a folder a stage updates in place (pack's tree),
-/// held while it lives: flock(2) on the folder itself, so no lock file is
-/// left in or beside it, and a run killed anywhere releases it. The folder
-/// is made if missing. A second run waits for the first (saying so on
-/// stderr) rather than interleaving its files with the first's; if the
-/// first removed the folder meanwhile (a new tree whose run failed), the
-/// lock is taken again on a fresh one.
+/// A lock on a folder a stage updates in place, held while it lives:
+/// flock(2) on the folder itself, so no lock file is left in or beside it,
+/// and a run killed anywhere releases it. The folder is made if missing.
+///
+/// Exclusive for what rewrites the folder as a whole (pack's tree, a
+/// --finish, the swap of a whole run's output into place); shared for the
+/// partition jobs of one run, which write disjoint files and run side by
+/// side. A run that cannot have the lock waits (saying so on stderr)
+/// rather than interleaving its files with another's; if the holder
+/// removed or replaced the folder meanwhile, the lock is taken again on
+/// the folder now of that name. On a file system without locks (flock
+/// fails with ENOLCK, ENOSYS or EOPNOTSUPP: some cluster mounts) the run
+/// goes on unguarded, saying so once on stderr.
 class FolderLock {
   public:
+    enum class Mode { exclusive, shared };
     /// Throws environment_error naming `folder` if it cannot be made,
     /// opened or locked. `who` names the stage in the waiting message.
-    FolderLock(const std::filesystem::path& folder, const std::string& who);
+    FolderLock(const std::filesystem::path& folder, const std::string& who, Mode mode = Mode::exclusive);
     FolderLock(const FolderLock&) = delete;
     FolderLock& operator=(const FolderLock&) = delete;
     ~FolderLock();
@@ -139,6 +146,7 @@ class OutputDir {
     std::filesystem::path m_final;
     std::filesystem::path m_tmp;
     std::vector<std::filesystem::path> m_removed;
+    bool m_overwrite = false;
     bool m_committed = false;
     std::string m_keep_times; ///< the extension of files whose times are kept; empty: none
 };                            // class OutputDir

@@ -2,8 +2,12 @@
 
 #include "core/errors.hpp"
 
+#include <cpl_conv.h>
 #include <cpl_error.h>
 #include <ogr_api.h>
+
+#include <cstdlib>
+#include <ctime>
 
 namespace fs = std::filesystem;
 
@@ -35,6 +39,26 @@ void GdalErrorTrap::record(const char* message)
     if (m_count++ == 0) {
         m_first = message != nullptr ? message : "";
     }
+}
+
+void fix_gdal_dates()
+{
+    if (CPLGetConfigOption("OGR_CURRENT_DATE", nullptr) != nullptr) {
+        return;
+    }
+    std::time_t t = 0;
+    if (const char* epoch = std::getenv("SOURCE_DATE_EPOCH"); epoch != nullptr && *epoch != '\0') {
+        char* end = nullptr;
+        const long long v = std::strtoll(epoch, &end, 10);
+        if (*end == '\0' && v >= 0) {
+            t = static_cast<std::time_t>(v);
+        }
+    }
+    std::tm utc{};
+    gmtime_r(&t, &utc);
+    char text[32];
+    std::strftime(text, sizeof text, "%Y-%m-%dT%H:%M:%S.000Z", &utc);
+    CPLSetConfigOption("OGR_CURRENT_DATE", text);
 }
 
 void close_and_check(GDALDatasetH ds, const fs::path& path, const std::map<std::string, int64_t>& expected,

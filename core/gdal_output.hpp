@@ -39,6 +39,14 @@ class GdalErrorTrap {
     std::string m_first;
 }; // class GdalErrorTrap
 
+/// Make the dates GDAL writes into files fixed, so that the same inputs give
+/// the same bytes: GeoPackage's gpkg_contents.last_change is otherwise the
+/// time of writing. Sets GDAL's OGR_CURRENT_DATE to SOURCE_DATE_EPOCH (the
+/// reproducible-builds convention: seconds since 1970) if that is set, else
+/// to 1970-01-01T00:00:00.000Z; an OGR_CURRENT_DATE the user set is kept.
+/// Call before creating the dataset.
+void fix_gdal_dates();
+
 /// Close `ds` (written to `path`) and make sure the file holds what was
 /// written: no error GDAL raised while `trap` lived (the writes and the
 /// close), the file opens again, and each layer named in `expected` has

@@ -39,6 +39,7 @@ StageOutput::StageOutput(const CommonOptions& options, const std::vector<fs::pat
     }
     m_dir = options.output;
     refuse_to_replace_inputs(m_dir, reads);
+    m_lock.emplace(m_dir, "tigerlod-" + stage, options.finish ? FolderLock::Mode::exclusive : FolderLock::Mode::shared);
     std::error_code ec;
     if (fs::exists(m_dir / "manifest.json", ec)) {
         try {

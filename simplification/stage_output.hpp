@@ -65,6 +65,9 @@ class StageOutput {
     std::string m_stage;
     std::optional<OutputDir> m_whole;
     std::filesystem::path m_dir;
+    /// In place: shared for --partitions (jobs side by side), exclusive for
+    /// --finish (which removes what no job wrote).
+    std::optional<FolderLock> m_lock;
     mutable std::vector<std::filesystem::path> m_removed;
     mutable std::mutex m_mutex;
     mutable std::set<std::filesystem::path> m_folders; ///< written into, in place

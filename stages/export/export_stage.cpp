@@ -414,6 +414,7 @@ int ExportStage::run(const StageContext& ctx)
     const fs::path tmp = temp_sibling_keeping_extension(out);
     log_removed_leftovers(ctx.log, remove_dead_leftovers(out.parent_path(), out.stem().string()));
     GDALAllRegister();
+    fix_gdal_dates();
     GDALDriverH driver = GDALGetDriverByName(gpkg ? "GPKG" : "GeoJSON");
     GdalErrorTrap trap; // every write's and the close's errors (a full disk), checked at the close
     TempDataset g;

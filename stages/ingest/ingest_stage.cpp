@@ -526,9 +526,12 @@ RegionPlan get_meta(const json& j, const fs::path& file)
 /// name and only where its bytes changed; the names written.
 class InPlaceStores {
   public:
-    InPlaceStores(const fs::path& out, const std::vector<fs::path>& reads) : m_out(out)
+    /// `finish`: an exclusive lock on OUTPUT (the finish removes what no job
+    /// wrote), else a shared one (region jobs side by side).
+    InPlaceStores(const fs::path& out, const std::vector<fs::path>& reads, bool finish) : m_out(out)
     {
         refuse_to_replace_inputs(out, reads);
+        m_lock.emplace(out, "tigerlod-ingest", finish ? FolderLock::Mode::exclusive : FolderLock::Mode::shared);
         std::error_code ec;
         if (fs::exists(out / "manifest.json", ec)) {
             try {
@@ -571,6 +574,7 @@ class InPlaceStores {
 
   private:
     fs::path m_out;
+    std::optional<FolderLock> m_lock;
     std::mutex m_mutex;
     std::set<fs::path> m_folders;
     std::vector<std::string> m_names;
@@ -1157,7 +1161,7 @@ int IngestStage::run_region(const StageContext& ctx, const Resolved& r)
     }
     const BuildOptions options = build_options(cfg, r.threads, m_max_problem_samples, ctx.log);
     const InputFiles input_files = input_files_of(cfg);
-    InPlaceStores out(m_output, reads_of(m_config, input_files, {dir}));
+    InPlaceStores out(m_output, reads_of(m_config, input_files, {dir}), false);
     const StoreSink sink = [&](const chains::ChainStore& s) { out.write(s); };
     const double t0 = ctx.log.elapsed_s();
     RegionJobShare share;
@@ -1267,7 +1271,7 @@ int IngestStage::run_finish(const StageContext& ctx, const Resolved& r)
     plan.empty_geometries = index.at("empty_geometries").get<std::vector<uint64_t>>();
     check_each_store_once(plan, written, plan.meta.level_names);
     const InputFiles input_files = input_files_of(cfg);
-    InPlaceStores out(m_output, reads_of(m_config, input_files, {dir}));
+    InPlaceStores out(m_output, reads_of(m_config, input_files, {dir}), true);
     Built built;
     if (plan.whole) {
         if (shares.size() != 1) {

@@ -140,6 +140,7 @@ std::string key_of(const json& item)
 void write_gpkg(const fs::path& path, const Report& r)
 {
     GDALAllRegister();
+    fix_gdal_dates();
     GdalErrorTrap trap;
     GDALDatasetH ds = GDALCreate(GDALGetDriverByName("GPKG"), path.c_str(), 0, 0, 0, GDT_Unknown, nullptr);
     if (ds == nullptr) {

@@ -1,10 +1,13 @@
 #!/usr/bin/env bash
-# Concurrent runs on one output that is updated in place (pack's tree): two
+# Concurrent runs on one output. Updated in place (pack's tree): two
 # packs of the same tree with different --tile-mb, started together eight
 # times, both exit 0 and leave exactly the tree one of them makes alone
 # (its skeleton, its tiles, no other), which verifies clean. And a pack
 # started while another holds the tree waits for it (the message says so)
-# instead of interleaving its files.
+# instead of interleaving its files. Whole runs of ingest, simplify and
+# verify, two at once on one OUTPUT: it is one run's output. And the kinds
+# of lock: partition jobs share OUTPUT, a --finish and a whole run's swap
+# take it alone.
 #   tests/faults/test_races.sh REPO BIN_DIR
 set -uo pipefail
 repo=$(cd "$1" && pwd)
@@ -56,4 +59,84 @@ grep -q "another run is updating $work/tree; waiting for it" "$work/w.log" || fa
 [ "$waited" = True ] || fail "the pack did not wait for the lock's holder"
 [ "$(tree_text "$work/tree")" = "$(cat "$work/want-0.002")" ] || fail "the waiting pack's tree is not its own"
 echo "races: a pack waits for the run that holds its tree, then writes its own"
-echo "2 passed, 0 failed"
+
+# Every stage's whole runs on one OUTPUT at once (--overwrite), with
+# different options where a stage has them: both exit 0 and OUTPUT is
+# exactly one run's output (the swap into place is under an exclusive lock
+# on OUTPUT), never a mix, never missing.
+digest_of() { (cd "$1" && find . -type f ! -name '*timings*' ! -name '*-report.json' -print0 | LC_ALL=C sort -z |
+  xargs -0 sha256sum); }
+two_at_once() { # NAME OUT CMD_A -- CMD_B: both run together, four times
+  local name=$1 out=$2
+  shift 2
+  local a=() b=()
+  while [ "$1" != -- ]; do a+=("$1"); shift; done
+  shift
+  b=("$@")
+  rm -rf "$out"
+  "${a[@]}" >"$work/log" 2>&1 || fail "$name alone: $(cat "$work/log")"
+  digest_of "$out" >"$work/want-a"
+  rm -rf "$out"
+  "${b[@]}" >"$work/log" 2>&1 || fail "$name alone (B): $(cat "$work/log")"
+  digest_of "$out" >"$work/want-b"
+  for try in 1 2 3 4; do
+    "${a[@]}" --overwrite >"$work/a.log" 2>&1 &
+    local pa=$!
+    "${b[@]}" --overwrite >"$work/b.log" 2>&1 &
+    local pb=$!
+    wait "$pa" || fail "$name try $try: A: $(cat "$work/a.log")"
+    wait "$pb" || fail "$name try $try: B: $(cat "$work/b.log")"
+    digest_of "$out" >"$work/got"
+    cmp -s "$work/got" "$work/want-a" || cmp -s "$work/got" "$work/want-b" ||
+      fail "$name try $try: OUTPUT is neither run's alone: $(diff "$work/got" "$work/want-a" | head)"
+    ls -d "$out".tmp-* "$out".old-* 2>/dev/null && fail "$name try $try: temporaries left beside OUTPUT"
+  done
+  echo "races: $name: 4 tries of two whole runs at once, each left one run's output"
+}
+sed 's/tolerances_m: \[50, 200\]/tolerances_m: [100, 400]/' "$work/map.yaml" >"$work/map2.yaml"
+two_at_once ingest "$work/in2" "$bin/tigerlod-ingest" "$work/map.yaml" "$work/in2" -- \
+  "$bin/tigerlod-ingest" --threads 1 "$work/map.yaml" "$work/in2"
+two_at_once simplify "$work/simp2" "$bin/tigerlod-simplify" --config "$work/map.yaml" "$work/in" "$work/simp2" -- \
+  "$bin/tigerlod-simplify" --config "$work/map2.yaml" "$work/in" "$work/simp2"
+two_at_once verify "$work/v2" "$bin/tigerlod-verify" "$work/ref-1" "$work/in" "$work/v2" -- \
+  "$bin/tigerlod-verify" "$work/ref-0.002" "$work/in" "$work/v2"
+
+# The locks' kinds, held by hand with flock(1): partition jobs of one run
+# share OUTPUT (a job does not wait for another), a --finish or a whole
+# run's swap waits for them, and a job waits for a --finish.
+waits() { # EXPECT(yes|no) HOLD(-s|-x) OUT CMD...: does CMD wait for the holder?
+  local expect=$1 mode=$2 out=$3
+  shift 3
+  mkdir -p "$out"
+  flock "$mode" "$out" sleep 2 &
+  local holder=$!
+  sleep 0.3
+  local t0
+  t0=$(date +%s.%N)
+  "$@" >"$work/w.log" 2>&1 || fail "$*: $(cat "$work/w.log")"
+  local long
+  long=$(python3 -c "import sys; print(float(sys.argv[2]) - float(sys.argv[1]) >= 1.5)" "$t0" "$(date +%s.%N)")
+  wait "$holder"
+  if [ "$expect" = yes ]; then
+    [ "$long" = True ] && grep -q "another run is updating $out; waiting for it" "$work/w.log" ||
+      fail "did not wait for a $mode holder of $out: $* ($(cat "$work/w.log"))"
+  else
+    [ "$long" = False ] || fail "waited for a $mode holder of $out: $*"
+  fi
+}
+s=$work/simp2
+"$bin/tigerlod-simplify" --config "$work/map.yaml" "$work/in" "$s" --overwrite >"$work/log" 2>&1 || fail "$(cat "$work/log")"
+waits no -s "$s" "$bin/tigerlod-simplify" --config "$work/map.yaml" --partitions 'county/01*' "$work/in" "$s"
+waits yes -x "$s" "$bin/tigerlod-simplify" --config "$work/map.yaml" --partitions 'county/02*' "$work/in" "$s"
+waits yes -s "$s" "$bin/tigerlod-simplify" --config "$work/map.yaml" --finish "$work/in" "$s"
+waits yes -s "$s" "$bin/tigerlod-simplify" --config "$work/map.yaml" --overwrite "$work/in" "$s"
+waits yes -s "$work/in2" "$bin/tigerlod-ingest" --overwrite "$work/map.yaml" "$work/in2"
+parts=$work/parts
+"$bin/tigerlod-ingest" --list --parts "$parts" "$work/map.yaml" "$work/in3" >"$work/log" 2>&1 &&
+  "$bin/tigerlod-ingest" --plan --parts "$parts" "$work/map.yaml" "$work/in3" >"$work/log" 2>&1 ||
+  fail "ingest --list/--plan: $(cat "$work/log")"
+waits no -s "$work/in3" "$bin/tigerlod-ingest" --region whole --parts "$parts" "$work/map.yaml" "$work/in3"
+waits yes -s "$work/in3" "$bin/tigerlod-ingest" --finish --parts "$parts" "$work/map.yaml" "$work/in3"
+waits yes -x "$work/in3" "$bin/tigerlod-ingest" --region whole --parts "$parts" "$work/map.yaml" "$work/in3"
+echo "races: partition jobs share OUTPUT; a --finish, a whole run's swap and a job behind a --finish wait"
+echo "5 passed, 0 failed"

@@ -151,6 +151,34 @@ TEST_F(Export, InTheTreesCrsEveryVertexIsTheTreesAndTheCrsIsNamed)
     }
 }
 
+TEST_F(Export, AGeoPackageHasTheSameBytesWhenWrittenAgain)
+{
+    // GDAL stamps gpkg_contents.last_change with the time of writing unless
+    // told a date: the export fixes it (the epoch, or SOURCE_DATE_EPOCH).
+    ASSERT_EQ(run("--lod 1 " + (dir / "tree").string() + " " + (dir / "d.gpkg").string()), 0)
+        << tigerlod::testing::slurp(dir / "log");
+    GDALDatasetH ds = GDALOpenEx((dir / "d.gpkg").c_str(), GDAL_OF_VECTOR, nullptr, nullptr, nullptr);
+    ASSERT_NE(ds, nullptr);
+    const auto count = [&](const char* sql) {
+        OGRLayerH rows = GDALDatasetExecuteSQL(ds, sql, nullptr, nullptr);
+        EXPECT_NE(rows, nullptr) << sql;
+        int64_t n = -1;
+        if (OGRFeatureH f = rows ? OGR_L_GetNextFeature(rows) : nullptr) {
+            n = OGR_F_GetFieldAsInteger64(f, 0);
+            OGR_F_Destroy(f);
+        }
+        if (rows) {
+            GDALDatasetReleaseResultSet(ds, rows);
+        }
+        return n;
+    };
+    EXPECT_GE(count("SELECT COUNT(*) FROM gpkg_contents"), 1);
+    EXPECT_EQ(count("SELECT COUNT(*) FROM gpkg_contents WHERE last_change <> '1970-01-01T00:00:00.000Z'"), 0);
+    GDALClose(ds);
+    ASSERT_EQ(run("--lod 1 " + (dir / "tree").string() + " " + (dir / "e.gpkg").string()), 0);
+    EXPECT_EQ(tigerlod::testing::slurp(dir / "d.gpkg"), tigerlod::testing::slurp(dir / "e.gpkg"));
+}
+
 TEST_F(Export, InLonLatSegmentsAreDensifiedWithinTheStatedBow)
 {
     // 1 % of the LOD's 1000 m: 10 m.
