@@ -430,6 +430,8 @@ BuildOptions build_options(const IngestConfig& cfg, unsigned threads, int max_pr
     options.line_tile_m = cfg.line_tile_km * 1000.0;
     options.threads = threads;
     options.max_problem_samples = static_cast<size_t>(max_problem_samples);
+    options.merge_duplicate_codes = cfg.dataset.merge_duplicate_codes;
+    options.code_field = cfg.dataset.code_field;
     options.log = &log;
     return options;
 }
@@ -1414,12 +1416,7 @@ int IngestStage::run(const StageContext& ctx)
         fs::create_directories(out.path() / l.name);
     }
     std::atomic<uint64_t> stores{0};
-    BuildOptions options;
-    options.halo_m = cfg.halo_m;
-    options.line_tile_m = cfg.line_tile_km * 1000.0;
-    options.threads = threads;
-    options.max_problem_samples = static_cast<size_t>(m_max_problem_samples);
-    options.log = &ctx.log;
+    const BuildOptions options = build_options(cfg, threads, m_max_problem_samples, ctx.log);
     const StoreSink sink = [&](const chains::ChainStore& s) {
         // Inside the output folder, renamed into place whole at the end.
         write_file(out.path() / s.level_name / (file_name(s.partition) + ".tlc"), chains::encode(s));

@@ -104,6 +104,35 @@ void refuse_non_nesting(const RawMap& raw, const std::vector<LevelCodes>& lcs,
     }
 }
 
+/// Polygon layers: a finest code that units of two input files carry, where
+/// codes must be unique (reading refuses a code repeated within one file; a
+/// code repeated across files is only seen where the files meet, here).
+/// In a region's map, only the region's own units are checked: the region
+/// that owns a code holds every unit of it.
+void refuse_codes_in_two_files(const RawMap& raw, const std::vector<LevelCodes>& lcs, const Owner& owner,
+                               const BuildOptions& options)
+{
+    if (raw.kind != RawMap::Kind::polygon_rings || options.merge_duplicate_codes || lcs.empty()) {
+        return;
+    }
+    const LevelCodes& finest = lcs.back();
+    std::vector<uint32_t> first(finest.codes.size(), no_unit);
+    for (uint32_t u = 0; u < raw.units.size(); ++u) {
+        if (!owner.unit(u)) {
+            continue;
+        }
+        uint32_t& f = first[finest.of_unit[u]];
+        if (f == no_unit) {
+            f = u;
+        } else if (raw.units[f].source.file != raw.units[u].source.file) {
+            throw input_error(raw.where(raw.units[u].source) + ": '" + options.code_field + "' " +
+                              finest.codes[finest.of_unit[u]] + " is also that of " + raw.where(raw.units[f].source) +
+                              ", in another file: give each unit its own code (an input named twice?), or set "
+                              "dataset.duplicate_code: merge to make each code one unit in parts");
+        }
+    }
+}
+
 /// The graph's counts for the report: unique vertices, edges, and the units
 /// no edge bounds (a problem each).
 void count_graph(const Graph& g, const RawMap& raw, const Owner& owner, BuildResult& result, Problems& problems)
@@ -240,6 +269,7 @@ BuildResult build(RawMap raw, const Projection& projection, const BuildOptions& 
     const auto lcs = level_codes(raw, non_nesting);
     Owner owner = owner_of(lcs, scope);
     refuse_non_nesting(raw, lcs, non_nesting, owner);
+    refuse_codes_in_two_files(raw, lcs, owner, options);
     Graph g = make_graph(raw, projection, options.threads, problems, owner);
     phase("intern_project");
     note("interned and projected " + std::to_string(g.keys.size()) + " vertices");

@@ -45,6 +45,11 @@ struct BuildOptions {
     /// step of the 1e-6 degree input grid (at most 0.112 m of latitude), plus the
     /// projection's scale error. 0 turns repairs off.
     double max_snap_shift_m = 0.12;
+    /// Polygon layers: units of one finest code from two input files are
+    /// refused (dataset.duplicate_code: error; one file's are refused as it
+    /// is read), or merged into one unit in parts (merge).
+    bool merge_duplicate_codes = false;
+    std::string code_field;   ///< dataset.code_field, for the message
     const Log* log = nullptr; ///< progress lines, if given
 };
 

@@ -1291,8 +1291,9 @@ TEST_F(Cli, OverwriteReplacesOnlyAStagesOutputOrAnEmptyFolder)
 TEST_F(Cli, UnitCodesAreCheckedNotMadeUp)
 {
     // Squares 0.1 degree wide, each a feature with its code.
-    auto write_map = [&](const std::vector<std::pair<double, std::string>>& squares) {
-        std::ofstream out(m_dir / "map.geojson");
+    auto write_map = [&](const std::vector<std::pair<double, std::string>>& squares,
+                         const std::string& name = "map.geojson") {
+        std::ofstream out(m_dir / name);
         out << R"({"type": "FeatureCollection", "features": [)";
         for (size_t i = 0; i < squares.size(); ++i) {
             const double x = squares[i].first;
@@ -1310,6 +1311,20 @@ TEST_F(Cli, UnitCodesAreCheckedNotMadeUp)
         expect_failure(run("ingest", config(levels).string() + " " + out()), 1,
                        "map.geojson: 1 feature repeats the 'code' of another ('01001' on feature 0 and feature 1): "
                        "give each unit its own code, or set dataset.duplicate_code: merge");
+    }
+    // One code in two files, the same square (an input named twice) or
+    // another one: stopped too, both places named.
+    const std::string two_files = "dataset: {kind: polygons, inputs: [map.geojson, more.geojson], code_field: code}\n"
+                                  "levels:\n  - {name: state, prefix: 2}\n  - {name: county, prefix: 5}\n";
+    for (const double other : {-100.0, -99.0}) {
+        write_map({{other, "01001"}}, "more.geojson");
+        write_map({{-100, "01001"}, {-99.9, "01002"}});
+        const Result r = run("ingest", config(two_files).string() + " " + out());
+        EXPECT_EQ(r.code, 1) << r.err;
+        EXPECT_NE(r.err.find("more.geojson:0: 'code' 01001 is also that of "), std::string::npos) << r.err;
+        EXPECT_NE(r.err.find("map.geojson:0, in another file: give each unit its own code"), std::string::npos)
+            << r.err;
+        EXPECT_FALSE(fs::exists(out()));
     }
     // Merged on request: one county in two parts, and said so.
     std::ofstream(m_dir / "config.yaml") << "name: t\ndataset: {kind: polygons, inputs: [map.geojson], code_field: "
