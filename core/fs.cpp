@@ -494,8 +494,24 @@ void OutputDir::commit()
     // on the same OUTPUT (another whole run, a --finish, partition jobs)
     // neither swaps at the same instant nor writes into the folder being
     // moved aside. The lock makes OUTPUT if missing (an empty folder, moved
-    // aside and removed below like an old output).
+    // aside and removed below like an old output; removed again if the swap
+    // fails, fs::remove leaving it if another run filled it meanwhile).
+    const bool existed = fs::exists(m_final);
     const FolderLock lock(m_final, program_invocation_short_name);
+    try {
+        swap_into_place();
+    } catch (...) {
+        if (!existed) {
+            std::error_code ignored;
+            fs::remove(m_final, ignored);
+        }
+        throw;
+    }
+}
+
+void OutputDir::swap_into_place()
+{
+    std::error_code ec;
     if (!m_overwrite && !fs::is_empty(m_final, ec)) {
         throw usage_error(m_final.string() + " was made by another run meanwhile. Use --overwrite to replace it.");
     }

@@ -143,6 +143,9 @@ class OutputDir {
     const std::vector<std::filesystem::path>& removed_leftovers() const noexcept { return m_removed; }
 
   private:
+    /// commit()'s swap, under its lock: the old output aside, the new one in.
+    void swap_into_place();
+
     std::filesystem::path m_final;
     std::filesystem::path m_tmp;
     std::vector<std::filesystem::path> m_removed;

@@ -8,21 +8,10 @@
 # the test cannot pass without running into the fault. Needs mount(8) for
 # tmpfs (root); skips (77) with a reason without it.
 #   tests/faults/test_full_disk.sh REPO BIN_DIR
-set -uo pipefail
-repo=$(cd "$1" && pwd)
-bin=$(cd "$2" && pwd)
-work=$(mktemp -d "${TMPDIR:-/tmp}/tigerlod-disk-XXXXXX")
+. "$(dirname "$0")/../support/script.sh" "full disk" "$1" "$2"
 mnt=$work/disk
 mkdir -p "$mnt"
-cleanup() {
-  mountpoint -q "$mnt" && umount "$mnt"
-  rm -rf "$work"
-}
-trap cleanup EXIT
-fail() {
-  echo "full disk: FAILED: $*"
-  exit 1
-}
+on_exit() { mountpoint -q "$mnt" && umount "$mnt"; }
 if ! mount -t tmpfs -o size=64k tmpfs "$mnt" 2>/dev/null; then
   echo "full disk: skipped: cannot mount a tmpfs here (needs root and mount(8))"
   exit 77
@@ -45,24 +34,9 @@ stages=(
   "export.geojson|$bin/tigerlod-export --layer chains $ref/pack OUT"
   "render|$bin/tigerlod-render --config $cfg --mode none $ref/pack OUT"
 )
-# What of an output must match the roomy run: every file's bytes (a
-# GeoPackage's too: its last_change is fixed), except the files that hold
-# measured times (the stages' reports and ingest's timings: JSON that must
-# parse; render's frame times).
-canonical() {
-  local p=$1
-  if [ -d "$p" ]; then
-    (cd "$p" && find . -type f | LC_ALL=C sort | while read -r f; do
-      case "$f" in
-      *-report.json | *-timings.json | ./summary.json) echo "$f"; python3 -c "import json,sys; json.load(open(sys.argv[1]))" "$f" || echo "not JSON" ;;
-      ./frames-*.csv) echo "$f" ;;
-      *) sha256sum "$f" ;;
-      esac
-    done)
-  else
-    sha256sum <"$p"
-  fi
-}
+# What of an output must match the roomy run: canonical (tests/support/
+# script.sh): every file's bytes, a GeoPackage's too (its last_change is
+# fixed), except the files that hold measured times.
 out_name() { # the output's name: a file for export
   case "$1" in
   export.gpkg) echo "out.gpkg" ;;

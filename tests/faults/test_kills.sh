@@ -8,15 +8,7 @@
 # times are fractions of the stage's own time on this machine; a stage that
 # no kill caught alive fails the test (it would have tested nothing).
 #   tests/faults/test_kills.sh REPO BIN_DIR
-set -uo pipefail
-repo=$(cd "$1" && pwd)
-bin=$(cd "$2" && pwd)
-work=$(mktemp -d "${TMPDIR:-/tmp}/tigerlod-kills-XXXXXX")
-trap 'rm -rf "$work"' EXIT
-fail() {
-  echo "kills: FAILED: $*"
-  exit 1
-}
+. "$(dirname "$0")/../support/script.sh" kills "$1" "$2"
 # The fault map, larger (12 x 12 counties, 150 vertices a side): each stage
 # runs for a few tenths of a second at least, long enough to be caught.
 python3 "$repo/tests/faults/make_map.py" "$work" 12 150
@@ -31,21 +23,6 @@ stages=(
   "verify|$bin/tigerlod-verify --overwrite $ref/pack $ref/ingest OUT"
   "export|$bin/tigerlod-export --overwrite $ref/pack OUT.gpkg"
 )
-# An output as text: each file's digest by name; the stages' reports and
-# ingest's timings hold measured times, so they must only parse.
-canonical() {
-  local p=$1
-  if [ -d "$p" ]; then
-    (cd "$p" && find . -type f | LC_ALL=C sort | while read -r f; do
-      case "$f" in
-      *-report.json | *-timings.json) echo "$f"; python3 -c "import json,sys; json.load(open(sys.argv[1]))" "$f" || echo "not JSON" ;;
-      *) sha256sum "$f" ;;
-      esac
-    done)
-  else
-    sha256sum <"$p"
-  fi
-}
 now_ms() { date +%s%3N; }
 for entry in "${stages[@]}"; do
   name=${entry%%|*}

@@ -9,15 +9,7 @@
 # of lock: partition jobs share OUTPUT, a --finish and a whole run's swap
 # take it alone.
 #   tests/faults/test_races.sh REPO BIN_DIR
-set -uo pipefail
-repo=$(cd "$1" && pwd)
-bin=$(cd "$2" && pwd)
-work=$(mktemp -d "${TMPDIR:-/tmp}/tigerlod-races-XXXXXX")
-trap 'rm -rf "$work"' EXIT
-fail() {
-  echo "races: FAILED: $*"
-  exit 1
-}
+. "$(dirname "$0")/../support/script.sh" races "$1" "$2"
 python3 "$repo/tests/faults/make_map.py" "$work"
 "$bin/tigerlod-ingest" "$work/map.yaml" "$work/in" >"$work/log" 2>&1 || fail "ingest: $(cat "$work/log")"
 "$bin/tigerlod-simplify" --config "$work/map.yaml" "$work/in" "$work/simp" >"$work/log" 2>&1 ||
@@ -64,8 +56,6 @@ echo "races: a pack waits for the run that holds its tree, then writes its own"
 # different options where a stage has them: both exit 0 and OUTPUT is
 # exactly one run's output (the swap into place is under an exclusive lock
 # on OUTPUT), never a mix, never missing.
-digest_of() { (cd "$1" && find . -type f ! -name '*timings*' ! -name '*-report.json' -print0 | LC_ALL=C sort -z |
-  xargs -0 sha256sum); }
 two_at_once() { # NAME OUT CMD_A -- CMD_B: both run together, four times
   local name=$1 out=$2
   shift 2
@@ -75,10 +65,10 @@ two_at_once() { # NAME OUT CMD_A -- CMD_B: both run together, four times
   b=("$@")
   rm -rf "$out"
   "${a[@]}" >"$work/log" 2>&1 || fail "$name alone: $(cat "$work/log")"
-  digest_of "$out" >"$work/want-a"
+  canonical "$out" >"$work/want-a"
   rm -rf "$out"
   "${b[@]}" >"$work/log" 2>&1 || fail "$name alone (B): $(cat "$work/log")"
-  digest_of "$out" >"$work/want-b"
+  canonical "$out" >"$work/want-b"
   for try in 1 2 3 4; do
     "${a[@]}" --overwrite >"$work/a.log" 2>&1 &
     local pa=$!
@@ -86,7 +76,7 @@ two_at_once() { # NAME OUT CMD_A -- CMD_B: both run together, four times
     local pb=$!
     wait "$pa" || fail "$name try $try: A: $(cat "$work/a.log")"
     wait "$pb" || fail "$name try $try: B: $(cat "$work/b.log")"
-    digest_of "$out" >"$work/got"
+    canonical "$out" >"$work/got"
     cmp -s "$work/got" "$work/want-a" || cmp -s "$work/got" "$work/want-b" ||
       fail "$name try $try: OUTPUT is neither run's alone: $(diff "$work/got" "$work/want-a" | head)"
     ls -d "$out".tmp-* "$out".old-* 2>/dev/null && fail "$name try $try: temporaries left beside OUTPUT"

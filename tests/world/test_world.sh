@@ -10,15 +10,7 @@
 # maps across the antimeridian and round a pole. The world map skips
 # without the package, which scripts/test fetches.
 #   tests/world/test_world.sh REPO BIN_DIR
-set -uo pipefail
-repo=$(cd "$1" && pwd)
-bin=$(cd "$2" && pwd)
-work=$(mktemp -d "${TMPDIR:-/tmp}/tigerlod-world-XXXXXX")
-trap 'rm -rf "$work"' EXIT
-fail() {
-  echo "world: FAILED: $*"
-  exit 1
-}
+. "$(dirname "$0")/../support/script.sh" world "$1" "$2"
 # Hand-made maps on a cone cut at the antimeridian (lon0 0): a square
 # across the antimeridian (two parts, one each side), a ring round the
 # south pole (closed along the pole), and a line across the cut (refused).

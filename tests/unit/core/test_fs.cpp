@@ -132,6 +132,29 @@ TEST_F(Fs, AnOutputFolderCleansWhatADeadRunLeftBesideIt)
     EXPECT_THROW(OutputDir(m_dir / "out", false), usage_error);
 }
 
+TEST_F(Fs, AnOutputMadeByAnotherRunMeanwhileIsNotReplacedWithoutOverwrite)
+{
+    {
+        OutputDir out(m_dir / "out", false);
+        write_file(out.path() / "a", "mine");
+        // Another run (or a person) makes OUTPUT while this one works.
+        fs::create_directories(m_dir / "out");
+        write_file(m_dir / "out" / "a", "theirs");
+        EXPECT_THROW(out.commit(), usage_error);
+    }
+    EXPECT_EQ(names(), (std::set<std::string>{"out"})); // no temporary left
+    EXPECT_EQ(read_file(m_dir / "out" / "a"), "theirs");
+    // A run whose OUTPUT is still missing at the swap leaves its own there.
+    fs::remove_all(m_dir / "out");
+    {
+        OutputDir out(m_dir / "out", false);
+        write_file(out.path() / "a", "mine");
+        out.commit();
+    }
+    EXPECT_EQ(read_file(m_dir / "out" / "a"), "mine");
+    EXPECT_EQ(names(), (std::set<std::string>{"out"}));
+}
+
 TEST_F(Fs, OverwriteReplacesOnlyAStagesOutputOrAnEmptyFolder)
 {
     // A folder of the user's is refused, naming a file in it, and kept.
