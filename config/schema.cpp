@@ -76,6 +76,11 @@ std::vector<Key> input_keys()
               "required for tiger"),
         entry("dataset.inputs", Type::paths, "polygons, lines: files GDAL reads", "required for those"),
         entry("dataset.layer", Type::text, "the layer to read when a file holds several", "the only layer"),
+        entry("dataset.where", Type::text,
+              "polygons, lines: only the features this OGR SQL condition selects (`id IN ('156', '392')`, "
+              "`STATEFP = '51'`); a file none of whose features it selects is an error; messages still number "
+              "features as the file does",
+              "every feature"),
         entry("dataset.code_field", Type::text,
               "polygons: the attribute with each unit's finest code (e.g. `GEOID10`, us-atlas `id`)",
               "required for polygons"),

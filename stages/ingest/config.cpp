@@ -125,6 +125,11 @@ IngestConfig load_config(const fs::path& file)
         ctx.fail(ds, "'dataset.kind' is required: tiger, polygons or lines");
     }
     d.layer = ctx.get<std::string>("dataset.layer", "");
+    d.where = ctx.get<std::string>("dataset.where", "");
+    if (!d.where.empty() && d.kind == DatasetSpec::Kind::tiger) {
+        ctx.fail(ds["where"], "'dataset.where' applies to polygons and lines datasets (TIGER's FACES and EDGES "
+                              "must stay whole to close their faces)");
+    }
     if (const YAML::Node fetch = ds["fetch"]) { // used by the pipeline, which fetches before ingest
         if (ctx.get<std::string>("dataset.fetch.npm", "").empty() ||
             ctx.get<std::string>("dataset.fetch.into", "").empty()) {

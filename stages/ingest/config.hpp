@@ -26,6 +26,7 @@ struct DatasetSpec {
     Kind kind = Kind::tiger;
     std::vector<std::filesystem::path> edges, faces, inputs; ///< resolved paths
     std::string layer;                                       ///< layer name when a source holds several
+    std::string where;                                       ///< OGR SQL attribute filter ("": every feature)
     std::string code_field;                                  ///< polygons: the finest unit code (e.g. GEOID10)
     std::string class_field;                                 ///< feature class attribute (TIGER: MTFCC)
     std::string intpt_lat_field, intpt_lon_field;            ///< internal point attributes

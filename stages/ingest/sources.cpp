@@ -23,6 +23,7 @@
 #include <optional>
 #include <stdexcept>
 #include <unordered_map>
+#include <unordered_set>
 
 namespace fs = std::filesystem;
 
@@ -177,11 +178,14 @@ class Source {
     /// feature, and a layer without features is input_error too: every
     /// input names part of the map, and an empty one (a cut-off download,
     /// the wrong layer) would map nothing there with exit 0.
+    /// With a filter (dataset.where), only the features it selects are
+    /// visited, still numbered as the file numbers them.
     template <class F> void for_each(F&& f)
     {
+        const std::unordered_set<GIntBig> selected = select();
         ErrorCapture errors;
         OGR_L_ResetReading(m_layer);
-        int64_t index = 0;
+        int64_t index = 0, visited = 0;
         while (true) {
             FeaturePtr feat(OGR_L_GetNextFeature(m_layer));
             if (errors.failed()) {
@@ -191,18 +195,63 @@ class Source {
             if (!feat) {
                 break;
             }
-            f(feat.get(), index);
+            if (m_where.empty() || selected.contains(OGR_F_GetFID(feat.get()))) {
+                f(feat.get(), index);
+                ++visited;
+            }
             ++index;
         }
         if (index == 0) {
             throw input_error(where() + ": no features: an empty layer (a cut-off file, or the wrong layer?) maps "
                                         "nothing; give inputs that hold features");
         }
+        if (visited == 0) {
+            throw input_error(where() + ": dataset.where '" + m_where + "' selects none of its " +
+                              std::to_string(index) +
+                              " features: a file that adds nothing to the map is named "
+                              "by mistake, or the condition is");
+        }
     }
+    /// Visit only the features that `condition` (OGR SQL) selects; "" for all.
+    void filter(const std::string& condition) { m_where = condition; }
 
   private:
+    /// The FIDs of the features the filter selects (none without one): a
+    /// pass with the filter set and the geometry not read, so that the
+    /// visiting pass can number every feature of the file.
+    std::unordered_set<GIntBig> select()
+    {
+        std::unordered_set<GIntBig> fids;
+        if (m_where.empty()) {
+            return fids;
+        }
+        ErrorCapture errors;
+        if (OGR_L_SetAttributeFilter(m_layer, m_where.c_str()) != OGRERR_NONE) {
+            throw input_error(where() + ": dataset.where '" + m_where +
+                              "': " + (errors.failed() ? errors.take() : std::string("not a condition OGR SQL reads")));
+        }
+        const char* ignored[] = {"OGR_GEOMETRY", nullptr};
+        OGR_L_SetIgnoredFields(m_layer, ignored);
+        OGR_L_ResetReading(m_layer);
+        while (FeaturePtr feat{OGR_L_GetNextFeature(m_layer)}) {
+            const GIntBig fid = OGR_F_GetFID(feat.get());
+            if (fid == OGRNullFID || !fids.insert(fid).second) {
+                throw input_error(where() + ": dataset.where needs each feature's own id (FID), which this file "
+                                            "does not give");
+            }
+        }
+        const bool failed = errors.failed();
+        const std::string why = failed ? errors.take() : std::string();
+        OGR_L_SetAttributeFilter(m_layer, nullptr);
+        OGR_L_SetIgnoredFields(m_layer, nullptr);
+        if (failed) {
+            throw input_error(where() + ": dataset.where '" + m_where + "': " + why);
+        }
+        return fids;
+    }
+
     fs::path m_path;
-    std::string m_name, m_layer_name;
+    std::string m_name, m_layer_name, m_where;
     std::unique_ptr<void, DatasetCloser> m_ds;
     OGRLayerH m_layer = nullptr;
 };
@@ -592,6 +641,7 @@ struct PolygonLayer {
 PolygonLayer open_polygons(const IngestConfig& cfg, const fs::path& path)
 {
     Source src(path, cfg.dataset.layer, "polygons");
+    src.filter(cfg.dataset.where);
     src.expect_geometry({wkbPolygon, wkbMultiPolygon}, "a polygons dataset needs polygons");
     const int code = src.expect_type(src.field(cfg.dataset.code_field, "dataset.code_field"), "dataset.code_field",
                                      {OFTString, OFTInteger, OFTInteger64}, code_type);
@@ -615,6 +665,7 @@ struct LineLayer {
 LineLayer open_lines(const IngestConfig& cfg, const fs::path& path)
 {
     Source src(path, cfg.dataset.layer, "lines");
+    src.filter(cfg.dataset.where);
     src.expect_geometry({wkbLineString, wkbMultiLineString}, "a lines dataset needs line strings");
     const int cls = src.optional_field(cfg.dataset.class_field);
     if (!cfg.dataset.class_field.empty() && cls < 0) {

@@ -77,6 +77,17 @@ void PackStage::initialize()
     if (!m_parts.empty()) {
         refuse_to_replace_inputs(m_parts, {m_original, m_simplified, m_output});
     }
+    // What OUTPUT holds is checked under the tree's lock (run): seen before
+    // it, a pack holding the tree would look half-written. A file is not a
+    // folder to lock.
+    std::error_code ec;
+    if (fs::exists(m_output, ec) && !fs::is_directory(m_output, ec)) {
+        throw usage_error("pack: " + m_output + " exists and is not a Data Tree (a file); pick another OUTPUT");
+    }
+}
+
+void PackStage::refuse_foreign_output() const
+{
     const fs::path out(m_output);
     std::error_code ec;
     // A Data Tree is updated in place; a folder a killed first pack left
@@ -239,6 +250,7 @@ int PackStage::run(const StageContext& ctx)
     // One pack at a time on a tree: two interleaved would each remove the
     // tiles the other's skeleton names.
     const FolderLock lock(m_output, "pack");
+    refuse_foreign_output();
     // A tree this run began (no OUTPUT, or an empty folder, when the lock
     // was taken) is removed whole if the run fails before its report is
     // written (a full disk): nothing half-written is left. An existing tree

@@ -26,6 +26,9 @@ class PackStage final : public Stage {
     std::vector<std::string> config_args(const std::filesystem::path& file) const override;
 
   private:
+    /// usage_error unless OUTPUT is missing, a Data Tree, or what a killed
+    /// first pack left (only pack's own files); under the tree's lock.
+    void refuse_foreign_output() const;
     int run_plan(const StageContext& ctx);
     int run_partitions(const StageContext& ctx);
 

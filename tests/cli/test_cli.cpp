@@ -1368,6 +1368,54 @@ TEST_F(Cli, AnInputWithoutFeaturesIsRefused)
                    "empty.geojson layer 'empty': no features: an empty layer");
 }
 
+TEST_F(Cli, DatasetWhereSelectsFeaturesAndMessagesNumberThemAsTheFileDoes)
+{
+    // Four squares 0.1 degree wide; the condition keeps the last three.
+    {
+        std::ofstream map(m_dir / "map.geojson");
+        map << R"({"type": "FeatureCollection", "features": [)";
+        const char* codes[] = {"01001", "01002", "02003", "02002"};
+        for (int i = 0; i < 4; ++i) {
+            const double x = -100 + 0.1 * i;
+            map << (i ? "," : "") << R"({"type": "Feature", "properties": {"code": ")" << codes[i] << R"(", "keep": )"
+                << (i > 0 ? 1 : 0) << R"(}, "geometry": {"type": "Polygon", "coordinates": [[[)" << x << ",40],["
+                << x + 0.1 << ",40],[" << x + 0.1 << ",40.1],[" << x << ",40.1],[" << x << ",40]]]}}";
+        }
+        map << "]}";
+    }
+    const auto with_where = [&](const std::string& where) {
+        return config("dataset: {kind: polygons, inputs: [map.geojson], code_field: code, where: \"" + where +
+                      "\"}\nlevels:\n  - {name: state, prefix: 2}\n  - {name: county, prefix: 5}\n")
+                   .string() +
+               " " + out();
+    };
+    const Result kept = run("ingest", with_where("keep = 1"));
+    ASSERT_EQ(kept.code, 0) << kept.err;
+    std::istringstream cells(kept.out.substr(kept.out.find("  county ")));
+    std::string level;
+    uint64_t units = 0;
+    cells >> level >> units;
+    EXPECT_EQ(units, 3U) << kept.out;
+    fs::remove_all(out());
+    // A message names a feature by its place in the file, not among the
+    // selected: the code too short for a level is feature 3's.
+    {
+        std::string text = slurp(m_dir / "map.geojson");
+        text.replace(text.rfind("02002"), 5, "0200");
+        std::ofstream(m_dir / "map.geojson") << text;
+    }
+    expect_failure(run("ingest", with_where("keep = 1")), 1, "map.geojson:3: code '0200' is shorter");
+    // A condition that selects nothing, or that OGR cannot read: exit 1,
+    // the condition named, nothing written.
+    expect_failure(run("ingest", with_where("keep = 7")), 1, "dataset.where 'keep = 7' selects none of its 4 features");
+    expect_failure(run("ingest", with_where("keep = = 1")), 1, "dataset.where 'keep = = 1': ");
+    // TIGER's files stay whole.
+    make_tiger();
+    expect_failure(
+        run("ingest", tiger_config("edges.zip", "faces.zip", "  where: \"STATEFP20 = '51'\"\n").string() + " " + out()),
+        2, "'dataset.where' applies to polygons and lines");
+}
+
 TEST_F(Cli, EveryConfigKeyOfAStageIsOneOfItsOptions)
 {
     // The schema says which stage takes a key as which option; each stage's

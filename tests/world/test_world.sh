@@ -7,8 +7,9 @@
 # by --validate naming projection.grid_m; without dataset.empty_code:
 # skip, the features without a code refused, all counted and three named;
 # a halo below the ladder's need refused by --validate. First, hand-made
-# maps across the antimeridian and round a pole. The world map skips
-# without the package, which scripts/test fetches.
+# maps across the antimeridian and round a pole. Then Asia
+# (configs/asia.yaml) the same way. The maps skip without the package,
+# which scripts/test fetches.
 #   tests/world/test_world.sh REPO BIN_DIR
 . "$(dirname "$0")/../support/script.sh" world "$1" "$2"
 # Hand-made maps on a cone cut at the antimeridian (lon0 0): a square
@@ -89,4 +90,19 @@ grep -q "'ingest.halo_m' (25000 m) is below the 28284.3 m that simplify.toleranc
   fail "halo rule: $(cat "$work/halo.log")"
 echo "world: ingest, simplify, pack and verify clean on the ground, CGAL agreeing; 0.01 m refused naming projection.grid_m;"
 echo "  empty codes refused by default, counted and named; the halo rule checked at --validate"
-echo "2 passed, 0 failed"
+# Asia (configs/asia.yaml): the same package, its countries chosen by
+# dataset.where (UN M49 region 142, 51 codes), on a cone of its own.
+cfg=$repo/configs/asia.yaml
+a=$work/asia
+mkdir -p "$a"
+"$bin/tigerlod-ingest" "$cfg" "$a/in" >"$a/ingest.log" 2>&1 || fail "asia ingest: $(cat "$a/ingest.log")"
+grep -Eq "^  country +51 " "$a/ingest.log" || fail "asia: not the 51 countries the condition names: $(cat "$a/ingest.log")"
+grep -q "problems: none" "$a/ingest.log" || fail "asia ingest: $(cat "$a/ingest.log")"
+"$bin/tigerlod-simplify" --config "$cfg" "$a/in" "$a/simp" >"$a/simp.log" 2>&1 || fail "asia simplify: $(cat "$a/simp.log")"
+"$bin/tigerlod-pack" "$a/in" "$a/simp" "$a/tree" >"$a/pack.log" 2>&1 || fail "asia pack: $(cat "$a/pack.log")"
+"$bin/tigerlod-verify" --cgal "$a/tree" "$a/in" "$a/verify" >"$a/verify.log" 2>&1 || fail "asia verify: $(cat "$a/verify.log")"
+grep -q "CLEAN: no violations" "$a/verify.log" || fail "asia verify: $(cat "$a/verify.log")"
+grep -q "CGAL check: agrees" "$a/verify.log" || fail "asia CGAL: $(cat "$a/verify.log")"
+grep -q "on the ellipsoid: skipped vertices at most 0\." "$a/verify.log" || fail "asia ground: $(cat "$a/verify.log")"
+echo "asia: 51 countries chosen by dataset.where; clean on the ground, CGAL agreeing"
+echo "3 passed, 0 failed"
