@@ -20,8 +20,14 @@ endfunction()
 # tigerlod_add_test(NAME SOURCES ... LIBS ... [NO_LEAK_CHECK]): one GoogleTest
 # binary, its tests discovered by CTest. NO_LEAK_CHECK turns LeakSanitizer off
 # for it in the sanitizer build (AddressSanitizer still checks memory).
+# COST: ctest's estimate of each of its tests' seconds, so that a fresh
+# build (no timings of its own yet) starts the long ones first and -j keeps
+# every core busy to the end.
 function(tigerlod_add_test name)
-  cmake_parse_arguments(T "NO_LEAK_CHECK" "" "SOURCES;LIBS" ${ARGN})
+  cmake_parse_arguments(T "NO_LEAK_CHECK" "COST" "SOURCES;LIBS" ${ARGN})
+  if(NOT T_COST)
+    set(T_COST 1)
+  endif()
   set(env "LSAN_OPTIONS=suppressions=${PROJECT_SOURCE_DIR}/tests/lsan.supp:print_suppressions=0")
   if(T_NO_LEAK_CHECK)
     string(APPEND env ":detect_leaks=0")
@@ -32,5 +38,5 @@ function(tigerlod_add_test name)
     ${name} PRIVATE TIGERLOD_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
                     TIGERLOD_BIN_DIR="${CMAKE_RUNTIME_OUTPUT_DIRECTORY}")
   tigerlod_warnings(${name})
-  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES TIMEOUT 900 ENVIRONMENT "${env}")
+  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES TIMEOUT 900 COST ${T_COST} ENVIRONMENT "${env}")
 endfunction()
