@@ -7,7 +7,7 @@ set -uo pipefail
 test_name=$1
 repo=$(cd "$2" && pwd)
 bin=$(cd "$3" && pwd)
-work=$(mktemp -d "${TMPDIR:-/tmp}/tigerlod-$test_name-XXXXXX")
+work=$(mktemp -d "${TMPDIR:-/tmp}/tigerlod-${test_name// /-}-XXXXXX") # no space: the tests split commands on it
 on_exit() { :; }
 trap 'on_exit; rm -rf "$work"' EXIT
 fail() {
