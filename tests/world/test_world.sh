@@ -12,6 +12,22 @@
 # which scripts/test fetches.
 #   tests/world/test_world.sh REPO BIN_DIR
 . "$(dirname "$0")/../support/script.sh" world "$1" "$2"
+# end_to_end NAME CONFIG DIR: ingest (its log in DIR, checked by the
+# caller), simplify, pack, and verify with the CGAL checker; clean, the
+# checkers agreeing, and measured on the ellipsoid.
+end_to_end() {
+  local name=$1 cfg=$2 d=$3
+  mkdir -p "$d"
+  "$bin/tigerlod-ingest" "$cfg" "$d/in" >"$d/ingest.log" 2>&1 || fail "$name ingest: $(cat "$d/ingest.log")"
+  "$bin/tigerlod-simplify" --config "$cfg" "$d/in" "$d/simp" >"$d/simp.log" 2>&1 ||
+    fail "$name simplify: $(cat "$d/simp.log")"
+  "$bin/tigerlod-pack" "$d/in" "$d/simp" "$d/tree" >"$d/pack.log" 2>&1 || fail "$name pack: $(cat "$d/pack.log")"
+  "$bin/tigerlod-verify" --cgal "$d/tree" "$d/in" "$d/verify" >"$d/verify.log" 2>&1 ||
+    fail "$name verify: $(cat "$d/verify.log")"
+  grep -q "CLEAN: no violations" "$d/verify.log" || fail "$name verify: $(cat "$d/verify.log")"
+  grep -q "CGAL check: agrees" "$d/verify.log" || fail "$name CGAL: $(cat "$d/verify.log")"
+  grep -q "on the ellipsoid: skipped vertices at most 0\." "$d/verify.log" || fail "$name ground: $(cat "$d/verify.log")"
+}
 # Hand-made maps on a cone cut at the antimeridian (lon0 0): a square
 # across the antimeridian (two parts, one each side), a ring round the
 # south pole (closed along the pole), and a line across the cut (refused).
@@ -36,13 +52,9 @@ open(f"{d}/globe.yaml", "w").write(
 open(f"{d}/line.yaml", "w").write("name: line\ndataset: {kind: lines, inputs: [line.geojson]}\n" + cone)
 PY
 g=$work/globe
-"$bin/tigerlod-ingest" "$g/globe.yaml" "$g/in" >"$g/ingest.log" 2>&1 || fail "globe ingest: $(cat "$g/ingest.log")"
+end_to_end globe "$g/globe.yaml" "$g"
 grep -Eq "^ +unit +3 +4 +4 " "$g/ingest.log" || fail "globe: not 3 units in 4 rings: $(cat "$g/ingest.log")"
 grep -q "problems: none" "$g/ingest.log" || fail "globe: $(cat "$g/ingest.log")"
-"$bin/tigerlod-simplify" --config "$g/globe.yaml" "$g/in" "$g/simp" >"$g/simp.log" 2>&1 || fail "globe simplify: $(cat "$g/simp.log")"
-"$bin/tigerlod-pack" "$g/in" "$g/simp" "$g/tree" >"$g/pack.log" 2>&1 || fail "globe pack: $(cat "$g/pack.log")"
-"$bin/tigerlod-verify" --cgal "$g/tree" "$g/in" "$g/verify" >"$g/verify.log" 2>&1 || fail "globe verify: $(cat "$g/verify.log")"
-grep -q "CLEAN: no violations" "$g/verify.log" || fail "globe verify: $(cat "$g/verify.log")"
 "$bin/tigerlod-ingest" "$g/line.yaml" "$g/lin" >"$g/line.log" 2>&1
 rc=$?
 [ "$rc" = 1 ] || fail "a line across the cut: exit $rc, not 1: $(cat "$g/line.log")"
@@ -55,17 +67,9 @@ if [ ! -f "$repo/.cache/npm/world-atlas-2.0.2/countries-50m.json" ]; then
   exit 0
 fi
 cfg=$repo/configs/world.yaml
-"$bin/tigerlod-ingest" "$cfg" "$work/in" >"$work/ingest.log" 2>&1 || fail "ingest: $(cat "$work/ingest.log")"
-grep -q "5 features with an empty 'id' (feature 58 'Somaliland'" "$work/ingest.log" ||
-  fail "ingest did not name the features without a code: $(cat "$work/ingest.log")"
-"$bin/tigerlod-simplify" --config "$cfg" "$work/in" "$work/simp" >"$work/simp.log" 2>&1 ||
-  fail "simplify: $(cat "$work/simp.log")"
-"$bin/tigerlod-pack" "$work/in" "$work/simp" "$work/tree" >"$work/pack.log" 2>&1 || fail "pack: $(cat "$work/pack.log")"
-"$bin/tigerlod-verify" --cgal "$work/tree" "$work/in" "$work/verify" >"$work/verify.log" 2>&1 ||
-  fail "verify: $(cat "$work/verify.log")"
-grep -q "CLEAN: no violations" "$work/verify.log" || fail "verify: $(cat "$work/verify.log")"
-grep -q "CGAL check: agrees" "$work/verify.log" || fail "CGAL: $(cat "$work/verify.log")"
-grep -q "on the ellipsoid: skipped vertices at most 0\." "$work/verify.log" || fail "ground: $(cat "$work/verify.log")"
+end_to_end world "$cfg" "$work/world"
+grep -q "5 features with an empty 'id' (feature 58 'Somaliland'" "$work/world/ingest.log" ||
+  fail "ingest did not name the features without a code: $(cat "$work/world/ingest.log")"
 # At the default grid the world is wider than a node: --validate says which key.
 sed -e 's/, grid_m: 0.1}/}/' -e "s|\.\./\.cache/|$repo/.cache/|g" "$cfg" >"$work/world-fine.yaml"
 "$bin/tigerlod-ingest" --validate "$work/world-fine.yaml" "$work/x" >"$work/validate.log" 2>&1
@@ -92,17 +96,9 @@ echo "world: ingest, simplify, pack and verify clean on the ground, CGAL agreein
 echo "  empty codes refused by default, counted and named; the halo rule checked at --validate"
 # Asia (configs/asia.yaml): the same package, its countries chosen by
 # dataset.where (UN M49 region 142, 51 codes), on a cone of its own.
-cfg=$repo/configs/asia.yaml
 a=$work/asia
-mkdir -p "$a"
-"$bin/tigerlod-ingest" "$cfg" "$a/in" >"$a/ingest.log" 2>&1 || fail "asia ingest: $(cat "$a/ingest.log")"
+end_to_end asia "$repo/configs/asia.yaml" "$a"
 grep -Eq "^  country +51 " "$a/ingest.log" || fail "asia: not the 51 countries the condition names: $(cat "$a/ingest.log")"
 grep -q "problems: none" "$a/ingest.log" || fail "asia ingest: $(cat "$a/ingest.log")"
-"$bin/tigerlod-simplify" --config "$cfg" "$a/in" "$a/simp" >"$a/simp.log" 2>&1 || fail "asia simplify: $(cat "$a/simp.log")"
-"$bin/tigerlod-pack" "$a/in" "$a/simp" "$a/tree" >"$a/pack.log" 2>&1 || fail "asia pack: $(cat "$a/pack.log")"
-"$bin/tigerlod-verify" --cgal "$a/tree" "$a/in" "$a/verify" >"$a/verify.log" 2>&1 || fail "asia verify: $(cat "$a/verify.log")"
-grep -q "CLEAN: no violations" "$a/verify.log" || fail "asia verify: $(cat "$a/verify.log")"
-grep -q "CGAL check: agrees" "$a/verify.log" || fail "asia CGAL: $(cat "$a/verify.log")"
-grep -q "on the ellipsoid: skipped vertices at most 0\." "$a/verify.log" || fail "asia ground: $(cat "$a/verify.log")"
 echo "asia: 51 countries chosen by dataset.where; clean on the ground, CGAL agreeing"
 echo "3 passed, 0 failed"
