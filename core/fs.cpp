@@ -395,11 +395,11 @@ FolderLock::FolderLock(const fs::path& folder, const std::string& who, Mode mode
             throw environment_error(folder.string() + ": cannot open to lock it: " + std::strerror(errno));
         }
         if (::flock(m_fd, op | LOCK_NB) != 0) {
-            if (errno == ENOLCK || errno == ENOSYS || errno == EOPNOTSUPP) {
+            if (const int err = errno; err == ENOLCK || err == ENOSYS || err == EOPNOTSUPP) {
                 static std::once_flag said;
                 std::call_once(said, [&] {
                     std::fprintf(stderr, "%s: %s cannot be locked (%s): concurrent runs on it are not guarded\n",
-                                 who.c_str(), folder.c_str(), std::strerror(errno));
+                                 who.c_str(), folder.c_str(), std::strerror(err));
                 });
                 ::close(m_fd);
                 m_fd = -1;
