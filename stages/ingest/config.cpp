@@ -78,23 +78,15 @@ std::vector<LevelSpec> default_tiger_levels()
             {"block", "", {"STATEFP20", "COUNTYFP20", "TRACTCE20", "BLOCKCE20"}, -1}};
 }
 
-IngestConfig load_config(const fs::path& file)
+/// The `dataset` section: its kind, files and fields, checked.
+DatasetSpec read_dataset_section(const Reader& ctx, const YAML::Node& root)
 {
-    const auto loaded = config::ConfigFile::load(file); // every key known, typed, in range
-    const Reader ctx(loaded);
-    IngestConfig cfg;
-    cfg.file = file;
-    const YAML::Node& root = loaded.root();
-    cfg.name = ctx.get<std::string>("name", "");
-    if (cfg.name.empty() || cfg.name.find_first_not_of("abcdefghijklmnopqrstuvwxyz0123456789_-") != std::string::npos) {
-        ctx.fail(root["name"], "'name' is required: lowercase letters, digits, '_' and '-'");
-    }
+    DatasetSpec d;
     const YAML::Node ds = root["dataset"];
     if (!ds) {
         ctx.fail(root, "'dataset' is required");
     }
     const auto kind = ctx.get<std::string>("dataset.kind", "");
-    auto& d = cfg.dataset;
     if (kind == "tiger") {
         d.kind = DatasetSpec::Kind::tiger;
         d.edges = ctx.paths("dataset.edges");
@@ -139,6 +131,22 @@ IngestConfig load_config(const fs::path& file)
     if (d.intpt_lat_field.empty() != d.intpt_lon_field.empty()) {
         ctx.fail(ds, "'intpt_lat_field' and 'intpt_lon_field' go together");
     }
+    return d;
+}
+
+IngestConfig load_config(const fs::path& file)
+{
+    const auto loaded = config::ConfigFile::load(file); // every key known, typed, in range
+    const Reader ctx(loaded);
+    IngestConfig cfg;
+    cfg.file = file;
+    const YAML::Node& root = loaded.root();
+    cfg.name = ctx.get<std::string>("name", "");
+    if (cfg.name.empty() || cfg.name.find_first_not_of("abcdefghijklmnopqrstuvwxyz0123456789_-") != std::string::npos) {
+        ctx.fail(root["name"], "'name' is required: lowercase letters, digits, '_' and '-'");
+    }
+    cfg.dataset = read_dataset_section(ctx, root);
+    const DatasetSpec& d = cfg.dataset;
 
     if (const YAML::Node lv = root["levels"]) {
         for (size_t i = 0; i < lv.size(); ++i) {
