@@ -277,7 +277,8 @@ class TreeContext {
     uint8_t metric() const noexcept { return m_metric; }
 
   private:
-    /// "DIR/F.tlc: simplified at 200 m, not at the 50 m of its folder".
+    /// "DIR/F.tlc: simplified at 200m, not at the 50m its folder's name
+    /// says (moved or copied from eps-200m?); ...".
     static std::string misplaced(const fs::path& file, double eps, const fs::path& folder)
     {
         return file.string() + ": simplified at " + chains::tolerance_dir(eps).substr(4) + ", not at the " +
@@ -350,10 +351,9 @@ class TreeContext {
         }
         for (const double e : m_options.lods) {
             if (std::find(m_lod_eps.begin(), m_lod_eps.end(), e) == m_lod_eps.end()) {
-                char buf[64];
-                std::snprintf(buf, sizeof buf, "%g", e);
-                throw input_error(m_simplified.string() + ": no stores simplified at " + buf + " m (no eps-" + buf +
-                                  "m folder): run tigerlod-simplify first");
+                const std::string dir = chains::tolerance_dir(e); // "eps-4m"
+                throw input_error(m_simplified.string() + ": no stores simplified at " + dir.substr(4, dir.size() - 5) +
+                                  " m (no " + dir + " folder): run tigerlod-simplify first");
             }
         }
         m_header.lod_eps_m = m_lod_eps;
