@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The operator's scripts around the workflow refuse bad arguments with one
 # line naming the fault and exit 2 (bad input files: 1), before they start
-# anything: scripts/cluster-estimate, pipeline/merge-reports,
+# anything: scripts/fuzz, scripts/cluster-estimate, pipeline/merge-reports,
 # scripts/bench-workflow, scripts/bench-gl, scripts/bench-partitions and scripts/test-slurm (which
 # would otherwise install and start Slurm first). And merge-reports sums two
 # shares as the whole run writes them.
@@ -33,6 +33,8 @@ mkdir -p "$work/run/benchmarks/color/tract" "$work/run/benchmarks/simplify/tract
 printf 's\th:m:s\tmax_rss\n12.5\t0:00:12\t100\n' >"$work/run/benchmarks/ingest.tsv"
 printf 's\th:m:s\tmax_rss\n3.0\t0:00:03\t100\n' >"$work/run/benchmarks/color/tract/g1.tsv"
 printf 's\th:m:s\tmax_rss\n5.0\t0:00:05\t100\n' >"$work/run/benchmarks/simplify/tract/g1.tsv"
+expect 2 "fuzz: SECONDS must be a whole number >= 1, not 'x'" "$repo/scripts/fuzz" x
+expect 2 "fuzz: TIGERLOD_FUZZ_JOBS must be a whole number >= 1, not '0'" env TIGERLOD_FUZZ_JOBS=0 "$repo/scripts/fuzz" 5
 expect 2 "usage: scripts/bench-gl" "$repo/scripts/bench-gl"
 expect 2 "not a tigerlod-ingest output" "$repo/scripts/bench-gl" "$work/none" 1,4
 expect 2 "required: out, workers" "$repo/scripts/cluster-estimate"
