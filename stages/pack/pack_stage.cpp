@@ -18,6 +18,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <optional>
 #include <sstream>
 #include <thread>
 
@@ -163,6 +164,9 @@ int PackStage::run_plan(const StageContext& ctx)
     const Manifest ingest = read_manifest(m_original, "ingest");
     const unsigned threads =
         m_threads > 0 ? static_cast<unsigned>(m_threads) : std::max(1U, std::thread::hardware_concurrency());
+    // The parts folder alone while its plan changes: partition jobs read
+    // the plan and share the folder, a --finish prunes it alone.
+    const FolderLock lock(m_parts, "pack");
     PackPlan plan = plan_parts(m_original, threads);
     plan.ingest_sha256 = ingest.sha256;
     const std::string text = plan_json(plan);
@@ -200,6 +204,12 @@ int PackStage::run_partitions(const StageContext& ctx)
         }
     }
     const fs::path plan_path = fs::path(m_parts) / "plan.json";
+    if (!fs::exists(plan_path)) {
+        throw usage_error(plan_path.string() + " is missing: run tigerlod-pack --plan --parts " + m_parts + " first");
+    }
+    // Shared with the run's other partition jobs; a --plan or a --finish
+    // (which prunes parts) waits for them, and they for it.
+    const FolderLock lock(m_parts, "pack", FolderLock::Mode::shared);
     std::ifstream in(plan_path, std::ios::binary);
     if (!in) {
         throw usage_error(plan_path.string() + " is missing: run tigerlod-pack --plan --parts " + m_parts + " first");
@@ -251,6 +261,13 @@ int PackStage::run(const StageContext& ctx)
     // tiles the other's skeleton names.
     const FolderLock lock(m_output, "pack");
     refuse_foreign_output();
+    // A --finish reads every part and prunes the folder: alone on it, after
+    // the partition jobs (which share it) are done. (Without the folder
+    // assemble_parts says what is missing.)
+    std::optional<FolderLock> parts_lock;
+    if (m_finish && fs::is_directory(m_parts)) {
+        parts_lock.emplace(m_parts, "pack");
+    }
     // A tree this run began (no OUTPUT, or an empty folder, when the lock
     // was taken) is removed whole if the run fails before its report is
     // written (a full disk): nothing half-written is left. An existing tree

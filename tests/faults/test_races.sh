@@ -7,7 +7,7 @@
 # instead of interleaving its files. Whole runs of ingest, simplify and
 # verify, two at once on one OUTPUT: it is one run's output. And the kinds
 # of lock: partition jobs share OUTPUT, a --finish and a whole run's swap
-# take it alone.
+# take it alone; pack's partition jobs share their parts folder.
 #   tests/faults/test_races.sh REPO BIN_DIR
 . "$(dirname "$0")/../support/script.sh" races "$1" "$2"
 python3 "$repo/tests/faults/make_map.py" "$work"
@@ -129,4 +129,18 @@ waits no -s "$work/in3" "$bin/tigerlod-ingest" --region whole --parts "$parts" "
 waits yes -s "$work/in3" "$bin/tigerlod-ingest" --finish --parts "$parts" "$work/map.yaml" "$work/in3"
 waits yes -x "$work/in3" "$bin/tigerlod-ingest" --region whole --parts "$parts" "$work/map.yaml" "$work/in3"
 echo "races: partition jobs share OUTPUT; a --finish, a whole run's swap and a job behind a --finish wait"
-echo "5 passed, 0 failed"
+# Pack's parts folder: its partition jobs share it, its --plan and its
+# --finish (which prunes parts) take it alone.
+pp=$work/packparts
+"$bin/tigerlod-pack" --plan --parts "$pp" "$work/in" "$work/simp" "$work/tree4" >"$work/log" 2>&1 ||
+  fail "pack --plan: $(cat "$work/log")"
+pack_job=("$bin/tigerlod-pack" --parts "$pp" --partitions 'county/*' --report "$work/share.json" "$work/in" "$work/simp" "$work/tree4")
+waits yes -s "$pp" "$bin/tigerlod-pack" --plan --parts "$pp" "$work/in" "$work/simp" "$work/tree4"
+waits no -s "$pp" "${pack_job[@]}"
+waits yes -x "$pp" "${pack_job[@]}"
+"$bin/tigerlod-pack" --parts "$pp" --partitions 'state/*' "$work/in" "$work/simp" "$work/tree4" >"$work/log" 2>&1 ||
+  fail "pack's state jobs: $(cat "$work/log")"
+waits yes -s "$pp" "$bin/tigerlod-pack" --finish --parts "$pp" "$work/in" "$work/simp" "$work/tree4"
+"$bin/tigerlod-verify" "$work/tree4" "$work/in" "$work/v4" >"$work/log" 2>&1 || fail "verify of the parts' tree: $(cat "$work/log")"
+echo "races: pack's partition jobs share their parts folder; its --plan and --finish wait for them"
+echo "6 passed, 0 failed"
