@@ -453,9 +453,14 @@ bool has_avx512() noexcept
 
 // The lanes kernel twice (scan_lanes.ipp): four starts at once for AVX2 and
 // eight for AVX-512, each built for its instruction set alone and run only
-// where the processor has it.
+// where the processor has it (GCC's target pragma; Clang's attribute pragma
+// for the sanitizer build).
+#if defined(__clang__)
+#pragma clang attribute push(__attribute__((target("avx2"))), apply_to = function)
+#else
 #pragma GCC push_options
 #pragma GCC target("avx2")
+#endif
 namespace avx2 {
 
 using V = double __attribute__((vector_size(32)));
@@ -477,10 +482,18 @@ inline V iota() noexcept
 #include "simplification/scan_lanes.ipp"
 
 } // namespace avx2
+#if defined(__clang__)
+#pragma clang attribute pop
+#else
 #pragma GCC pop_options
+#endif
 
+#if defined(__clang__)
+#pragma clang attribute push(__attribute__((target("avx512f"))), apply_to = function)
+#else
 #pragma GCC push_options
 #pragma GCC target("avx512f")
+#endif
 namespace avx512 {
 
 using V = double __attribute__((vector_size(64)));
@@ -503,7 +516,11 @@ inline V iota() noexcept
 #include "simplification/scan_lanes.ipp"
 
 } // namespace avx512
+#if defined(__clang__)
+#pragma clang attribute pop
+#else
 #pragma GCC pop_options
+#endif
 #endif
 
 } // namespace

@@ -245,9 +245,9 @@ void add_result(BuildResult& total, BuildResult&& r, size_t first_level, size_t 
     first_samples(total.samples, max_samples);
     total.unique_vertices += r.unique_vertices;
     total.edges += r.edges;
-    for (auto& [name, s] : r.seconds) {
-        auto it =
-            std::find_if(total.seconds.begin(), total.seconds.end(), [&](const auto& p) { return p.first == name; });
+    for (const auto& [name, s] : r.seconds) {
+        auto it = std::find_if(total.seconds.begin(), total.seconds.end(),
+                               [&n = name](const auto& p) { return p.first == n; });
         if (it == total.seconds.end()) {
             total.seconds.emplace_back(name, s);
         } else {

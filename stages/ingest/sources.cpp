@@ -680,7 +680,12 @@ LineLayer open_lines(const IngestConfig& cfg, const fs::path& path)
 void read_faces_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw,
                      std::unordered_map<int64_t, uint32_t>& face_unit)
 {
-    auto [src, tfid, lat_i, lon_i, area_i, fields] = open_faces(cfg, path);
+    // Named, not a structured binding: lambdas below use them, and Clang 14
+    // (the sanitizer build's compiler) cannot capture a binding.
+    FacesLayer layer = open_faces(cfg, path);
+    Source& src = layer.src;
+    const int tfid = layer.tfid, lat_i = layer.lat, lon_i = layer.lon, area_i = layer.area;
+    const auto& fields = layer.levels;
     OGR_L_SetIgnoredFields(src.layer(), std::array<const char*, 2>{"OGR_GEOMETRY", nullptr}.data());
     const auto file = static_cast<uint32_t>(raw.files.size());
     raw.files.push_back(src.name());
@@ -720,7 +725,9 @@ void read_edges_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw,
 {
     size_t edges = 0, orphans = 0;
     std::string examples;
-    auto [src, tlid, tfidl, tfidr, cls] = open_edges(cfg, path);
+    EdgesLayer layer = open_edges(cfg, path); // named: see read_faces_file
+    Source& src = layer.src;
+    const int tlid = layer.tlid, tfidl = layer.tfidl, tfidr = layer.tfidr, cls = layer.cls;
     const auto file = static_cast<uint32_t>(raw.files.size());
     raw.files.push_back(src.name());
     std::vector<LonLatE6> pts;
@@ -903,7 +910,10 @@ void read_polygon_file(const IngestConfig& cfg, const fs::path& path, RawMap& ra
 {
     std::vector<LonLatE6> ring;
     {
-        auto [src, code_i, lat_i, lon_i, cls, fields] = open_polygons(cfg, path);
+        PolygonLayer layer = open_polygons(cfg, path); // named: see read_faces_file
+        Source& src = layer.src;
+        const int code_i = layer.code, lat_i = layer.lat, lon_i = layer.lon, cls = layer.cls;
+        const auto& fields = layer.levels;
         const auto file = static_cast<uint32_t>(raw.files.size());
         raw.files.push_back(src.name());
         uint64_t empty_codes = 0; // features with an empty code, and the first three
@@ -1001,7 +1011,9 @@ void read_line_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw)
 {
     std::vector<LonLatE6> pts;
     {
-        auto [src, cls] = open_lines(cfg, path);
+        LineLayer layer = open_lines(cfg, path); // named: see read_faces_file
+        Source& src = layer.src;
+        const int cls = layer.cls;
         const auto file = static_cast<uint32_t>(raw.files.size());
         raw.files.push_back(src.name());
         src.for_each([&](OGRFeatureH f, int64_t index) {

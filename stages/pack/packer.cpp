@@ -913,7 +913,9 @@ PackPlan plan_parts(const fs::path& original, unsigned threads)
         levels[rel[i].parent_path().string()].push_back(i);
     }
     PackPlan plan;
-    for (const auto& [level, members] : levels) {
+    for (const auto& entry : levels) {
+        const std::string& level = entry.first; // (a lambda uses them: no structured binding for Clang 14)
+        const std::vector<size_t>& members = entry.second;
         std::vector<std::vector<uint64_t>> owned(members.size()), shown(members.size()), halo(members.size());
         parallel_each(members.size(), threads, [&](size_t a) {
             const auto s = chains::read(original / rel[members[a]]);

@@ -55,7 +55,7 @@ size_t LineRenderer::buffer_bytes() noexcept
 }
 
 LineRenderer::LineRenderer(gl::Context& context, uint32_t width, uint32_t height)
-    : m_context(context), gl(context.api()), m_width(width), m_height(height)
+    : gl(context.api()), m_width(width), m_height(height)
 {
     gl.GenFramebuffers(1, &m_fbo);
     gl.BindFramebuffer(GL_FRAMEBUFFER, m_fbo);

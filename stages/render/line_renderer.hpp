@@ -61,8 +61,7 @@ class LineRenderer {
     };
     void flush();
 
-    gl::Context& m_context;
-    const gl::Api& gl;
+    const gl::Api& gl; // the context's, which must outlive this
     uint32_t m_width, m_height;
     GLuint m_fbo = 0, m_rb_color = 0, m_program = 0, m_vao = 0, m_vbo = 0;
     GLint m_size_loc = -1;

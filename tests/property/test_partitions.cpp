@@ -9,6 +9,7 @@
 #include "../support/adversarial_lines.hpp"
 #include "../support/adversarial_map.hpp"
 #include "../support/run_tool.hpp"
+#include "../support/sanitizers.hpp"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -42,7 +43,7 @@ std::pair<uint64_t, uint64_t> seed_range()
 {
     const char* env = std::getenv("TIGERLOD_PROPERTY_SEEDS");
     if (!env || !*env) {
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+#if TIGERLOD_SANITIZED
         // Under the sanitizers one seed: they look for memory and thread
         // faults, which the same code shows on any map (the line layers'
         // three seeds took 632 s under ASan); the dev pass runs all three.

@@ -9,6 +9,7 @@
 #include "stages/ingest/map_builder.hpp"
 #include "stages/ingest/sources.hpp"
 #include "simplification/simplifier.hpp"
+#include "../../support/sanitizers.hpp"
 
 #include <gtest/gtest.h>
 
@@ -287,7 +288,7 @@ TEST(SimplifyReal, FloydCoarseLadderIsByteIdenticalToEachToleranceAloneAtBlockGr
 
 TEST(SimplifyReal, FloydCoarseLadderIsByteIdenticalToEachToleranceAloneAtBlockLevel)
 {
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+#if TIGERLOD_SANITIZED
     // Floyd's blocks at the coarse ladder took 650 s of the 900 under ASan
     // idle, most of it at the kilometre tolerances: the sanitizer pass
     // checks the two smallest (one shared grid, the same code); the dev
@@ -300,7 +301,7 @@ TEST(SimplifyReal, FloydCoarseLadderIsByteIdenticalToEachToleranceAloneAtBlockLe
 
 TEST(SimplifyReal, FloydWideLadderIsByteIdenticalToEachToleranceAlone)
 {
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+#if TIGERLOD_SANITIZED
     // 200 s under ASan on every level; the block groups alone run the same
     // code (two grids, one tolerance on its own); the dev pass checks all.
     expect_floyd_ladder_alone({1, 16, 2000}, false, "block_group");
