@@ -10,10 +10,11 @@ namespace tigerlod {
 
 /// Exit codes of every tigerlod executable (documented in each --help).
 enum ExitCode : int {
-    exit_ok = 0,         ///< done
-    exit_data = 1,       ///< the stage ran, but the data failed
-    exit_usage = 2,      ///< usage or config error
-    exit_environment = 3 ///< environment problem (I/O, GL context); worth retrying
+    exit_ok = 0,          ///< done
+    exit_data = 1,        ///< the stage ran, but the data failed
+    exit_usage = 2,       ///< usage or config error
+    exit_environment = 3, ///< environment problem (I/O, GL context); worth retrying
+    exit_internal = 4     ///< a fault in tigerlod itself (an exception no stage expected): do not retry, report it
 };
 
 /// Base of all tigerlod errors; carries the exit code it maps to.

@@ -9,6 +9,7 @@
 #include <new>
 #include <sstream>
 #include <string_view>
+#include <system_error>
 
 namespace tigerlod {
 
@@ -260,8 +261,9 @@ int run_stage_impl(Stage& stage, const char* name, const char* description, int 
                       << "\nDiagnostics:\n"
                          "  Exit codes: 0 done; 1 the stage ran but the data failed (bad or corrupt\n"
                          "  input, problems over budget); 2 usage or config error; 3 environment\n"
-                         "  problem (I/O, GL context), worth retrying. Messages name the file, the\n"
-                         "  place and the fault.\n";
+                         "  problem (I/O, GL context), worth retrying; 4 internal error (a fault in\n"
+                         "  tigerlod): do not retry, report it. Messages name the file, the place\n"
+                         "  and the fault.\n";
             return exit_ok;
         }
         if (version) {
@@ -291,6 +293,16 @@ int run_stage_impl(Stage& stage, const char* name, const char* description, int 
         log.set_verbose(verbose);
         StageContext ctx{log, parse_progress_mode(progress)};
         return stage.run(ctx);
+    } catch (...) {
+        return report_exception(std::current_exception(), name, std::cerr);
+    }
+}
+
+int report_exception(const std::exception_ptr& error, const char* name, std::ostream& err)
+{
+    const std::string program = std::string("tigerlod-") + name;
+    try {
+        std::rethrow_exception(error);
     } catch (const Error& e) {
         // Messages thrown as "pack: ..." by a stage: the program name says it once.
         std::string_view what = e.what();
@@ -298,14 +310,25 @@ int run_stage_impl(Stage& stage, const char* name, const char* description, int 
         if (what.substr(0, own.size()) == own) {
             what.remove_prefix(own.size());
         }
-        std::cerr << program << ": " << what << '\n';
+        err << program << ": " << what << '\n';
         return e.exit_code();
     } catch (const std::bad_alloc&) {
-        std::cerr << program << ": out of memory\n";
+        err << program << ": out of memory\n";
+        return exit_environment;
+    } catch (const std::system_error& e) {
+        // The system said no (std::filesystem, threads, streams with
+        // exceptions on): the machine's state, not the code's.
+        err << program << ": " << e.what() << '\n';
         return exit_environment;
     } catch (const std::exception& e) {
-        std::cerr << program << ": internal error: " << e.what() << '\n';
-        return exit_environment;
+        err << program
+            << ": internal error (a fault in tigerlod, not in its input or the machine; running it again "
+               "will not help, please report it): "
+            << e.what() << '\n';
+        return exit_internal;
+    } catch (...) {
+        err << program << ": internal error (a fault in tigerlod: an exception of no known kind; please report it)\n";
+        return exit_internal;
     }
 }
 

@@ -10,7 +10,9 @@
 #include "core/log.hpp"
 #include "core/progress.hpp"
 
+#include <exception>
 #include <filesystem>
+#include <iosfwd>
 #include <limits>
 #include <string>
 #include <variant>
@@ -113,6 +115,12 @@ class Stage {
 
 namespace detail {
 int run_stage_impl(Stage& stage, const char* name, const char* description, int argc, char** argv);
+
+/// Write `error`'s one-line message for tigerlod-`name` to `err` and return
+/// its exit code: an Error's own; 3 for std::bad_alloc and std::system_error
+/// (std::filesystem's errors among them: the machine's state); 4 for any
+/// other exception, a fault in tigerlod that a retry would only repeat.
+int report_exception(const std::exception_ptr& error, const char* name, std::ostream& err);
 } // namespace detail
 
 /// Parse, validate, run and map exceptions to exit codes (see ExitCode).
