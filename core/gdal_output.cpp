@@ -48,11 +48,21 @@ void fix_gdal_dates()
     }
     std::time_t t = 0;
     if (const char* epoch = std::getenv("SOURCE_DATE_EPOCH"); epoch != nullptr && *epoch != '\0') {
-        char* end = nullptr;
-        const long long v = std::strtoll(epoch, &end, 10);
-        if (*end == '\0' && v >= 0) {
-            t = static_cast<std::time_t>(v);
+        // Digits only (no sign, no spaces), up to 9999-12-31T23:59:59Z: a
+        // date the user set and we cannot write is refused, not replaced.
+        constexpr long long last = 253402300799LL;
+        long long v = 0;
+        bool ok = true;
+        for (const char* c = epoch; *c != '\0' && ok; ++c) {
+            ok = *c >= '0' && *c <= '9' && v <= last;
+            v = ok ? v * 10 + (*c - '0') : v;
         }
+        if (!ok || v > last) {
+            throw usage_error(std::string("SOURCE_DATE_EPOCH is '") + epoch +
+                              "': expected seconds since 1970-01-01 UTC, a whole number from 0 to " +
+                              std::to_string(last) + " (9999-12-31)");
+        }
+        t = static_cast<std::time_t>(v);
     }
     std::tm utc{};
     gmtime_r(&t, &utc);

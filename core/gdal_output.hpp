@@ -44,7 +44,9 @@ class GdalErrorTrap {
 /// time of writing. Sets GDAL's OGR_CURRENT_DATE to SOURCE_DATE_EPOCH (the
 /// reproducible-builds convention: seconds since 1970) if that is set, else
 /// to 1970-01-01T00:00:00.000Z; an OGR_CURRENT_DATE the user set is kept.
-/// Call before creating the dataset.
+/// A SOURCE_DATE_EPOCH that is not a whole number of seconds from 0 to
+/// 9999-12-31 throws usage_error (exit 2) naming it. Call before the stage
+/// does its work, so that the fault is found before it, not after.
 void fix_gdal_dates();
 
 /// Close `ds` (written to `path`) and make sure the file holds what was

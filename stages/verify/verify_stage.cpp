@@ -626,8 +626,10 @@ int VerifyStage::run(const StageContext& ctx)
     if (!m_partitions.empty()) {
         return run_partitions(ctx);
     }
-    // The earlier report first: a bad one is found before the work, not after.
+    // The earlier report and the date violations.gpkg will carry first: a
+    // bad one is found before the work, not after.
     const json old = m_compare.empty() ? json() : read_earlier_report(m_compare);
+    fix_gdal_dates();
     // The tree's manifest says what it was made from and under which
     // contract (simplify's options, its user points included): the tree is
     // checked against that, and against the ingest output it was packed from.

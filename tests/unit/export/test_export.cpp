@@ -179,6 +179,47 @@ TEST_F(Export, AGeoPackageHasTheSameBytesWhenWrittenAgain)
     EXPECT_EQ(tigerlod::testing::slurp(dir / "d.gpkg"), tigerlod::testing::slurp(dir / "e.gpkg"));
 }
 
+TEST_F(Export, SourceDateEpochDatesTheFileOrIsRefused)
+{
+    // The reproducible-builds convention: the file carries that date; a
+    // value that is no date is exit 2 naming it, with no file written.
+    struct Env {
+        explicit Env(const char* v) { ::setenv("SOURCE_DATE_EPOCH", v, 1); }
+        ~Env() { ::unsetenv("SOURCE_DATE_EPOCH"); }
+        Env(const Env&) = delete;
+        Env& operator=(const Env&) = delete;
+    };
+    {
+        const Env env("86400");
+        ASSERT_EQ(run("--lod 1 " + (dir / "tree").string() + " " + (dir / "day.gpkg").string()), 0)
+            << tigerlod::testing::slurp(dir / "log");
+    }
+    GDALDatasetH ds = GDALOpenEx((dir / "day.gpkg").c_str(), GDAL_OF_VECTOR, nullptr, nullptr, nullptr);
+    ASSERT_NE(ds, nullptr);
+    OGRLayerH rows = GDALDatasetExecuteSQL(
+        ds, "SELECT COUNT(*) FROM gpkg_contents WHERE last_change = '1970-01-02T00:00:00.000Z'", nullptr, nullptr);
+    ASSERT_NE(rows, nullptr);
+    OGRFeatureH f = OGR_L_GetNextFeature(rows);
+    ASSERT_NE(f, nullptr);
+    EXPECT_GE(OGR_F_GetFieldAsInteger64(f, 0), 1);
+    OGR_F_Destroy(f);
+    GDALDatasetReleaseResultSet(ds, rows);
+    GDALClose(ds);
+    for (const char* bad : {"yesterday", "-1", "1e9", " 5", "253402300800", "99999999999999999999999"}) {
+        SCOPED_TRACE(bad);
+        const Env env(bad);
+        EXPECT_EQ(run("--lod 1 " + (dir / "tree").string() + " " + (dir / "bad.geojson").string()), 2);
+        const std::string log = tigerlod::testing::slurp(dir / "log");
+        EXPECT_NE(log.find(std::string("SOURCE_DATE_EPOCH is '") + bad + "'"), std::string::npos) << log;
+        EXPECT_FALSE(fs::exists(dir / "bad.geojson"));
+    }
+    bool leftover = false;
+    for (const auto& e : fs::directory_iterator(dir)) {
+        leftover = leftover || e.path().filename().string().rfind("bad", 0) == 0;
+    }
+    EXPECT_FALSE(leftover);
+}
+
 TEST_F(Export, InLonLatSegmentsAreDensifiedWithinTheStatedBow)
 {
     // 1 % of the LOD's 1000 m: 10 m.
