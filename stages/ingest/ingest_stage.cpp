@@ -412,7 +412,7 @@ namespace {
 // shares/<job>.share (a job's counts and coarse edges, region_share.hpp).
 
 constexpr const char* spec_schema = "tigerlod.ingest-job/1";
-constexpr const char* index_schema = "tigerlod.ingest-index/1";
+constexpr const char* index_schema = "tigerlod.ingest-index/2"; // 2: empty_codes
 
 /// Whether the dataset is read part by part (several polygon files, or a
 /// TIGER dataset of several counties whose EDGES and FACES pair).
@@ -1125,6 +1125,7 @@ int IngestStage::run_plan(const StageContext& ctx, const Resolved& r)
     json index{{"schema", index_schema}, {"mode", mode}, {"jobs", jobs}, {"options", opts}};
     put_meta(index, plan);
     index["empty_geometries"] = plan.empty_geometries;
+    index["empty_codes"] = plan.empty_codes;
     index["points_read"] = points_read;
     index["inputs"] = input_digests;
     write_file_if_changed(dir / "index.json", index.dump(1) + "\n");
@@ -1271,6 +1272,7 @@ int IngestStage::run_finish(const StageContext& ctx, const Resolved& r)
     RegionPlan plan = get_meta(index, index_path);
     plan.whole = mode != "regions";
     plan.empty_geometries = index.at("empty_geometries").get<std::vector<uint64_t>>();
+    plan.empty_codes = index.at("empty_codes").get<std::vector<uint64_t>>();
     check_each_store_once(plan, written, plan.meta.level_names);
     const InputFiles input_files = input_files_of(cfg);
     InPlaceStores out(m_output, reads_of(m_config, input_files, {dir}), true);

@@ -177,7 +177,10 @@ std::vector<uint32_t> check_planarity(Graph& g, const RawMap& raw, const std::ve
         const uint32_t rank = std::min({owner.rank(g.left[f.first]), owner.rank(g.right[f.first]),
                                         owner.rank(g.left[f.second]), owner.rank(g.right[f.second])});
         if (owner.of_rank(rank)) {
-            problems.add(kind, f.x, f.y, raw.where(g.src[f.first]) + " " + raw.where(g.src[f.second]));
+            // The features at the place (an edge of a line layer may join several).
+            problems.add(kind, f.x, f.y,
+                         raw.where(g.source_at(f.first, f.first_segment)) + " " +
+                             raw.where(g.source_at(f.second, f.second_segment)));
         }
         bad_edges.push_back(f.first);
         bad_edges.push_back(f.second);
@@ -258,6 +261,7 @@ BuildResult build(RawMap raw, const Projection& projection, const BuildOptions& 
     const size_t nlev = raw.level_names.size();
     result.input_vertices = raw.points_read;
     problems.count("empty_geometries", raw.empty_geometries);
+    problems.count("empty_codes", raw.empty_codes);
     auto note = [&](const std::string& what) { log_progress(options, what); };
     auto last = std::chrono::steady_clock::now();
     auto phase = [&](std::string name) {
@@ -274,7 +278,7 @@ BuildResult build(RawMap raw, const Projection& projection, const BuildOptions& 
     phase("intern_project");
     note("interned and projected " + std::to_string(g.keys.size()) + " vertices");
     if (raw.kind != RawMap::Kind::edges) {
-        join_pieces(g, merge_segments(g, raw, options.threads, problems, owner));
+        join_pieces(g, merge_segments(g, raw, options.threads, problems, owner), raw.kind == RawMap::Kind::lines);
     }
     phase("merge_join");
     note("merged shared segments: " + std::to_string(g.edge_count()) + " edges");

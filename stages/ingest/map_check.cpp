@@ -249,8 +249,8 @@ Repairs choose_repairs(const Graph& g, const RawMap& raw, const SegmentSet& s,
 /// Rebuild the edges with the repairs applied, in the same order; `scope`
 /// and `hot` become what the next round checks: the repaired and unresolved
 /// edges, and the boxes of the new segments.
-void apply_repairs(Graph& g, const Repairs& repairs, const std::vector<Intersection>& found,
-                   std::vector<uint8_t>& scope, std::vector<GridBox>& hot)
+void apply_repairs(Graph& g, const Repairs& repairs, const std::vector<EdgeMeeting>& found, std::vector<uint8_t>& scope,
+                   std::vector<GridBox>& hot)
 {
     const auto& drop_interior = repairs.drop_interior;
     const auto& join = repairs.join;
@@ -276,6 +276,15 @@ void apply_repairs(Graph& g, const Repairs& repairs, const std::vector<Intersect
     Graph out;
     out.keys = std::move(g.keys);
     out.grid = std::move(g.grid);
+    const bool with_runs = !g.run_off.empty();
+    if (with_runs) {
+        out.run_off.push_back(0);
+    }
+    // Edge e's runs in the order of its vertices (one when it has one source).
+    auto runs_in_order = [&](uint32_t e) {
+        const auto r = g.runs_of(e);
+        return r.empty() ? std::vector<SourceRun>{{0, g.src[e]}} : std::vector<SourceRun>(r.begin(), r.end());
+    };
     std::vector<uint32_t> pts;
     for (uint32_t e = 0; e < g.edge_count(); ++e) {
         if (absorbed[e]) {
@@ -288,16 +297,27 @@ void apply_repairs(Graph& g, const Repairs& repairs, const std::vector<Intersect
         uint32_t left = g.left[e], right = g.right[e];
         uint64_t sid = g.sid[e];
         size_t new_segment = 0; // where the repair put a new segment: pts[new_segment, +1]
+        std::vector<SourceRun> runs;
+        if (with_runs) {
+            runs = runs_in_order(e);
+        }
         if (drop_at[e] >= 0) {
             pts.erase(pts.begin() + drop_at[e]);
             new_segment = static_cast<size_t>(drop_at[e]) - 1;
+            // Segments idx-1 and idx become one (idx-1's source); those after move down.
+            const auto idx = static_cast<uint32_t>(drop_at[e]);
+            for (auto& r : runs) {
+                r.first = r.first <= idx ? r.first : r.first - 1;
+            }
         } else if (joined_with[e] >= 0) {
             const auto code = static_cast<uint64_t>(joined_with[e]);
             const bool first_ends_at_v = (code & 1U) != 0;
             const uint32_t second_end = static_cast<uint32_t>(code >> 1);
+            const auto m1 = static_cast<uint32_t>(pts.size() - 1);
             if (!first_ends_at_v) { // make this edge end at v
                 std::reverse(pts.begin(), pts.end());
                 std::swap(left, right);
+                runs = with_runs ? reversed_runs(runs, m1) : runs;
             }
             const auto sv = g.edge(second_end / 2);
             pts.pop_back(); // v
@@ -306,6 +326,19 @@ void apply_repairs(Graph& g, const Repairs& repairs, const std::vector<Intersect
                 pts.insert(pts.end(), sv.rbegin() + 1, sv.rend());
             } else {
                 pts.insert(pts.end(), sv.begin() + 1, sv.end());
+            }
+            if (with_runs) {
+                // The first's last segment and the second's first become one
+                // (the first's source); the second's others follow.
+                const auto m2 = static_cast<uint32_t>(sv.size() - 1);
+                std::vector<SourceRun> second = runs_in_order(second_end / 2);
+                if (second_end & 1U) {
+                    second = reversed_runs(second, m2);
+                }
+                for (auto r : second) {
+                    r.first = std::max(r.first, 1U) + m1 - 1;
+                    runs.push_back(r);
+                }
             }
             const uint64_t other = g.sid[second_end / 2];
             sid = sid == 0 ? other : (other == 0 ? sid : std::min(sid, other));
@@ -325,15 +358,22 @@ void apply_repairs(Graph& g, const Repairs& repairs, const std::vector<Intersect
         out.cls.push_back(g.cls[e]);
         out.sid.push_back(sid);
         out.src.push_back(g.src[e]);
+        if (with_runs) {
+            runs = canonical_runs(std::move(runs), static_cast<uint32_t>(pts.size() - 1));
+            if (runs.size() > 1 || (runs.size() == 1 && !same_source(runs[0].src, g.src[e]))) {
+                out.runs.insert(out.runs.end(), runs.begin(), runs.end());
+            }
+            out.run_off.push_back(out.runs.size());
+        }
     }
     g = std::move(out);
 }
 
 } // namespace
 
-std::vector<Intersection> repair_snap_crossings(Graph& g, const RawMap& raw, const std::vector<LevelCodes>& lcs,
-                                                double max_shift, unsigned threads, Problems& problems,
-                                                const Owner& owner)
+std::vector<EdgeMeeting> repair_snap_crossings(Graph& g, const RawMap& raw, const std::vector<LevelCodes>& lcs,
+                                               double max_shift, unsigned threads, Problems& problems,
+                                               const Owner& owner)
 {
     constexpr int max_rounds = 8;
     // After the first round only what a repair touched can change: the repaired
@@ -343,10 +383,16 @@ std::vector<Intersection> repair_snap_crossings(Graph& g, const RawMap& raw, con
     for (int round = 0;; ++round) {
         const SegmentSet s = segments_of(g, checked_edges(g, raw, lcs), scope, hot);
         const std::vector<Intersection> by_segment = find_intersections(s.segs, threads);
-        std::vector<Intersection> found = by_segment;
-        for (auto& f : found) { // report edges, not segment indices
-            f.first = s.at[f.first].first;
-            f.second = s.at[f.second].first;
+        std::vector<EdgeMeeting> found(by_segment.size());
+        for (size_t i = 0; i < found.size(); ++i) { // report edges and their segments
+            const Intersection& f = by_segment[i];
+            found[i].relation = f.relation;
+            found[i].x = f.x;
+            found[i].y = f.y;
+            found[i].first = s.at[f.first].first;
+            found[i].first_segment = s.at[f.first].second;
+            found[i].second = s.at[f.second].first;
+            found[i].second_segment = s.at[f.second].second;
         }
         if (found.empty() || round == max_rounds) {
             return found;

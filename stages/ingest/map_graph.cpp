@@ -361,7 +361,50 @@ std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned th
     return out;
 }
 
-void join_pieces(Graph& g, const std::vector<Piece>& pieces)
+std::vector<SourceRun> reversed_runs(std::span<const SourceRun> runs, uint32_t m)
+{
+    // Run i covers segments [first_i, first_{i+1}); the other way round it
+    // covers [m - first_{i+1}, m - first_i).
+    std::vector<SourceRun> out;
+    out.reserve(runs.size());
+    for (size_t i = runs.size(); i-- > 0;) {
+        const uint32_t end = i + 1 < runs.size() ? runs[i + 1].first : m;
+        out.push_back({m - std::min(end, m), runs[i].src});
+    }
+    return out;
+}
+
+std::vector<SourceRun> canonical_runs(std::vector<SourceRun> runs, uint32_t m)
+{
+    std::vector<SourceRun> out;
+    for (const SourceRun& r : runs) {
+        if (r.first >= m) {
+            break; // sorted: no segment left for these
+        }
+        if (!out.empty() && out.back().first == r.first) {
+            out.back() = r; // the earlier run has no segment left
+        } else {
+            out.push_back(r);
+        }
+        while (out.size() >= 2 && same_source(out[out.size() - 2].src, out.back().src)) {
+            out.pop_back();
+        }
+    }
+    if (!out.empty()) {
+        out.front().first = 0;
+    }
+    return out;
+}
+
+SourceRef Graph::source_at(size_t i, uint32_t segment) const noexcept
+{
+    const auto r = runs_of(i);
+    const auto after =
+        std::upper_bound(r.begin(), r.end(), segment, [](uint32_t s, const SourceRun& run) { return s < run.first; });
+    return after == r.begin() ? src[i] : std::prev(after)->src;
+}
+
+void join_pieces(Graph& g, const std::vector<Piece>& pieces, bool keep_runs)
 {
     const size_t nv = g.keys.size();
     const auto np = static_cast<uint32_t>(pieces.size());
@@ -403,13 +446,22 @@ void join_pieces(Graph& g, const std::vector<Piece>& pieces)
     out.grid = std::move(g.grid);
     out.verts.reserve(pieces.size() + pieces.size() / 8);
     std::vector<uint8_t> visited(np, 0);
+    if (keep_runs) {
+        out.run_off.push_back(0);
+    }
+    std::vector<SourceRun> runs;
     // Walk from the end `end` of its piece through joints; appends one edge.
     auto walk = [&](uint32_t end) {
         const uint32_t first = end / 2;
         const auto [left, right] = sides_out(end);
         out.verts.push_back(pieces[first].ab[end & 1U]);
-        for (;;) {
+        runs.clear();
+        for (uint32_t segment = 0;; ++segment) {
             visited[end / 2] = 1;
+            const SourceRef here = g.src[pieces[end / 2].edge];
+            if (keep_runs && (runs.empty() || !same_source(runs.back().src, here))) {
+                runs.push_back({segment, here});
+            }
             const uint32_t v = pieces[end / 2].ab[(end & 1U) ^ 1U];
             out.verts.push_back(v);
             if (!joint[v]) {
@@ -428,6 +480,12 @@ void join_pieces(Graph& g, const std::vector<Piece>& pieces)
         out.cls.push_back(cls(first));
         out.sid.push_back(0);
         out.src.push_back(g.src[pieces[first].edge]);
+        if (keep_runs) {
+            if (runs.size() > 1) {
+                out.runs.insert(out.runs.end(), runs.begin(), runs.end());
+            }
+            out.run_off.push_back(out.runs.size());
+        }
     };
     // Runs that end somewhere, from an end that is not a joint; then rings of joints.
     for (uint32_t p = 0; p < np; ++p) {

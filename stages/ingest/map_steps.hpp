@@ -32,6 +32,7 @@
 #include <mutex>
 #include <numbers>
 #include <numeric>
+#include <span>
 #include <stdexcept>
 #include <tuple>
 #include <thread>
@@ -54,6 +55,7 @@ inline const std::vector<std::string> kinds = {"crossings",
                                                "internal_points_replaced",
                                                "missing_internal_points",
                                                "empty_geometries",
+                                               "empty_codes",
                                                "snap_repairs",
                                                "duplicate_segments"};
 
@@ -65,6 +67,25 @@ inline uint64_t splitmix(uint64_t x) noexcept
     return x ^ (x >> 31);
 }
 
+inline bool same_source(SourceRef a, SourceRef b) noexcept
+{
+    return a.file == b.file && a.feature == b.feature;
+}
+
+/// One run of an edge's segments from one source: from segment `first` on.
+struct SourceRun {
+    uint32_t first = 0;
+    SourceRef src;
+};
+
+/// The runs of `m` segments taken the other way round (segment j is m-1-j).
+std::vector<SourceRun> reversed_runs(std::span<const SourceRun> runs, uint32_t m);
+
+/// Runs made canonical: starts below `m` segments, the last of equal starts
+/// kept, neighbours with one source merged, the first at 0; a single run
+/// left is returned as none (the edge's one source).
+std::vector<SourceRun> canonical_runs(std::vector<SourceRun> runs, uint32_t m);
+
 /// Everything the levels share: interned vertices and cleaned edges.
 struct Graph {
     std::vector<uint64_t> keys;  // vertex id -> packed lon/lat
@@ -74,8 +95,23 @@ struct Graph {
     std::vector<uint32_t> left, right, cls;
     std::vector<uint64_t> sid;
     std::vector<SourceRef> src;
+    /// Where the source changes along an edge joined from the features of a
+    /// line layer (one river in several features): edge i's runs are
+    /// runs[run_off[i], run_off[i+1]), each (its first segment, its source),
+    /// the first at segment 0; none where the edge has one source (src[i]).
+    /// Empty (no run_off) in maps of polygons, whose problems name the
+    /// polygons on each side.
+    std::vector<uint64_t> run_off;
+    std::vector<SourceRun> runs;
     size_t edge_count() const noexcept { return left.size(); }
     std::span<const uint32_t> edge(size_t i) const noexcept { return {verts.data() + off[i], off[i + 1] - off[i]}; }
+    std::span<const SourceRun> runs_of(size_t i) const noexcept
+    {
+        return run_off.empty() ? std::span<const SourceRun>()
+                               : std::span(runs).subspan(run_off[i], run_off[i + 1] - run_off[i]);
+    }
+    /// The source of edge i's segment `segment` (from its vertex `segment`).
+    SourceRef source_at(size_t i, uint32_t segment) const noexcept;
 };
 
 /// A problem found on a worker thread, recorded later in a fixed order so
@@ -244,7 +280,9 @@ std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned th
 /// the planarity check and every level then walk instead of single segments.
 /// The chains a level builds are the same either way. Pieces are taken in
 /// order, so the result depends on nothing but the input.
-void join_pieces(Graph& g, const std::vector<Piece>& pieces);
+/// With `keep_runs` (a line layer) the joined edges keep where their source
+/// changes (Graph::runs), so that a problem names the feature at its place.
+void join_pieces(Graph& g, const std::vector<Piece>& pieces, bool keep_runs);
 
 /// The codes of every level; units whose code at a level has another parent
 /// than the code's first unit gave it go into `non_nesting` as (unit, level).
@@ -290,9 +328,15 @@ uint64_t cut_at_tiles(Level& lev, const Graph& g, const TileGrid& grid);
 /// whole graph, the same units on each side) and dropping it moves the boundary
 /// by at most `max_shift` grid units, drop it, as snap rounding would, and
 /// check again. Returns the intersections that remain; repairs are counted.
-std::vector<Intersection> repair_snap_crossings(Graph& g, const RawMap& raw, const std::vector<LevelCodes>& lcs,
-                                                double max_shift, unsigned threads, Problems& problems,
-                                                const Owner& owner);
+/// A meeting of two edges (Intersection's first and second are edges) and
+/// the segment of each where they meet.
+struct EdgeMeeting : Intersection {
+    uint32_t first_segment = 0, second_segment = 0;
+};
+
+std::vector<EdgeMeeting> repair_snap_crossings(Graph& g, const RawMap& raw, const std::vector<LevelCodes>& lcs,
+                                               double max_shift, unsigned threads, Problems& problems,
+                                               const Owner& owner);
 
 /// One line to the build's log, if it has one.
 void log_progress(const BuildOptions& options, const std::string& what);

@@ -28,7 +28,7 @@ int32_t round_half_away(double x) noexcept
 
 namespace {
 
-constexpr char raw_magic[] = "TLRAWPT1";
+constexpr char raw_magic[] = "TLRAWPT2"; // 2: empty_codes
 
 template <class T> void put_vec(ByteWriter& w, const std::vector<T>& v)
 {
@@ -141,6 +141,7 @@ std::string encode_raw(const RawMap& raw)
     }
     w.put(raw.points_read);
     w.put(raw.empty_geometries);
+    w.put(raw.empty_codes);
     return std::move(w.bytes());
 }
 
@@ -193,6 +194,7 @@ RawMap decode_raw(std::span<const std::byte> bytes, const std::string& name)
     }
     raw.points_read = r.get<uint64_t>("the counts");
     raw.empty_geometries = r.get<uint64_t>("the counts");
+    raw.empty_codes = r.get<uint64_t>("the counts");
     if (r.left() != 0) {
         r.fail("bytes after the end");
     }
@@ -266,6 +268,7 @@ void RawMap::append(RawMap&& part)
     }
     points_read += part.points_read;
     empty_geometries += part.empty_geometries;
+    empty_codes += part.empty_codes;
     part = RawMap();
 }
 

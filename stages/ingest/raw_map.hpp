@@ -90,6 +90,7 @@ struct RawMap {
     std::vector<ForeignFace> foreign; ///< sides left as no_unit whose face another part holds (parts only)
     uint64_t points_read = 0;         ///< input points, as the files hold them
     uint64_t empty_geometries = 0;    ///< features without geometry, skipped by the reader
+    uint64_t empty_codes = 0;         ///< features with an empty code, left out (dataset.empty_code: skip)
 
     size_t polyline_count() const noexcept { return left.size(); }
     void add_polyline(std::span<const LonLatE6> pts, uint32_t left_unit, uint32_t right_unit, uint32_t cls,

@@ -7,7 +7,7 @@ namespace tigerlod::ingest {
 namespace {
 
 constexpr char share_magic[] = "TLSHARE1";
-constexpr char reads_magic[] = "TLREADS1";
+constexpr char reads_magic[] = "TLREADS2"; // 2: empty_codes
 
 void put_source(ByteWriter& w, const SourceRef& s)
 {
@@ -228,6 +228,7 @@ std::string encode_reads(const ReadJob& job)
         }
         w.put_varint(s.points_read);
         w.put_varint(s.empty_geometries);
+        w.put_varint(s.empty_codes);
         w.put(static_cast<uint8_t>(s.kind));
         put_strings(w, s.files);
         put_strings(w, s.classes);
@@ -267,6 +268,7 @@ ReadJob decode_reads(std::span<const std::byte> bytes, const std::string& name)
         }
         s.points_read = r.get_varint("a part's counts");
         s.empty_geometries = r.get_varint("a part's counts");
+        s.empty_codes = r.get_varint("a part's counts");
         const auto kind = r.get<uint8_t>("a part's kind");
         if (kind > static_cast<uint8_t>(RawMap::Kind::lines)) {
             r.fail("a part of unknown kind");

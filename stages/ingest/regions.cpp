@@ -290,6 +290,7 @@ PartSummary summarize_part(const RawMap& part, size_t max_codes)
     }
     s.points_read = part.points_read;
     s.empty_geometries = part.empty_geometries;
+    s.empty_codes = part.empty_codes;
     s.kind = part.kind;
     s.files = part.files;
     s.classes = part.classes;
@@ -661,6 +662,7 @@ RegionPlan plan_regions(const std::vector<PartSummary>& parts, const std::vector
         }
         plan.boxes.push_back(GridBox{parts[i].lo.lon, parts[i].lo.lat, parts[i].hi.lon, parts[i].hi.lat});
         plan.empty_geometries.push_back(parts[i].empty_geometries);
+        plan.empty_codes.push_back(parts[i].empty_codes);
     }
     bool separable = false;
     const auto groups = group_parts(parts, plan.level, nlev, separable);
@@ -711,16 +713,18 @@ BuildResult build_planned_whole(const RegionPlan& plan, const std::function<RawM
 {
     const size_t nparts = plan.boxes.size();
     Assembly whole(plan.meta, plan.class_of);
-    uint64_t empty = 0;
+    uint64_t empty = 0, empty_codes = 0;
     for (size_t i = 0; i < nparts; ++i) {
         RawMap part = load(i);
         empty += part.empty_geometries;
+        empty_codes += part.empty_codes;
         const std::vector<uint8_t> all(part.units.size(), 1);
         whole.add(i, std::move(part), all, true);
     }
     RawMap raw = whole.finish();
     raw.points_read = whole.own_points();
     raw.empty_geometries = empty;
+    raw.empty_codes = empty_codes;
     if (options.log != nullptr) {
         options.log->info("building the map whole (one region)");
     }
@@ -760,6 +764,9 @@ BuildResult finish_planned(const RegionPlan& plan, std::vector<RegionShare> shar
     total.input_vertices = own_points;
     for (const uint64_t e : plan.empty_geometries) {
         total.problems["empty_geometries"] += e;
+    }
+    for (const uint64_t e : plan.empty_codes) {
+        total.problems["empty_codes"] += e;
     }
     return total;
 }

@@ -56,7 +56,7 @@ struct PartSummary {
     std::vector<std::vector<std::string>> codes;
     std::vector<uint8_t> many;
     LonLatE6 lo{INT32_MAX, INT32_MAX}, hi{INT32_MIN, INT32_MIN}; ///< box of the points
-    uint64_t points_read = 0, empty_geometries = 0;
+    uint64_t points_read = 0, empty_geometries = 0, empty_codes = 0;
     RawMap::Kind kind = RawMap::Kind::polygon_rings;
     std::vector<std::string> files; ///< the part's files, for messages
     std::vector<std::string> classes;
@@ -87,9 +87,11 @@ struct RegionPlan {
     };
     std::vector<Region> regions; ///< in the order of their codes; empty when whole
     /// Each part's box of points (micro-degrees lon/lat; empty for a part
-    /// without points) and its features without geometry.
+    /// without points), its features without geometry and those with an
+    /// empty code that were left out.
     std::vector<GridBox> boxes;
     std::vector<uint64_t> empty_geometries;
+    std::vector<uint64_t> empty_codes;
 };
 
 RegionPlan plan_regions(const std::vector<PartSummary>& parts, const std::vector<std::string>& level_names,

@@ -1001,6 +1001,7 @@ void read_polygon_file(const IngestConfig& cfg, const fs::path& path, RawMap& ra
             if (!cfg.dataset.skip_empty_codes) {
                 throw input_error(what + ": give each a code, or set dataset.empty_code: skip to leave them out");
             }
+            raw.empty_codes += empty_codes; // the report's empty_codes
             std::fprintf(stderr, "tigerlod-ingest: %s left out (dataset.empty_code: skip)\n", what.c_str());
         }
     }

@@ -70,6 +70,16 @@ cfg=$repo/configs/world.yaml
 end_to_end world "$cfg" "$work/world"
 grep -q "5 features with an empty 'id' (feature 58 'Somaliland'" "$work/world/ingest.log" ||
   fail "ingest did not name the features without a code: $(cat "$work/world/ingest.log")"
+grep -q "problems:.* empty_codes=5" "$work/world/ingest.log" ||
+  fail "the report does not count the features left out: $(cat "$work/world/ingest.log")"
+# The same count through the workflow's jobs (list, plan, region, finish).
+wp=$work/world-jobs
+"$bin/tigerlod-ingest" --list --parts "$wp/parts" "$cfg" "$wp/in" >"$wp.log" 2>&1 &&
+  "$bin/tigerlod-ingest" --plan --parts "$wp/parts" "$cfg" "$wp/in" >"$wp.log" 2>&1 &&
+  "$bin/tigerlod-ingest" --region whole --parts "$wp/parts" "$cfg" "$wp/in" >"$wp.log" 2>&1 &&
+  "$bin/tigerlod-ingest" --finish --parts "$wp/parts" "$cfg" "$wp/in" >"$wp.log" 2>&1 ||
+  fail "world ingest in jobs: $(cat "$wp.log")"
+grep -q "problems:.* empty_codes=5" "$wp.log" || fail "the jobs' report does not count the features left out: $(cat "$wp.log")"
 # At the default grid the world is wider than a node: --validate says which key.
 sed -e 's/, grid_m: 0.1}/}/' -e "s|\.\./\.cache/|$repo/.cache/|g" "$cfg" >"$work/world-fine.yaml"
 "$bin/tigerlod-ingest" --validate "$work/world-fine.yaml" "$work/x" >"$work/validate.log" 2>&1
@@ -93,7 +103,8 @@ rc=$?
 grep -q "'ingest.halo_m' (25000 m) is below the 28284.3 m that simplify.tolerances_m's largest, 10000 m, needs" "$work/halo.log" ||
   fail "halo rule: $(cat "$work/halo.log")"
 echo "world: ingest, simplify, pack and verify clean on the ground, CGAL agreeing; 0.01 m refused naming projection.grid_m;"
-echo "  empty codes refused by default, counted and named; the halo rule checked at --validate"
+echo "  empty codes refused by default, counted and named, and counted when skipped (whole and in jobs);"
+echo "  the halo rule checked at --validate"
 # Asia (configs/asia.yaml): the same package, its countries chosen by
 # dataset.where (UN M49 region 142, 51 codes), on a cone of its own.
 a=$work/asia

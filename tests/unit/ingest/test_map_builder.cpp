@@ -1,6 +1,7 @@
 // Hand-made maps through the map builder, with exact expectations.
 #include "core/errors.hpp"
 #include "stages/ingest/map_builder.hpp"
+#include "stages/ingest/map_steps.hpp"
 
 #include <gtest/gtest.h>
 
@@ -418,6 +419,46 @@ TEST(MapBuilder, CrossingsTouchesAndOverlapsAreFoundAndMarked)
     EXPECT_EQ(b.result.samples[0].kind, "crossings");
     EXPECT_NEAR(b.result.samples[0].lon_deg, -96.0 + 0.001, 1e-6);
     EXPECT_NEAR(b.result.samples[0].lat_deg, 40.0 + 0.001, 1e-5);
+}
+
+TEST(MapBuilder, ACrossingNamesTheFeatureAtThePlaceNotTheFirstOfItsJoinedChain)
+{
+    // Three features end to end become one chain; a fourth crosses the
+    // middle one: the problem names that one, whichever way the chain runs.
+    for (const bool reversed : {false, true}) {
+        SCOPED_TRACE(reversed ? "the middle feature drawn backwards" : "all one way");
+        RawMap m = line_map();
+        auto line = [&](std::vector<LonLatE6> p, int64_t f) { m.add_polyline(p, no_unit, no_unit, 0, 0, {0, f}); };
+        line({ll(0, 0), ll(2, 0)}, 0);
+        line(reversed ? std::vector{ll(4, 0), ll(2, 0)} : std::vector{ll(2, 0), ll(4, 0)}, 1);
+        line({ll(4, 0), ll(6, 0)}, 2);
+        line({ll(3, -1), ll(3, 1)}, 3); // crosses feature 1 inside both segments
+        const Built b = build(std::move(m));
+        EXPECT_EQ(describe(b.store("lines")).size(), 2U); // the three joined, and the crossing line
+        ASSERT_EQ(b.result.problems.at("crossings"), 1U);
+        ASSERT_EQ(b.result.samples.size(), 1U);
+        EXPECT_EQ(b.result.samples[0].where, "hand:1 hand:3");
+    }
+}
+
+TEST(MapBuilder, SourceRunsTurnAroundAndStayCanonical)
+{
+    namespace rd = tigerlod::ingest::detail;
+    using rd::SourceRun;
+    auto text = [](const std::vector<SourceRun>& runs) {
+        std::string t;
+        for (const auto& r : runs) {
+            t += std::to_string(r.first) + ":" + std::to_string(r.src.feature) + " ";
+        }
+        return t;
+    };
+    const SourceRef a{0, 10}, b{0, 11}, c{0, 12};
+    // Segments 0-1 from a, 2-4 from b: turned round, 0-2 from b, 3-4 from a.
+    EXPECT_EQ(text(rd::reversed_runs(std::vector<SourceRun>{{0, a}, {2, b}}, 5)), "0:11 3:10 ");
+    EXPECT_EQ(text(rd::reversed_runs(std::vector<SourceRun>{{0, a}}, 3)), "0:10 ");
+    // The last of equal starts wins, equal neighbours merge, starts past the end go.
+    EXPECT_EQ(text(rd::canonical_runs({{0, a}, {2, b}, {2, c}, {4, c}, {5, a}}, 5)), "0:10 2:12 ");
+    EXPECT_EQ(text(rd::canonical_runs({{0, a}, {1, b}, {1, a}}, 3)), "0:10 ");
 }
 
 TEST(MapBuilder, OutputDoesNotDependOnThreads)
