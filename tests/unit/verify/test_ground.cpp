@@ -13,12 +13,16 @@
 #include "stages/pack/packer.hpp"
 #include "stages/verify/verifier.hpp"
 #include "../../support/ground_distance.hpp"
+#include "../../support/sanitizers.hpp"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <numbers>
+#include <random>
+#include <string>
 
 namespace fs = std::filesystem;
 using namespace tigerlod;
@@ -113,6 +117,120 @@ ChainStore simplified(const ChainStore& store, bool centre_scale)
     ChainStore out = simplify::simplify_store(store, eps, opt, nullptr, nullptr, stats);
     out.eps_m = eps_m;
     return out;
+}
+
+/// Seeds of the property test: 1-8, 1-3 under the sanitizers (which look
+/// for memory faults, the same on any chain), or TIGERLOD_PROPERTY_SEEDS=A-B.
+std::pair<uint64_t, uint64_t> ground_seeds()
+{
+    const char* env = std::getenv("TIGERLOD_PROPERTY_SEEDS");
+    if (env == nullptr || *env == '\0') {
+        return {1, TIGERLOD_SANITIZED ? 3 : 8};
+    }
+    const std::string t = env;
+    const auto dash = t.find('-');
+    return dash == std::string::npos ? std::pair{std::stoull(t), std::stoull(t)}
+                                     : std::pair{std::stoull(t.substr(0, dash)), std::stoull(t.substr(dash + 1))};
+}
+
+/// A seeded case: a projection of any kind this tool offers, anywhere on
+/// the globe its formulas serve (either hemisphere, any central meridian),
+/// and one long chain in it: from 2 to 12 degrees long in a random
+/// direction, wiggling across it by up to a few eps, a graph over its own
+/// axis in longitude/latitude (so simple).
+struct GroundCase {
+    ProjectionParams params;
+    ChainStore store;
+    double eps_m = 0;
+    Metric metric = Metric::l2;
+    std::string what;
+};
+
+GroundCase ground_case(uint64_t seed)
+{
+    std::mt19937_64 rng(seed * 0x9E3779B97F4A7C15ULL + 7);
+    auto uni = [&](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
+    GroundCase c;
+    ProjectionParams& p = c.params;
+    const int kind = static_cast<int>(seed % 4);
+    const double sign = uni(0, 1) < 0.5 ? 1.0 : -1.0; // the hemisphere
+    double lon_lo = 0, lon_hi = 0, lat_lo = 0, lat_hi = 0;
+    if (kind <= 1) { // the conics
+        p.kind = kind == 0 ? ProjectionParams::Kind::albers : ProjectionParams::Kind::lcc;
+        p.lon0_deg = uni(-179, 179);
+        const double s1 = uni(20, 50), s2 = s1 + uni(5, 20);
+        p.stdlat1_deg = sign * s1;
+        p.stdlat2_deg = sign * s2;
+        p.lat0_deg = sign * (s1 - 10);
+        lon_lo = p.lon0_deg - 40;
+        lon_hi = p.lon0_deg + 40;
+        lat_lo = 15;
+        lat_hi = 75;
+    } else if (kind == 2) {
+        p.kind = ProjectionParams::Kind::tm;
+        p.lon0_deg = uni(-179, 179);
+        p.lat0_deg = 0;
+        p.k0 = uni(0.9996, 1.0);
+        p.false_easting_m = 500000;
+        lon_lo = p.lon0_deg - 6;
+        lon_hi = p.lon0_deg + 6;
+        lat_lo = 0;
+        lat_hi = 72;
+    } else {
+        p.kind = ProjectionParams::Kind::utm;
+        p.utm_zone = 1 + static_cast<int>(rng() % 60);
+        p.utm_north = sign > 0;
+        const double mid = -183 + 6.0 * p.utm_zone;
+        lon_lo = mid - 3;
+        lon_hi = mid + 3;
+        lat_lo = 0;
+        lat_hi = 80;
+    }
+    const double eps_choices[] = {1, 4, 16, 64, 250, 500, 1000, 2000};
+    c.eps_m = eps_choices[rng() % 8];
+    c.metric = static_cast<Metric>((seed / 4) % 3); // each kind in each metric over 12 seeds
+    // The chain: n vertices from a start, along a heading, in degrees.
+    const int n = 400 + static_cast<int>(rng() % 800);
+    const double length = uni(2, 12), heading = uni(0, 2 * std::numbers::pi);
+    const double ux = std::cos(heading), uy = std::sin(heading);
+    const double step = length / n;
+    // Start so that the whole chain stays in the domain chosen above.
+    const double x0 = uni(lon_lo + std::max(0.0, -ux * length), lon_hi - std::max(0.0, ux * length));
+    const double y0 = uni(lat_lo + std::max(0.0, -uy * length), lat_hi - std::max(0.0, uy * length));
+    // Wiggles of up to 3 eps (in degrees of latitude), their slope at most
+    // about half a step a step.
+    const double amp = uni(0.3, 3) * c.eps_m / 111000;
+    const double period = std::max(12.0, 2 * std::numbers::pi * amp / (0.4 * step));
+    const double phase = uni(0, 6.3);
+    c.store.level_name = "lines";
+    c.store.partition = "all";
+    c.store.halo_m = 10000;
+    c.store.projection = p;
+    const Projection proj(p);
+    std::vector<GridPoint> pts;
+    for (int i = 0; i < n; ++i) {
+        const double w = amp * (std::sin(2 * std::numbers::pi * i / period + phase) +
+                                0.3 * std::sin(2 * std::numbers::pi * i / (0.37 * period)));
+        // Longitudes wrapped into [-180, 180]: a chain may cross the antimeridian
+        // (the conics' cut is 180 degrees from lon0, far from it).
+        const double lon = std::remainder(x0 + i * step * ux - w * uy, 360.0),
+                     lat = sign * (y0 + i * step * uy + w * ux);
+        const auto g = proj.to_grid(lon, lat);
+        if (!g) {
+            ADD_FAILURE() << "seed " << seed << ": (" << lon << ", " << lat << ") is outside the projection";
+            break;
+        }
+        if (pts.empty() || !(pts.back() == *g)) {
+            pts.push_back(*g);
+        }
+    }
+    c.store.add_chain({1, c.store.intern(""), c.store.intern(""), c.store.intern("X0000"), 0, 0, 0}, pts);
+    c.store.canonicalize();
+    c.what = "seed " + std::to_string(seed) + ": " + projection_kind_name(p.kind) +
+             (kind == 3 ? " zone " + std::to_string(p.utm_zone) : " lon0 " + std::to_string(p.lon0_deg)) +
+             (sign > 0 ? " north" : " south") + ", " + std::to_string(n) + " vertices over " + std::to_string(length) +
+             " degrees, eps " + std::to_string(c.eps_m) + " m " + metric_name(c.metric);
+    return c;
 }
 
 class Ground : public ::testing::Test {
@@ -213,4 +331,51 @@ TEST_F(Ground, VerifyOnTheGroundCatchesWhatThePlanarModelPasses)
     // Near eps the report is the geodesic itself: the old tree's violation
     // names the brute force's worst distance.
     EXPECT_NEAR(old.ground_ratio_max, worst_ground_ratio(store, simplified(store, true)), 1e-6);
+}
+
+TEST_F(Ground, SeededLongChainsStayWithinEpsOnTheGroundInEveryProjectionAndMetric)
+{
+    // What the README's guarantee says, for any chain length, latitude and
+    // metric: within eps geodesic metres in L2 and L1, sqrt(2) eps in Linf
+    // (measured along the grid's axes), by the brute force above.
+    const auto [first, last] = ground_seeds();
+    double worst_l2 = 0;
+    size_t cases = 0, l2_cases = 0;
+    for (uint64_t seed = first; seed <= last; ++seed) {
+        GroundCase c = ground_case(seed);
+        SCOPED_TRACE(c.what);
+        simplify::SimplifyOptions opt;
+        opt.metric = c.metric;
+        simplify::ToleranceStats stats;
+        const ChainStore out = simplify::simplify_store(c.store, c.eps_m, opt, nullptr, nullptr, stats);
+        ASSERT_EQ(out.chains.size(), 1U);
+        const size_t n = c.store.points.size(), kept = out.points.size();
+        EXPECT_LT(kept, n * 3 / 4) << "too little simplified to test anything";
+        // worst_ground_ratio measures against eps_m: the case's own eps.
+        const Projection proj(c.params);
+        const auto o = c.store.chain_points(c.store.chains.at(0));
+        const auto sp = out.chain_points(out.chains.at(0));
+        double worst = 0;
+        size_t m = 0;
+        for (size_t i = 0; i + 1 < sp.size(); ++i) {
+            while (o[m] != sp[i]) {
+                ++m;
+            }
+            for (size_t j = m + 1; o[j] != sp[i + 1]; ++j) {
+                worst = std::max(worst, brute_ground_m(proj, o[j], sp[i], sp[i + 1]) / c.eps_m);
+            }
+        }
+        const double bound = c.metric == Metric::linf ? std::numbers::sqrt2 : 1.0;
+        EXPECT_LE(worst, bound * (1 + 1e-7)) << "kept " << kept << " of " << n;
+        if (c.metric == Metric::l2) {
+            worst_l2 = std::max(worst_l2, worst);
+            ++l2_cases;
+        }
+        std::printf("ground: %s: kept %zu of %zu, worst %.6f eps\n", c.what.c_str(), kept, n, worst);
+        ++cases;
+    }
+    EXPECT_GT(cases, 0U);
+    if (l2_cases > 0) { // the bound is used, not only kept
+        EXPECT_GT(worst_l2, 0.8);
+    }
 }
