@@ -452,7 +452,14 @@ OutputDir::OutputDir(fs::path final_path, bool overwrite, const std::vector<fs::
     if (fs::exists(m_final) && !overwrite) {
         throw usage_error(m_final.string() + " exists. Use --overwrite to replace it.");
     }
-    if (fs::exists(m_final)) {
+    if (std::error_code dir_ec; fs::is_directory(m_final, dir_ec)) {
+        // Looked at under a shared lock: another run's swap into place
+        // (which takes it alone) then cannot move the folder between the
+        // read of its manifest and the listing, which would show the new
+        // folder's files with no manifest read: "not a stage's output".
+        const FolderLock look(m_final, program_invocation_short_name, FolderLock::Mode::shared);
+        refuse_to_replace_foreign(m_final);
+    } else if (fs::exists(m_final)) {
         refuse_to_replace_foreign(m_final);
     }
     m_tmp = temp_sibling(m_final, ".tmp-");

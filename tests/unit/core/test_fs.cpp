@@ -11,6 +11,8 @@
 
 #include <chrono>
 #include <fstream>
+#include <future>
+#include <memory>
 #include <set>
 #include <string>
 
@@ -153,6 +155,27 @@ TEST_F(Fs, AnOutputMadeByAnotherRunMeanwhileIsNotReplacedWithoutOverwrite)
     }
     EXPECT_EQ(read_file(m_dir / "out" / "a"), "mine");
     EXPECT_EQ(names(), (std::set<std::string>{"out"}));
+}
+
+TEST_F(Fs, AnOutputIsLookedAtUnderItsLockNotWhileAnotherRunSwapsIt)
+{
+    // A run beside this one is swapping its output into place (it holds the
+    // lock alone): this run's look at what OUTPUT holds waits for it, so it
+    // never sees the folder half moved.
+    {
+        OutputDir first(m_dir / "out", false);
+        write_file(first.path() / "manifest.json", R"({"schema": "tigerlod.manifest/1"})");
+        first.commit();
+    }
+    auto holder = std::make_unique<FolderLock>(m_dir / "out", "test");
+    auto second = std::async(std::launch::async, [&] {
+        OutputDir out(m_dir / "out", true);
+        return true;
+    });
+    EXPECT_EQ(second.wait_for(std::chrono::milliseconds(300)), std::future_status::timeout)
+        << "the look at OUTPUT did not wait for the lock";
+    holder.reset();
+    EXPECT_TRUE(second.get());
 }
 
 TEST_F(Fs, OverwriteReplacesOnlyAStagesOutputOrAnEmptyFolder)
