@@ -296,9 +296,9 @@ void apply_repairs(Graph& g, const Repairs& repairs, const std::vector<EdgeMeeti
         pts.assign(ev.begin(), ev.end());
         uint32_t left = g.left[e], right = g.right[e];
         uint64_t sid = g.sid[e];
-        size_t new_segment = 0; // where the repair put a new segment: pts[new_segment, +1]
-        std::vector<SourceRun> runs;
-        if (with_runs) {
+        size_t new_segment = 0;      // where the repair put a new segment: pts[new_segment, +1]
+        std::vector<SourceRun> runs; // a repaired edge's, rebuilt; the others' are copied as they are
+        if (with_runs && repaired) {
             runs = runs_in_order(e);
         }
         if (drop_at[e] >= 0) {
@@ -358,11 +358,16 @@ void apply_repairs(Graph& g, const Repairs& repairs, const std::vector<EdgeMeeti
         out.cls.push_back(g.cls[e]);
         out.sid.push_back(sid);
         out.src.push_back(g.src[e]);
-        if (with_runs) {
+        if (with_runs && repaired) {
             runs = canonical_runs(std::move(runs), static_cast<uint32_t>(pts.size() - 1));
             if (runs.size() > 1 || (runs.size() == 1 && !same_source(runs[0].src, g.src[e]))) {
                 out.runs.insert(out.runs.end(), runs.begin(), runs.end());
             }
+        } else if (with_runs) {
+            const auto kept = g.runs_of(e);
+            out.runs.insert(out.runs.end(), kept.begin(), kept.end());
+        }
+        if (with_runs) {
             out.run_off.push_back(out.runs.size());
         }
     }
