@@ -49,6 +49,14 @@ PY
     echo "SKIP golden $name: inputs absent ($missing)"
     continue
   fi
+  # Under the sanitizers (TIGERLOD_SANITIZED=1, set by CTest in their
+  # builds) a case marked large is left to the dev pass: its bytes are
+  # the dev pass's, and the sanitizers see the same stage code on the small
+  # cases (and on Floyd in test_cli, test_pack_real and test_simplify_real).
+  if [ "${TIGERLOD_SANITIZED:-0}" = 1 ] && [ -f "$case_dir/large" ]; then
+    echo "SKIP golden $name under the sanitizers: $(cat "$case_dir/large")"
+    continue
+  fi
   ran=$((ran + 1))
   ladder=$(cat "$case_dir/ladder")
   w=$work/$name

@@ -106,7 +106,15 @@ echo "world: ingest, simplify, pack and verify clean on the ground, CGAL agreein
 echo "  empty codes refused by default, counted and named, and counted when skipped (whole and in jobs);"
 echo "  the halo rule checked at --validate"
 # Asia (configs/asia.yaml): the same package, its countries chosen by
-# dataset.where (UN M49 region 142, 51 codes), on a cone of its own.
+# dataset.where (UN M49 region 142, 51 codes), on a cone of its own. Left
+# to the dev pass under the sanitizers (TIGERLOD_SANITIZED=1, set by CTest
+# in their builds): the world's run above is the same code on more of the
+# same map, and test_cli runs dataset.where under them.
+if [ "${TIGERLOD_SANITIZED:-0}" = 1 ]; then
+  echo "asia: left to the dev pass under the sanitizers"
+  echo "2 passed, 0 failed, 1 skipped"
+  exit 0
+fi
 a=$work/asia
 end_to_end asia "$repo/configs/asia.yaml" "$a"
 grep -Eq "^  country +51 " "$a/ingest.log" || fail "asia: not the 51 countries the condition names: $(cat "$a/ingest.log")"

@@ -5,6 +5,7 @@
 #include "stages/ingest/map_builder.hpp"
 #include "stages/ingest/regions.hpp"
 #include "stages/ingest/sources.hpp"
+#include "../../support/sanitizers.hpp"
 
 #include <gdal.h>
 #include <ogr_api.h>
@@ -424,6 +425,11 @@ TEST(IngestReal, TwentyStateTractsRegionByRegionAreTheWholeBuild)
     if (!fs::exists(shared_data / "tiger" / "tracts2010")) {
         GTEST_SKIP() << "../shared/data/tiger/tracts2010 is absent: the 20-state tract test needs it";
     }
+#if TIGERLOD_SANITIZED
+    // 33 s under ASan: the Floyd splits below run the same region code
+    // under the sanitizers; the dev pass runs the 20 states.
+    GTEST_SKIP() << "under the sanitizers the Floyd splits run the region code; the dev pass runs the 20 states";
+#endif
     const fs::path config = source_dir / "configs" / "tracts2010.yaml";
     const Regional r = run_by_regions(config);
     EXPECT_TRUE(built_by_regions(r.result));
