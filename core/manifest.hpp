@@ -12,8 +12,8 @@
 /// A stage that reads another's output reads its manifest first, records its
 /// digest, and refuses inputs whose manifests disagree (a Data Tree packed
 /// from another ingest than the one verify is given, colours made with other
-/// options than simplify's). Schema: "tigerlod.manifest/1", described in the
-/// README's "Outputs" section.
+/// options than simplify's). Schema: "tigerlod.manifest/1", described in
+/// docs/stages.md (a stage's manifest.json).
 
 #include <nlohmann/json.hpp>
 

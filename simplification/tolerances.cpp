@@ -64,7 +64,7 @@ ChainScales::ChainScales(const ChainStore& store, const SimplifyOptions& opt)
             // skipped vertex, the point of its shortcut nearest to it and the
             // planar segment between them lie in the box, so a planar
             // distance within eps_m * s is within eps_m on the ellipsoid
-            // (the README's guarantee; Projection::smallest_scale). At most
+            // (docs/guarantees.md; Projection::smallest_scale). At most
             // 1: ingest cuts halos in projected metres, and the partition
             // contract needs each planar eps within its ground eps (a
             // conformal conic's scale passes 1 far from its parallels).

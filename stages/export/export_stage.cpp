@@ -81,7 +81,7 @@ std::string ExportStage::help_notes() const
 {
     return "Units whose boundary is not complete in a node (neighbours across its border) get no polygon\n"
            "there; every unit is complete in the node of its parent unit. A chain's eps_m is its own: the\n"
-           "LOD's tolerance times its feature class's scale, which holds on the ground (README.md).\n"
+           "LOD's tolerance times its feature class's scale, which holds on the ground (docs/guarantees.md).\n"
            "Exit codes: 0 done; 1 bad data in the tree (the message names file, node and fault);\n"
            "  2 usage error; 3 environment (cannot write).\n";
 }

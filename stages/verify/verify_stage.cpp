@@ -21,6 +21,7 @@
 #include <charconv>
 #include <cstdio>
 #include <fstream>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <thread>
@@ -391,7 +392,125 @@ void print_summary(const Report& r, const std::string& tree, const std::string& 
                     static_cast<unsigned long long>(r.input_problems));
     }
     std::printf("%s", compare_text.c_str());
-    std::printf("report: %s/verify-report.json, violations: %s/violations.gpkg\n", output.c_str(), output.c_str());
+    std::printf("report: %s/verify-report.json, summary: %s/verify-summary.md, violations: %s/violations.gpkg\n",
+                output.c_str(), output.c_str(), output.c_str());
+}
+
+/// A table cell: Markdown's column bar and line breaks escaped.
+std::string cell(const std::string& text)
+{
+    std::string out;
+    for (const char c : text) {
+        if (c == '|') {
+            out += "\\|";
+        } else if (c == '\n') {
+            out += ' ';
+        } else {
+            out += c;
+        }
+    }
+    return out;
+}
+
+/// verify-summary.md: the report for a person, beside the JSON: the verdict
+/// first, then the violations by kind, by level and LOD, and the first
+/// items with their places. No timings: the same tree gives the same bytes.
+std::string summary_markdown(const Report& r, const std::string& tree, const std::string& original,
+                             const std::string& compare_text, const std::optional<CgalCheck>& cgal)
+{
+    std::string md;
+    auto line = [&md](const std::string& text) { md += text + "\n"; };
+    auto num = [](uint64_t v) { return std::to_string(v); };
+    auto fixed = [](double v, int digits) {
+        char b[64];
+        std::snprintf(b, sizeof b, "%.*f", digits, v);
+        return std::string(b);
+    };
+    auto general = [](double v) {
+        char b[64];
+        std::snprintf(b, sizeof b, "%g", v);
+        return std::string(b);
+    };
+    line("# Verification of `" + tree + "`");
+    line("");
+    line("Against `" + original + "`: " + num(r.nodes) + " nodes x " + num(r.lods) + " LODs, " + num(r.chains) +
+         " chains, " + num(r.segments) + " segments, " + num(r.points) + " points checked.");
+    line("");
+    line(r.total() == 0 ? "**CLEAN: no violations.**"
+                        : "**" + num(r.total()) + (r.total() == 1 ? " VIOLATION.**" : " VIOLATIONS.**"));
+    line("");
+    if (r.ground) {
+        line("- On the ellipsoid: skipped vertices at most " + fixed(r.ground_ratio_max, 6) +
+             " of their eps from their shortcuts (" + num(r.ground_geodesics) + " measured by geodesics).");
+    } else {
+        line("- On the ellipsoid: not checked (the tree's eps are projected metres: projection_scale off).");
+    }
+    if (!cgal) {
+        line("- CGAL check: not run (`tigerlod-verify --cgal` runs it).");
+    } else if (cgal->disagreements.empty()) {
+        line("- CGAL check: agrees (" + num(cgal->segments) + " segments, " + num(cgal->within_pairs) +
+             " meetings within LODs, " + num(cgal->across_pairs) + " across).");
+    } else {
+        line("- CGAL check: **DISAGREES** with verify's predicates:");
+        for (const auto& d : cgal->disagreements) {
+            line("  - " + d);
+        }
+    }
+    if (r.input_problems > 0) {
+        line("- " + num(r.input_problems) +
+             " input problems: chains that already meet in the original map (see the ingest report), listed as "
+             "kind input_problem, not counted as violations.");
+    }
+    if (!compare_text.empty()) {
+        // "since EARLIER: N new, M fixed violations\n"
+        line("- " + std::string(compare_text, 0, compare_text.size() - 1) + ".");
+    }
+    if (r.total() > 0) {
+        line("");
+        line("## Violations by kind");
+        line("");
+        line("| kind | count |");
+        line("|---|---:|");
+        for (const char* k : kinds) {
+            if (count_of(r, k) > 0) {
+                line(std::string("| ") + k + " | " + num(count_of(r, k)) + " |");
+            }
+        }
+    }
+    line("");
+    line("## By level and LOD");
+    line("");
+    line("| level | LOD | eps (m) | nodes | chains | segments | ground: largest ratio to eps | violations | input "
+         "problems |");
+    line("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    for (const auto& ll : r.by_level_lod) {
+        uint64_t n = 0;
+        for (const auto& [k, c] : ll.violations) {
+            n += c;
+        }
+        line("| " + cell(ll.level) + " | " + num(ll.lod) + " | " + general(ll.eps_m) + " | " + num(ll.nodes) + " | " +
+             num(ll.chains) + " | " + num(ll.segments) + " | " + (r.ground ? fixed(ll.ground_ratio_max, 6) : "-") +
+             " | " + num(n) + " | " + num(ll.input_problems) + " |");
+    }
+    if (!r.items.empty()) {
+        constexpr size_t shown_at_most = 50;
+        line("");
+        line("## The first " + std::to_string(std::min(r.items.size(), shown_at_most)) + " of " +
+             std::to_string(r.items.size() + r.items_dropped) + " items");
+        line("");
+        line("Each with its place in longitude and latitude (NAD83) and the node (the unit whose map holds it); "
+             "`violations.gpkg` has them all as points, `verify-report.json` as JSON.");
+        line("");
+        line("| kind | level | LOD | node | chains | lon | lat | detail |");
+        line("|---|---|---:|---|---|---:|---:|---|");
+        for (size_t i = 0; i < r.items.size() && i < shown_at_most; ++i) {
+            const Violation& v = r.items[i];
+            line("| " + v.kind + " | " + cell(v.level) + " | " + num(v.lod) + " | " +
+                 (v.node.empty() ? std::string("(root)") : cell(v.node)) + " | " + ids_text(v.chains) + " | " +
+                 fixed(v.lon, 6) + " | " + fixed(v.lat, 6) + " | " + cell(v.detail) + " |");
+        }
+    }
+    return md;
 }
 
 /// A report as report_json wrote it (a job's share), back.
@@ -682,6 +801,7 @@ int VerifyStage::run(const StageContext& ctx)
     const std::string compare_text = m_compare.empty() ? std::string() : compare_reports(report, old, m_compare);
     write_file_atomic(out.path() / "verify-report.json", report.dump(2) + "\n");
     write_gpkg(out.path() / "violations.gpkg", r);
+    write_file_atomic(out.path() / "verify-summary.md", summary_markdown(r, m_tree, m_original, compare_text, cgal));
     json manifest = new_manifest("verify", versions());
     add_input(manifest, "pack", packed);
     add_input(manifest, "ingest", ingest);

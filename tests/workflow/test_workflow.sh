@@ -52,6 +52,8 @@ if ! "$repo/scripts/workflow" wf.yaml >run2.out 2>&1; then
   cat run2.out
 fi
 grep -q '"clean": true' out/wf/reports/verify-report.json || fail "the resumed run's verify report is not clean"
+grep -q '^\*\*CLEAN: no violations.\*\*$' out/wf/reports/verify-summary.md ||
+  fail "the reports have no clean verify summary: $(cat out/wf/reports/verify-summary.md 2>&1)"
 grep -q "releasing the lock of a run that died" run2.out || fail "the rerun did not say it released a dead run's lock"
 ls -d out/wf/*.tmp-* 2>/dev/null && fail "temporaries of the killed run are left"
 

@@ -427,6 +427,20 @@ TEST_F(PackReal, VerifyIsCleanOnRealDataAndCatchesDamage)
     EXPECT_NE(report.find("\"schema\": \"tigerlod.verify-report/1\""), std::string::npos);
     EXPECT_NE(report.find("\"clean\": true"), std::string::npos);
     EXPECT_TRUE(fs::exists(dir / "v1" / "violations.gpkg"));
+    // The summary for a person, beside the JSON: the verdict, the ground
+    // and CGAL checks, a row per level and LOD; no timings, so a second run
+    // gives its bytes again.
+    const std::string summary = slurp(dir / "v1" / "verify-summary.md");
+    EXPECT_EQ(summary.rfind("# Verification of `" + d + "/tree`\n", 0), 0U) << summary;
+    EXPECT_NE(summary.find("\n**CLEAN: no violations.**\n"), std::string::npos) << summary;
+    EXPECT_NE(summary.find("\n- On the ellipsoid: skipped vertices at most 0."), std::string::npos) << summary;
+    EXPECT_NE(summary.find("\n- CGAL check: agrees ("), std::string::npos) << summary;
+    EXPECT_EQ(summary.find("## Violations by kind"), std::string::npos) << summary;
+    EXPECT_NE(summary.find("\n| block | 0 | 0 | "), std::string::npos) << summary;
+    EXPECT_NE(summary.find("\n| tract | 2 | 64 | "), std::string::npos) << summary;
+    ASSERT_EQ(run("verify", "--cgal " + d + "/tree " + d + "/ingest " + d + "/v5", dir / "out"), 0)
+        << slurp(dir / "out");
+    EXPECT_EQ(slurp(dir / "v5" / "verify-summary.md"), summary);
     // A tree with a damaged payload: reported as such, exit 1, and --compare names it as new.
     fs::copy(dir / "tree", dir / "bad", fs::copy_options::recursive);
     const auto t = open(dir / "bad");
@@ -444,6 +458,13 @@ TEST_F(PackReal, VerifyIsCleanOnRealDataAndCatchesDamage)
     EXPECT_NE(slurp(dir / "out").find("skeleton"), std::string::npos) << slurp(dir / "out");
     EXPECT_NE(slurp(dir / "out").find(": 1 new, 0 fixed violations"), std::string::npos) << slurp(dir / "out");
     EXPECT_NE(slurp(dir / "v2" / "verify-report.json").find("checksum mismatch"), std::string::npos);
+    const std::string damaged = slurp(dir / "v2" / "verify-summary.md");
+    EXPECT_NE(damaged.find("\n**1 VIOLATION.**\n"), std::string::npos) << damaged;
+    EXPECT_NE(damaged.find("\n- CGAL check: not run"), std::string::npos) << damaged;
+    EXPECT_NE(damaged.find(": 1 new, 0 fixed violations.\n"), std::string::npos) << damaged;
+    EXPECT_NE(damaged.find("\n## Violations by kind\n"), std::string::npos) << damaged;
+    EXPECT_NE(damaged.find("\n## The first 1 of 1 items\n"), std::string::npos) << damaged;
+    EXPECT_NE(damaged.find("checksum mismatch"), std::string::npos) << damaged;
     // An unreadable skeleton: one skeleton violation naming the file, exit 1.
     {
         std::fstream f(dir / "bad" / "skeleton.tls", std::ios::in | std::ios::out | std::ios::binary);

@@ -335,7 +335,7 @@ TEST_F(Ground, VerifyOnTheGroundCatchesWhatThePlanarModelPasses)
 
 TEST_F(Ground, SeededLongChainsStayWithinEpsOnTheGroundInEveryProjectionAndMetric)
 {
-    // What the README's guarantee says, for any chain length, latitude and
+    // What docs/guarantees.md says, for any chain length, latitude and
     // metric: within eps geodesic metres in L2 and L1, sqrt(2) eps in Linf
     // (measured along the grid's axes), by the brute force above.
     const auto [first, last] = ground_seeds();
