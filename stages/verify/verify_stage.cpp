@@ -498,8 +498,8 @@ std::string summary_markdown(const Report& r, const std::string& tree, const std
         line("## The first " + std::to_string(std::min(r.items.size(), shown_at_most)) + " of " +
              std::to_string(r.items.size() + r.items_dropped) + " items");
         line("");
-        line("Each with its place in longitude and latitude (NAD83) and the node (the unit whose map holds it); "
-             "`violations.gpkg` has them all as points, `verify-report.json` as JSON.");
+        line("Each with its place in longitude and latitude and its node (the unit whose map holds it); "
+             "`violations.gpkg` holds the same items as points, `verify-report.json` as JSON.");
         line("");
         line("| kind | level | LOD | node | chains | lon | lat | detail |");
         line("|---|---|---:|---|---|---:|---:|---|");
