@@ -203,6 +203,16 @@ uint64_t count_of(const Report& r, const char* k)
     return it == r.violations.end() ? 0 : it->second;
 }
 
+/// The violations of every kind at one level and LOD.
+uint64_t total_of(const LevelLod& ll)
+{
+    uint64_t n = 0;
+    for (const auto& [k, c] : ll.violations) {
+        n += c;
+    }
+    return n;
+}
+
 /// The earlier report of --compare, checked to be one.
 json read_earlier_report(const std::string& path)
 {
@@ -364,10 +374,7 @@ void print_summary(const Report& r, const std::string& tree, const std::string& 
             }
         }
         for (const auto& ll : r.by_level_lod) {
-            uint64_t n = 0;
-            for (const auto& [k, c] : ll.violations) {
-                n += c;
-            }
+            const uint64_t n = total_of(ll);
             if (n > 0) {
                 std::printf("    at %s LOD %u (eps %g m): %llu\n", ll.level.c_str(), ll.lod, ll.eps_m,
                             static_cast<unsigned long long>(n));
@@ -484,10 +491,7 @@ std::string summary_markdown(const Report& r, const std::string& tree, const std
          "problems |");
     line("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
     for (const auto& ll : r.by_level_lod) {
-        uint64_t n = 0;
-        for (const auto& [k, c] : ll.violations) {
-            n += c;
-        }
+        const uint64_t n = total_of(ll);
         line("| " + cell(ll.level) + " | " + num(ll.lod) + " | " + general(ll.eps_m) + " | " + num(ll.nodes) + " | " +
              num(ll.chains) + " | " + num(ll.segments) + " | " + (r.ground ? fixed(ll.ground_ratio_max, 6) : "-") +
              " | " + num(n) + " | " + num(ll.input_problems) + " |");
