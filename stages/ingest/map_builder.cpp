@@ -274,6 +274,11 @@ BuildResult build(RawMap raw, const Projection& projection, const BuildOptions& 
     Owner owner = owner_of(lcs, scope);
     refuse_non_nesting(raw, lcs, non_nesting, owner);
     refuse_codes_in_two_files(raw, lcs, owner, options);
+    if (raw.kind == RawMap::Kind::polygon_rings) {
+        if (const uint64_t n = raw.share_seam_vertices(); n > 0) {
+            note("put " + std::to_string(n) + " points on segments along the meridian 180, where rings meet");
+        }
+    }
     Graph g = make_graph(raw, projection, options.threads, problems, owner);
     phase("intern_project");
     note("interned and projected " + std::to_string(g.keys.size()) + " vertices");

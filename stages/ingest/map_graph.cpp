@@ -275,15 +275,16 @@ std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned th
     const unsigned nparts = std::max(1U, std::min<unsigned>(threads, static_cast<unsigned>(nrec / 65536 + 1)));
     const std::vector<size_t> bounds = key_aligned_parts(keys, nparts);
     // The records of the key at i: where they end, the units on each side,
-    // and whether a side was claimed twice.
+    // whether a side was claimed twice, and whether they are one ring's.
     struct Group {
         size_t end;
         uint32_t left, right;
-        bool conflict;
+        bool conflict, one_ring;
     };
     auto group = [&](size_t i) {
-        Group gr{i, no_unit, no_unit, false};
+        Group gr{i, no_unit, no_unit, false, true};
         for (; gr.end < nrec && keys[gr.end].first == keys[i].first; ++gr.end) {
+            gr.one_ring = gr.one_ring && edge_of(gr.end) == edge_of(i);
             uint32_t& slot = (keys[gr.end].second & 1U) ? gr.left : gr.right;
             if (slot == no_unit) {
                 slot = unit_of(gr.end);
@@ -296,7 +297,9 @@ std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned th
         }
         return gr;
     };
-    // The same polygon on both sides: a slit or spike in its ring, never a boundary.
+    // The same polygon on both sides, never a boundary: a slit or spike in
+    // its ring, or an edge that two of its parts share (the halves of a
+    // unit that a source cut at the antimeridian), which is inside it.
     auto is_spike = [](const Group& gr) { return gr.left != no_unit && gr.left == gr.right; };
     std::vector<size_t> first_piece(nparts + 1, 0);
     parallel_each(nparts, threads, [&](size_t t) {
@@ -344,7 +347,7 @@ std::vector<Piece> merge_segments(const Graph& g, const RawMap& raw, unsigned th
                 }
             }
             if (is_spike(gr)) {
-                if (owner.unit(gr.left)) {
+                if (gr.one_ring && owner.unit(gr.left)) {
                     found[t].push_back(
                         {"spikes", static_cast<double>(pa.x), static_cast<double>(pa.y), raw.where(g.src[first_edge])});
                 }

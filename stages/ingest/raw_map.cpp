@@ -283,6 +283,55 @@ void RawMap::reserve(size_t points, size_t polylines)
     source.reserve(polylines);
 }
 
+uint64_t RawMap::share_seam_vertices()
+{
+    constexpr int32_t seam = 180000000;
+    std::vector<int32_t> lats;
+    bool along = false; // some segment runs along the meridian
+    for (size_t i = 0; i < polyline_count(); ++i) {
+        for (uint64_t k = offsets[i]; k < offsets[i + 1]; ++k) {
+            if (coords[k].lon == seam) {
+                lats.push_back(coords[k].lat);
+                along = along || (k > offsets[i] && coords[k - 1].lon == seam);
+            }
+        }
+    }
+    if (!along) {
+        return 0;
+    }
+    std::sort(lats.begin(), lats.end());
+    lats.erase(std::unique(lats.begin(), lats.end()), lats.end());
+    std::vector<LonLatE6> out;
+    out.reserve(coords.size());
+    std::vector<uint64_t> offs{0};
+    offs.reserve(offsets.size());
+    for (size_t i = 0; i < polyline_count(); ++i) {
+        for (uint64_t k = offsets[i]; k < offsets[i + 1]; ++k) {
+            const LonLatE6 q = coords[k];
+            if (k > offsets[i] && q.lon == seam && coords[k - 1].lon == seam) {
+                const int32_t a = coords[k - 1].lat, b = q.lat;
+                auto lo = std::upper_bound(lats.begin(), lats.end(), std::min(a, b));
+                auto hi = std::lower_bound(lats.begin(), lats.end(), std::max(a, b));
+                if (a < b) {
+                    for (auto it = lo; it < hi; ++it) {
+                        out.push_back({seam, *it});
+                    }
+                } else {
+                    for (auto it = hi; it > lo; --it) {
+                        out.push_back({seam, *(it - 1)});
+                    }
+                }
+            }
+            out.push_back(q);
+        }
+        offs.push_back(out.size());
+    }
+    const uint64_t added = out.size() - coords.size();
+    coords = std::move(out);
+    offsets = std::move(offs);
+    return added;
+}
+
 std::string RawMap::where(SourceRef src) const
 {
     std::string s = src.file < files.size() ? files[src.file] : std::string("?");

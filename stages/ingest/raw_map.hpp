@@ -103,6 +103,20 @@ struct RawMap {
     void reserve(size_t points, size_t polylines);
     /// "file:feature" for messages.
     std::string where(SourceRef src) const;
+    /// Rings that meet along the meridian 180 (the parts of a unit that a
+    /// source cut at the antimeridian, Fiji's; where 180 is not the
+    /// projection's cut, -180 is written 180 first) share their edges along
+    /// it only where both sides hold the same vertices there, which sources
+    /// clipped at the antimeridian seldom give: the edges would overlap
+    /// instead of merging. Into each segment that runs along the meridian
+    /// this puts every latitude between its ends at which a point of the map
+    /// lies on the meridian, in order from its first end, so that the two
+    /// sides' segments are the same segments. The meridian is straight in the
+    /// cones, so the points lie on the segment (up to the grid); elsewhere
+    /// they lie on the meridian, where the segment means to be. Returns the
+    /// number of points put in (none where no two points of a polyline follow
+    /// each other on the meridian).
+    uint64_t share_seam_vertices();
 };
 
 /// A unit and a list of strings as bytes and back (the parts and the

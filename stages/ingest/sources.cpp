@@ -397,6 +397,110 @@ void fit_to_globe(std::vector<LonLatE6>& pts, const ProjectionParams& proj, cons
     }
 }
 
+using XY = std::pair<double, double>;
+
+/// The part of a closed ring (first point = last) on one side of the
+/// vertical line at `x` (points on it count as on the kept side), as closed
+/// rings. Each run of the ring on the kept side goes from where it enters
+/// to where it leaves, both on the line. Along the line, the inside of a
+/// simple ring is the intervals between its crossings sorted by y, the
+/// first and second, the third and fourth, and so on; each such interval
+/// joins the run that leaves at one end to the run that enters at the
+/// other, and following them gives the pieces, as many as the ring has on
+/// that side (a C cut across its opening gives two, not one joined by a
+/// bridge along the line). Runs that lie on the line alone (the ring
+/// touches it from the far side) enclose nothing and are left out. Where
+/// the crossings do not pair up so (a ring that crosses itself), the ring
+/// is clipped in one piece (Sutherland-Hodgman), its parts joined along
+/// the line, and ingest reports the overlap there.
+std::vector<std::vector<XY>> clip_ring(const std::vector<XY>& in, double x, bool keep_above)
+{
+    auto inside = [&](const XY& p) { return keep_above ? p.first >= x : p.first <= x; };
+    auto cross = [&](const XY& p, const XY& q) -> XY {
+        const double t = (x - p.first) / (q.first - p.first);
+        return {x, p.second + t * (q.second - p.second)};
+    };
+    const size_t n = in.size() - 1; // the ring's points once
+    // Start just after a point outside, so that the walk begins with an entry.
+    size_t start = n;
+    for (size_t i = 0; i < n && start == n; ++i) {
+        start = inside(in[i]) ? start : i;
+    }
+    if (start == n) {
+        return {in}; // all on the kept side
+    }
+    std::vector<std::vector<XY>> runs;
+    for (size_t s = 0; s < n; ++s) {
+        const XY& p = in[(start + s) % n];
+        const XY& q = in[(start + s + 1) % n];
+        if (!inside(p) && inside(q)) {
+            runs.push_back({cross(p, q)});
+            if (!(runs.back().back() == q)) {
+                runs.back().push_back(q);
+            }
+        } else if (inside(p) && inside(q)) {
+            runs.back().push_back(q);
+        } else if (inside(p) && !inside(q)) {
+            if (const XY c = cross(p, q); !(runs.back().back() == c)) {
+                runs.back().push_back(c);
+            }
+        }
+    }
+    std::erase_if(runs, [&](const std::vector<XY>& r) {
+        return std::all_of(r.begin(), r.end(), [&](const XY& p) { return p.first == x; });
+    });
+    if (runs.empty()) {
+        return {};
+    }
+    // The runs' ends by y (entry: 2 r, exit: 2 r + 1), paired in order.
+    std::vector<size_t> ends(2 * runs.size());
+    std::iota(ends.begin(), ends.end(), size_t{0});
+    auto y_of = [&](size_t e) { return e % 2 == 0 ? runs[e / 2].front().second : runs[e / 2].back().second; };
+    std::sort(ends.begin(), ends.end(),
+              [&](size_t a, size_t b) { return std::pair(y_of(a), a) < std::pair(y_of(b), b); });
+    std::vector<size_t> next(runs.size(), SIZE_MAX);
+    bool paired = true;
+    for (size_t i = 0; i + 1 < ends.size(); i += 2) {
+        const size_t e = ends[i], f = ends[i + 1];
+        if (e % 2 == f % 2) {
+            paired = false; // two entries (or exits) bound one interval
+            break;
+        }
+        const size_t exit = e % 2 == 1 ? e : f, entry = e % 2 == 1 ? f : e;
+        next[exit / 2] = entry / 2;
+    }
+    if (!paired) {
+        std::vector<XY> res; // Sutherland-Hodgman: one ring, bridged along the line
+        for (size_t i = 0; i + 1 < in.size(); ++i) {
+            if (inside(in[i])) {
+                res.push_back(in[i]);
+            }
+            if (inside(in[i]) != inside(in[i + 1])) {
+                res.push_back(cross(in[i], in[i + 1]));
+            }
+        }
+        if (!res.empty()) {
+            res.push_back(res.front());
+        }
+        return {res};
+    }
+    std::vector<std::vector<XY>> out;
+    std::vector<uint8_t> used(runs.size(), 0);
+    for (size_t r0 = 0; r0 < runs.size(); ++r0) {
+        if (used[r0]) {
+            continue;
+        }
+        std::vector<XY> ring;
+        for (size_t r = r0; !used[r]; r = next[r]) {
+            used[r] = 1;
+            ring.insert(ring.end(), runs[r].begin(), runs[r].end());
+        }
+        ring.push_back(ring.front());
+        out.push_back(std::move(ring));
+    }
+    return out;
+}
+
 /// A polygon ring cut along a conic's cut (the meridian opposite its
 /// central one), where the plane tears: the ring unwrapped the short way
 /// round from its first point, clipped to each strip of 360 degrees of
@@ -407,9 +511,9 @@ void fit_to_globe(std::vector<LonLatE6>& pts, const ProjectionParams& proj, cons
 /// map. A ring that crosses nothing comes back alone (points that lie on
 /// the cut from its west side moved a micro-degree west of it too). A ring
 /// round a pole (it winds once round the globe) is first closed along the
-/// pole, a degree a step (the cones draw a pole as an arc). A piece
-/// that leaves and enters a strip more than once keeps its parts joined
-/// along the cut (ingest then reports the overlap).
+/// pole, a degree a step (the cones draw a pole as an arc). A ring that
+/// leaves and enters a strip more than once gives a piece for each part
+/// of it there (clip_ring).
 std::vector<std::vector<LonLatE6>> split_at_cut(const std::vector<LonLatE6>& ring, const ProjectionParams& proj)
 {
     if ((proj.kind != ProjectionParams::Kind::albers && proj.kind != ProjectionParams::Kind::lcc) || ring.size() < 4 ||
@@ -455,42 +559,26 @@ std::vector<std::vector<LonLatE6>> split_at_cut(const std::vector<LonLatE6>& rin
     std::vector<std::vector<LonLatE6>> out;
     for (int64_t k = k_lo; k <= k_hi; ++k) {
         const double a = double(-half + k * turn), b = double(half + k * turn);
-        auto clip = [](const std::vector<std::pair<double, double>>& in, double x, bool keep_above) {
-            std::vector<std::pair<double, double>> res;
-            auto inside = [&](const std::pair<double, double>& p) { return keep_above ? p.first >= x : p.first <= x; };
-            for (size_t i = 0; i + 1 < in.size(); ++i) {
-                const auto& p = in[i];
-                const auto& q = in[i + 1];
-                if (inside(p)) {
-                    res.push_back(p);
+        for (const auto& half_piece : clip_ring(u, a, true)) {
+            for (const auto& piece : clip_ring(half_piece, b, false)) {
+                if (piece.size() < 4) {
+                    continue;
                 }
-                if (inside(p) != inside(q)) {
-                    const double t = (x - p.first) / (q.first - p.first);
-                    res.emplace_back(x, p.second + t * (q.second - p.second));
+                std::vector<LonLatE6> r;
+                for (const auto& [x, y] : piece) {
+                    // On a strip's meridian: a micro-degree inside it.
+                    const double xi = x <= a ? a + 1 : x >= b ? b - 1 : x;
+                    int64_t lon = lon0 + std::llround(xi) - k * turn;
+                    lon += lon > half ? -turn : lon < -half ? turn : 0;
+                    const LonLatE6 pt{static_cast<int32_t>(lon), static_cast<int32_t>(std::llround(y))};
+                    if (r.empty() || !(r.back() == pt)) {
+                        r.push_back(pt);
+                    }
+                }
+                if (r.size() >= 4 && r.front() == r.back()) {
+                    out.push_back(std::move(r));
                 }
             }
-            if (!res.empty()) {
-                res.push_back(res.front());
-            }
-            return res;
-        };
-        const auto piece = clip(clip(u, a, true), b, false);
-        if (piece.size() < 4) {
-            continue;
-        }
-        std::vector<LonLatE6> r;
-        for (const auto& [x, y] : piece) {
-            // On a strip's meridian: a micro-degree inside it.
-            const double xi = x <= a ? a + 1 : x >= b ? b - 1 : x;
-            int64_t lon = lon0 + std::llround(xi) - k * turn;
-            lon += lon > half ? -turn : lon < -half ? turn : 0;
-            const LonLatE6 pt{static_cast<int32_t>(lon), static_cast<int32_t>(std::llround(y))};
-            if (r.empty() || !(r.back() == pt)) {
-                r.push_back(pt);
-            }
-        }
-        if (r.size() >= 4 && r.front() == r.back()) {
-            out.push_back(std::move(r));
         }
     }
     return out.empty() ? std::vector<std::vector<LonLatE6>>{ring} : out;
@@ -871,21 +959,37 @@ void read_tiger(const IngestConfig& cfg, RawMap& raw, const Log& log)
                                                          : "the EDGES files given");
 }
 
-/// Signed area sign of a ring in micro-degrees (exact).
-int ring_orientation(const std::vector<LonLatE6>& r)
+/// A ring's longitudes as the plane lays them out: micro-degrees east of
+/// the central meridian, in (-180, 180] degrees. Read straight, 180 and -180
+/// are a turn apart, and a ring that touches the meridian 180 from the east
+/// (written 180 there, see fit_to_globe) would wind the wrong way round.
+std::vector<int64_t> eastings(const std::vector<LonLatE6>& r, const ProjectionParams& proj)
+{
+    constexpr int64_t half = 180000000, turn = 2 * half;
+    const int64_t lon0 = std::llround(proj.lon0_deg * 1e6);
+    std::vector<int64_t> x(r.size());
+    for (size_t i = 0; i < r.size(); ++i) {
+        int64_t d = (r[i].lon - lon0) % turn;
+        x[i] = d + (d <= -half ? turn : d > half ? -turn : 0);
+    }
+    return x;
+}
+
+/// Signed area sign of a ring in micro-degrees east of lon0 (exact).
+int ring_orientation(const std::vector<LonLatE6>& r, const std::vector<int64_t>& x)
 {
     int128 a = 0;
     for (size_t i = 0; i + 1 < r.size(); ++i) {
-        a += static_cast<int128>(r[i].lon) * r[i + 1].lat - static_cast<int128>(r[i + 1].lon) * r[i].lat;
+        a += static_cast<int128>(x[i]) * r[i + 1].lat - static_cast<int128>(x[i + 1]) * r[i].lat;
     }
     return (a > 0) - (a < 0);
 }
 
-double ring_area_deg2(const std::vector<LonLatE6>& r)
+double ring_area_deg2(const std::vector<LonLatE6>& r, const std::vector<int64_t>& x)
 {
     double a = 0;
     for (size_t i = 0; i + 1 < r.size(); ++i) {
-        a += 1e-12 * (static_cast<double>(r[i].lon) * r[i + 1].lat - static_cast<double>(r[i + 1].lon) * r[i].lat);
+        a += 1e-12 * (static_cast<double>(x[i]) * r[i + 1].lat - static_cast<double>(x[i + 1]) * r[i].lat);
     }
     return 0.5 * a;
 }
@@ -973,9 +1077,10 @@ void read_polygon_file(const IngestConfig& cfg, const fs::path& path, RawMap& ra
                     for (auto& piece : split_at_cut(ring, cfg.projection)) {
                         fit_to_globe(piece, cfg.projection, where);
                         // Exterior rings counter-clockwise, holes clockwise: the unit is on the left.
-                        const int o = ring_orientation(piece);
+                        const std::vector<int64_t> x = eastings(piece, cfg.projection);
+                        const int o = ring_orientation(piece, x);
                         const bool unit_left = ri == 0 ? o >= 0 : o <= 0;
-                        u.weight += (ri == 0 ? 1 : -1) * std::fabs(ring_area_deg2(piece));
+                        u.weight += (ri == 0 ? 1 : -1) * std::fabs(ring_area_deg2(piece, x));
                         raw.add_polyline(piece, unit_left ? unit : no_unit, unit_left ? no_unit : unit, c, 0,
                                          {file, index});
                     }

@@ -6,8 +6,10 @@
 # beside it: clean. And the same map at the default 0.01 m grid: refused
 # by --validate naming projection.grid_m; without dataset.empty_code:
 # skip, the features without a code refused, all counted and three named;
-# a halo below the ladder's need refused by --validate. First, hand-made
-# maps across the antimeridian and round a pole. Then Asia
+# a halo below the ladder's need refused by --validate; the same map on a
+# cone centred on 100 E, cut through the Americas. First, hand-made maps
+# across the antimeridian, round a pole, meeting along the meridian 180
+# and across a cut in several pieces. Then Asia
 # (configs/asia.yaml) the same way. The maps skip without the package,
 # which scripts/test fetches.
 #   tests/world/test_world.sh REPO BIN_DIR
@@ -50,11 +52,29 @@ open(f"{d}/globe.yaml", "w").write(
     "levels:\n  - {name: world, code: W}\n  - {name: unit, prefix: 2}\n" + cone +
     "ingest: {halo_m: 20000}\nsimplify: {tolerances_m: [1000, 5000], shortcut_test: exact}\n")
 open(f"{d}/line.yaml", "w").write("name: line\ndataset: {kind: lines, inputs: [line.geojson]}\n" + cone)
+# On a cone centred on 100 E (cut at 80 W): F1 in two parts cut at the
+# antimeridian, each side with a vertex on the meridian the other lacks;
+# F2 and F3 meeting there, 35 N on F3's side only; C1, a C across the cut
+# whose two arms reach past it (three pieces, none bridged along the cut).
+def multi(code, rings): return {"type": "Feature", "properties": {"code": code}, "geometry": {"type": "MultiPolygon", "coordinates": [[r] for r in rings]}}
+west = [[170, 10], [180, 10], [180, 13], [180, 20], [170, 20], [170, 10]]
+east = [[-180, 10], [-170, 10], [-170, 20], [-180, 20], [-180, 16], [-180, 10]]
+f2 = [[170, 30], [180, 30], [180, 40], [170, 40], [170, 30]]
+f3 = [[-180, 30], [-170, 30], [-170, 40], [-180, 40], [-180, 35], [-180, 30]]
+c1 = [[-85, 0], [-75, 0], [-75, 2], [-84, 2], [-84, 8], [-75, 8], [-75, 10], [-85, 10], [-85, 0]]
+json.dump(fc([multi("F1", [west, east]), multi("F2", [f2]), multi("F3", [f3]), multi("C1", [c1])]), open(f"{d}/seam.geojson", "w"))
+open(f"{d}/seam.yaml", "w").write(
+    "name: seam\ndataset: {kind: polygons, inputs: [seam.geojson], code_field: code}\n"
+    "levels:\n  - {name: world, code: W}\n  - {name: unit, prefix: 2}\n" + cone.replace("lon0: 0", "lon0: 100") +
+    "ingest: {halo_m: 20000}\nsimplify: {tolerances_m: [1000, 5000], shortcut_test: exact}\n")
 PY
 g=$work/globe
 end_to_end globe "$g/globe.yaml" "$g"
 grep -Eq "^ +unit +3 +4 +4 " "$g/ingest.log" || fail "globe: not 3 units in 4 rings: $(cat "$g/ingest.log")"
 grep -q "problems: none" "$g/ingest.log" || fail "globe: $(cat "$g/ingest.log")"
+end_to_end seam "$g/seam.yaml" "$g/seam"
+grep -Eq "^ +unit +4 +" "$g/seam/ingest.log" || fail "seam: not 4 units: $(cat "$g/seam/ingest.log")"
+grep -q "problems: none" "$g/seam/ingest.log" || fail "seam: $(cat "$g/seam/ingest.log")"
 "$bin/tigerlod-ingest" "$g/line.yaml" "$g/lin" >"$g/line.log" 2>&1
 rc=$?
 [ "$rc" = 1 ] || fail "a line across the cut: exit $rc, not 1: $(cat "$g/line.log")"
@@ -72,6 +92,17 @@ grep -q "5 features with an empty 'id' (feature 58 'Somaliland'" "$work/world/in
   fail "ingest did not name the features without a code: $(cat "$work/world/ingest.log")"
 grep -q "problems:.* empty_codes=5" "$work/world/ingest.log" ||
   fail "the report does not count the features left out: $(cat "$work/world/ingest.log")"
+# The same world on a cone centred on 100 E: cut at 80 W, through the
+# Americas and Antarctica, and the halves of Fiji and Russia meeting at
+# 180. Clean, and the cut and the seam add no problem to Natural Earth's
+# own (Antarctica's crossings, the same at lon0 0).
+sed -e 's/lon0: 0,/lon0: 100,/' -e "s|\.\./\.cache/|$repo/.cache/|g" "$cfg" >"$work/world-100.yaml"
+end_to_end world-100 "$work/world-100.yaml" "$work/world-100"
+c0=$(grep -o "crossings=[0-9]*" "$work/world/ingest.log")
+c100=$(grep -o "crossings=[0-9]*" "$work/world-100/ingest.log")
+[ "$c0" = "$c100" ] || fail "lon0 100: $c100 against $c0 at lon0 0: $(cat "$work/world-100/ingest.log")"
+! grep -Eq "(overlaps|overlapping_polygons|spikes|touches|invalid_polygons)=" "$work/world-100/ingest.log" ||
+  fail "lon0 100: $(cat "$work/world-100/ingest.log")"
 # The same count through the workflow's jobs (list, plan, region, finish).
 wp=$work/world-jobs
 "$bin/tigerlod-ingest" --list --parts "$wp/parts" "$cfg" "$wp/in" >"$wp.log" 2>&1 &&
@@ -102,7 +133,8 @@ rc=$?
 [ "$rc" = 2 ] || fail "halo rule: exit $rc, not 2: $(cat "$work/halo.log")"
 grep -q "'ingest.halo_m' (25000 m) is below the 28284.3 m that simplify.tolerances_m's largest, 10000 m, needs" "$work/halo.log" ||
   fail "halo rule: $(cat "$work/halo.log")"
-echo "world: ingest, simplify, pack and verify clean on the ground, CGAL agreeing; 0.01 m refused naming projection.grid_m;"
+echo "world: ingest, simplify, pack and verify clean on the ground, CGAL agreeing, at lon0 0 and 100;"
+echo "  0.01 m refused naming projection.grid_m;"
 echo "  empty codes refused by default, counted and named, and counted when skipped (whole and in jobs);"
 echo "  the halo rule checked at --validate"
 # Asia (configs/asia.yaml): the same package, its countries chosen by

@@ -304,6 +304,55 @@ TEST(MapBuilder, SharedPolygonEdgesMergeAndRingsCloseOnTheirSmallestVertex)
     }
 }
 
+TEST(MapBuilder, RingsThatMeetAlongTheMeridian180WithOtherVerticesEachSideShareTheirEdges)
+{
+    // On a cone centred on 100 E (cut at 80 W), the meridian 180 is inside
+    // the map. Unit F in two parts cut there, each side with a vertex the
+    // other lacks (13 N west, 16 N east); units G and H meeting there, 35 N
+    // on H's side only. The reader writes -180 as 180 and gives the sides.
+    ProjectionParams pp;
+    pp.lon0_deg = 100;
+    pp.lat0_deg = 0;
+    pp.stdlat1_deg = 20;
+    pp.stdlat2_deg = 50;
+    pp.grid_m = 0.1;
+    const Projection cone(pp);
+    auto at = [](int lon, int lat) { return LonLatE6{lon * 1000000, lat * 1000000}; };
+    for (const bool reversed : {false, true}) {
+        SCOPED_TRACE(reversed ? "the east rings drawn clockwise, the unit on their right" : "all counter-clockwise");
+        RawMap m =
+            polygon_map({{{"F"}, std::nullopt, 2, {}}, {{"G"}, std::nullopt, 1, {}}, {{"H"}, std::nullopt, 1, {}}});
+        auto east_ring = [&](std::vector<LonLatE6> r, uint32_t unit) {
+            if (reversed) {
+                std::reverse(r.begin(), r.end());
+            }
+            ring(m, r, unit, !reversed);
+        };
+        ring(m, {at(170, 10), at(180, 10), at(180, 13), at(180, 20), at(170, 20), at(170, 10)}, 0, true);
+        east_ring({at(180, 10), at(-170, 10), at(-170, 20), at(180, 20), at(180, 16), at(180, 10)}, 0);
+        ring(m, {at(170, 30), at(180, 30), at(180, 40), at(170, 40), at(170, 30)}, 1, true);
+        east_ring({at(180, 30), at(-170, 30), at(-170, 40), at(180, 40), at(180, 35), at(180, 30)}, 2);
+        BuildOptions o;
+        o.halo_m = 20000;
+        o.threads = 2;
+        const Built b = build(std::move(m), o, cone);
+        for (const char* kind : {"overlapping_polygons", "spikes", "crossings", "overlaps", "touches"}) {
+            EXPECT_EQ(b.result.problems.at(kind), 0U) << kind;
+        }
+        // F: one ring without its seam (six corners); G | H: one edge along
+        // the seam, through 35 N; G's and H's outer sides, between its ends.
+        std::vector<std::string> chains;
+        const auto& s = b.store("l");
+        for (const auto& c : s.chains) {
+            chains.push_back(s.strings[c.left] + "|" + s.strings[c.right] + " " +
+                             std::to_string(s.chain_points(c).size()));
+        }
+        std::sort(chains.begin(), chains.end());
+        EXPECT_EQ(chains, (std::vector<std::string>{"F| 7", "G|H 3", "H| 4", "|G 4"}));
+        EXPECT_EQ(b.result.levels[0].rings, 1U);
+    }
+}
+
 TEST(MapBuilder, PolygonSegmentsJoinIntoOneEdgePerRunBetweenJunctions)
 {
     // A and B share a boundary of three segments, and each ring starts at a
