@@ -7,8 +7,9 @@
 # clipped there draw them); in every other row the two cells at 180 are
 # one unit in two parts. A cone whose cut (lon0 + 180) falls at a random
 # place inside the grid, so that cells are cut there too, and a random
-# star-shaped ring around a point of the cut, which crosses it many times
-# (each of its pieces a ring of its own). Every seed: no problem at ingest,
+# flower near the cut, which crosses it many times (each of its pieces a
+# ring of its own), and a random ring round the
+# south pole, closed by going once round the globe. Every seed: no problem at ingest,
 # every unit there, clean on the ground, the checkers agreeing.
 #   tests/world/test_globe_property.sh REPO BIN_DIR [SEEDS]
 . "$(dirname "$0")/../support/script.sh" globe-property "$1" "$2"
@@ -72,17 +73,31 @@ for j in range(len(rows) - 1):
 k = rnd.randrange(len(cols) - 1)
 cut = cols[k] + rnd.randint(5, 45) / 10 + rnd.randint(0, 99) / 1000
 lon0 = cut - 180
-# A star around a point of the cut, north of the grid: sorted random angles, random radii.
-m = rnd.randint(24, 60)
-angles = sorted(rnd.uniform(0, 2 * math.pi) for _ in range(m))
+# A flower of k petals north of the grid, its centre 2.5 to 4.5 degrees off
+# the cut, so that the cut crosses it up to 2 k times. Smooth (short
+# segments, petals apart): simple in the plane too, where the cone bends
+# lon/lat's straight lines (a spiky star, simple in lon/lat, can cross
+# itself there, and ingest rightly says so).
+k = rnd.randint(3, 8)
+amp, phase = rnd.uniform(1.5, 2.5), rnd.uniform(0, 2 * math.pi)
+dx = rnd.choice([-1, 1]) * rnd.uniform(2.5, 4.5)  # through the petals
+m = 12 * k
 star = []
-for a in angles:
-    r = rnd.uniform(0.5, 6.0)
-    star.append([lon(round((cut + r * math.cos(a)) * E6)), round(37.5 + r * math.sin(a), 6)])
+for i in range(m):
+    a = 2 * math.pi * (i + rnd.uniform(-0.3, 0.3)) / m
+    r = 4 + amp * math.sin(k * a + phase)
+    star.append([lon(round((cut + dx + r * math.cos(a)) * E6)), round(37.5 + r * math.sin(a), 6)])
 star.append(star[0])
 n += 1
 features.append({"type": "Feature", "properties": {"code": "S%03d" % n},
                  "geometry": {"type": "Polygon", "coordinates": [star]}})
+# A ring round the south pole at random longitudes and latitudes, from
+# -180 once round back to it (as Natural Earth closes Antarctica).
+lons = sorted(rnd.sample(range(-179 * E6, 180 * E6, 1000), rnd.randint(20, 80)))
+polar = [[-180.0, -70.0]] + [[round(x / E6, 6), round(rnd.uniform(-75, -65), 6)] for x in lons] + [[-180.0, -70.0]]
+n += 1
+features.append({"type": "Feature", "properties": {"code": "P%03d" % n},
+                 "geometry": {"type": "Polygon", "coordinates": [polar]}})
 json.dump({"type": "FeatureCollection", "features": features}, open(f"{d}/map.geojson", "w"))
 open(f"{d}/map.yaml", "w").write(
     "name: globe-property\ndataset: {kind: polygons, inputs: [map.geojson], code_field: code}\n"
