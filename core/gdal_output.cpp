@@ -5,6 +5,7 @@
 #include <cpl_conv.h>
 #include <cpl_error.h>
 #include <ogr_api.h>
+#include <ogr_srs_api.h>
 
 #include <cstdlib>
 #include <ctime>
@@ -107,6 +108,44 @@ void close_and_check(GDALDatasetH ds, const fs::path& path, const std::map<std::
             who + ": " + path.string() +
             " was written but does not read back whole (a full disk or a failed device?): " + fault);
     }
+}
+
+OGRSpatialReferenceH tree_srs(const ProjectionParams& p, const std::string& who)
+{
+    using K = ProjectionParams::Kind;
+    OGRSpatialReferenceH srs = OSRNewSpatialReference(nullptr);
+    const bool grs80 = p.a_m == 6378137.0 && p.f == 1.0 / 298.257222101;
+    if (p == ProjectionParams{.grid_m = p.grid_m}) {
+        OSRImportFromEPSG(srs, 5070); // NAD83 / Conus Albers: the default, grid aside
+        return srs;
+    }
+    if ((p.kind == K::albers || p.kind == K::lcc) && p.k0 != 1.0) {
+        OSRDestroySpatialReference(srs);
+        throw usage_error(who + ": the tree's projection (" + std::string(projection_kind_name(p.kind)) +
+                          " with k0 != 1) has no CRS GDAL can state: use --crs lonlat");
+    }
+    OSRSetProjCS(srs, (std::string("tigerlod ") + projection_kind_name(p.kind)).c_str());
+    if (grs80) {
+        OSRSetWellKnownGeogCS(srs, "NAD83");
+    } else {
+        OSRSetGeogCS(srs, "tigerlod", "tigerlod", "tigerlod", p.a_m, 1.0 / p.f, "Greenwich", 0.0, "degree",
+                     0.0174532925199433);
+    }
+    switch (p.kind) {
+    case K::albers:
+        OSRSetACEA(srs, p.stdlat1_deg, p.stdlat2_deg, p.lat0_deg, p.lon0_deg, p.false_easting_m, p.false_northing_m);
+        break;
+    case K::lcc:
+        OSRSetLCC(srs, p.stdlat1_deg, p.stdlat2_deg, p.lat0_deg, p.lon0_deg, p.false_easting_m, p.false_northing_m);
+        break;
+    case K::tm:
+        OSRSetTM(srs, p.lat0_deg, p.lon0_deg, p.k0, p.false_easting_m, p.false_northing_m);
+        break;
+    case K::utm:
+        OSRSetUTM(srs, p.utm_zone, p.utm_north ? TRUE : FALSE);
+        break;
+    }
+    return srs;
 }
 
 } // namespace tigerlod

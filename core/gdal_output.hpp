@@ -9,7 +9,10 @@
 /// close_and_check() closes the dataset, then reads the file back and
 /// compares each layer's feature count with what was written.
 
+#include "core/projection.hpp"
+
 #include <gdal.h>
+#include <ogr_srs_api.h>
 
 #include <cstdint>
 #include <filesystem>
@@ -57,5 +60,12 @@ void fix_gdal_dates();
 /// message ("export", "verify").
 void close_and_check(GDALDatasetH ds, const std::filesystem::path& path, const std::map<std::string, int64_t>& expected,
                      const GdalErrorTrap& trap, const std::string& who);
+
+/// The tree's projection as a GDAL spatial reference: EPSG:5070 for the
+/// default CONUS Albers on GRS 80, else the projection built from its
+/// parameters (on NAD83 where the ellipsoid is GRS 80). Throws usage_error,
+/// its message prefixed by `who`, for a conic with k0 != 1, which PROJ's
+/// conics cannot state. The caller destroys it (OSRDestroySpatialReference).
+OGRSpatialReferenceH tree_srs(const ProjectionParams& p, const std::string& who);
 
 } // namespace tigerlod

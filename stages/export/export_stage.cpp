@@ -176,48 +176,6 @@ std::map<std::string, std::pair<size_t, uint32_t>> home_nodes(const reader::Tree
     return home;
 }
 
-/// The tree's projection as a GDAL spatial reference: EPSG:5070 for the
-/// default CONUS Albers on GRS 80, else the projection built from its
-/// parameters (on NAD83 where the ellipsoid is GRS 80). Throws usage_error
-/// for a conic with k0 != 1, which PROJ's conics cannot state.
-OGRSpatialReferenceH tree_srs(const ProjectionParams& p)
-{
-    using K = ProjectionParams::Kind;
-    OGRSpatialReferenceH srs = OSRNewSpatialReference(nullptr);
-    const bool grs80 = p.a_m == 6378137.0 && p.f == 1.0 / 298.257222101;
-    if (p == ProjectionParams{.grid_m = p.grid_m}) {
-        OSRImportFromEPSG(srs, 5070); // NAD83 / Conus Albers: the default, grid aside
-        return srs;
-    }
-    if ((p.kind == K::albers || p.kind == K::lcc) && p.k0 != 1.0) {
-        OSRDestroySpatialReference(srs);
-        throw usage_error("export: the tree's projection (" + std::string(projection_kind_name(p.kind)) +
-                          " with k0 != 1) has no CRS GDAL can state: use --crs lonlat");
-    }
-    OSRSetProjCS(srs, (std::string("tigerlod ") + projection_kind_name(p.kind)).c_str());
-    if (grs80) {
-        OSRSetWellKnownGeogCS(srs, "NAD83");
-    } else {
-        OSRSetGeogCS(srs, "tigerlod", "tigerlod", "tigerlod", p.a_m, 1.0 / p.f, "Greenwich", 0.0, "degree",
-                     0.0174532925199433);
-    }
-    switch (p.kind) {
-    case K::albers:
-        OSRSetACEA(srs, p.stdlat1_deg, p.stdlat2_deg, p.lat0_deg, p.lon0_deg, p.false_easting_m, p.false_northing_m);
-        break;
-    case K::lcc:
-        OSRSetLCC(srs, p.stdlat1_deg, p.stdlat2_deg, p.lat0_deg, p.lon0_deg, p.false_easting_m, p.false_northing_m);
-        break;
-    case K::tm:
-        OSRSetTM(srs, p.lat0_deg, p.lon0_deg, p.k0, p.false_easting_m, p.false_northing_m);
-        break;
-    case K::utm:
-        OSRSetUTM(srs, p.utm_zone, p.utm_north ? TRUE : FALSE);
-        break;
-    }
-    return srs;
-}
-
 /// The layers of the file being written, and what went into them.
 class Writer {
   public:
@@ -232,7 +190,7 @@ class Writer {
             srs = OSRNewSpatialReference(nullptr);
             OSRImportFromEPSG(srs, 4269);
         } else {
-            srs = tree_srs(proj.params());
+            srs = tree_srs(proj.params(), "export");
         }
         OSRSetAxisMappingStrategy(srs, OAMS_TRADITIONAL_GIS_ORDER);
         if (with_chains) {

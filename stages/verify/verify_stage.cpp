@@ -10,6 +10,7 @@
 #include "simplification/stage_options.hpp"
 #include "stages/pack/packer.hpp"
 #include "stages/verify/cgal_check.hpp"
+#include "reader/tree_view.hpp"
 #include "stages/verify/verifier.hpp"
 
 #include <GeographicLib/Config.h>
@@ -107,7 +108,8 @@ std::string VerifyStage::help_notes() const
     return "Outputs:\n"
            "  OUTPUT/verify-report.json  counts checked, violations by kind and by level and LOD, each violation\n"
            "                             with node, chain ids, kind and lon/lat (schema: stages/verify/REPORT.md)\n"
-           "  OUTPUT/violations.gpkg     the violations as points, for QGIS\n"
+           "  OUTPUT/violations.gpkg     the violations as points, and their chains as lines with their units, for "
+           "QGIS\n"
            "  OUTPUT/manifest.json       the tree's and the original's manifest digests, the options\n"
            "Exit codes: 0 clean; 1 a violation was found (or the tree is unreadable); 2 usage error;\n"
            "  3 environment (cannot write).\n";
@@ -138,10 +140,66 @@ std::string key_of(const json& item)
            item.at("detail").get<std::string>();
 }
 
-void write_gpkg(const fs::path& path, const Report& r)
+/// The offending chains of each item, as the tree holds them at its LOD: a
+/// line each, with the units on its sides. Items of a node the tree cannot
+/// decode (the damage verify found) have none.
+struct ItemChain {
+    size_t item = 0; ///< index in Report::items
+    uint64_t id = 0;
+    std::string left, right;
+    double eps_m = 0;
+    std::vector<GridPoint> points;
+};
+std::vector<ItemChain> item_chains(const reader::Tree* tree, const Report& r)
+{
+    std::vector<ItemChain> out;
+    if (tree == nullptr) {
+        return out;
+    }
+    const auto& s = tree->skeleton();
+    std::map<std::pair<uint32_t, uint32_t>, std::optional<view::NodeMap>> maps; // by (node, LOD)
+    for (size_t i = 0; i < r.items.size(); ++i) {
+        const Violation& v = r.items[i];
+        if (v.chains.empty() || v.lod >= s.lod_eps_m.size()) {
+            continue;
+        }
+        uint32_t n = 0;
+        try {
+            n = view::find_node(s, v.node);
+        } catch (const usage_error&) {
+            continue; // not a node of this tree (an item of the manifest, say)
+        }
+        auto [it, fresh] = maps.try_emplace({n, v.lod});
+        if (fresh) {
+            try {
+                it->second = view::read_node(*tree, n, v.lod);
+            } catch (const Error&) {
+                // A payload that does not decode: the item says so, no lines.
+            }
+        }
+        if (!it->second) {
+            continue;
+        }
+        const view::NodeMap& m = *it->second;
+        for (size_t c = 0; c < m.table.chains.size(); ++c) {
+            const auto& ch = m.table.chains[c];
+            if (std::binary_search(v.chains.begin(), v.chains.end(), ch.id)) {
+                const auto pts = m.geometry.chain(c);
+                out.push_back({i, ch.id, m.table.strings[ch.left], m.table.strings[ch.right], s.lod_eps_m[v.lod],
+                               std::vector<GridPoint>(pts.begin(), pts.end())});
+            }
+        }
+    }
+    return out;
+}
+
+} // namespace
+
+void write_violations_gpkg(const fs::path& path, const Report& r, const reader::Tree* tree)
 {
     GDALAllRegister();
     fix_gdal_dates();
+    const std::vector<ItemChain> lines = item_chains(tree, r);
     GdalErrorTrap trap;
     GDALDatasetH ds = GDALCreate(GDALGetDriverByName("GPKG"), path.c_str(), 0, 0, 0, GDT_Unknown, nullptr);
     if (ds == nullptr) {
@@ -152,20 +210,48 @@ void write_gpkg(const fs::path& path, const Report& r)
     OSRSetAxisMappingStrategy(srs, OAMS_TRADITIONAL_GIS_ORDER);
     OGRLayerH layer = GDALDatasetCreateLayer(ds, "violations", srs, wkbPoint, nullptr);
     OSRDestroySpatialReference(srs);
-    const std::pair<const char*, OGRFieldType> fields[] = {{"kind", OFTString},   {"level", OFTString},
-                                                           {"lod", OFTInteger},   {"node", OFTString},
-                                                           {"chains", OFTString}, {"detail", OFTString}};
-    for (const auto& [name, type] : fields) {
-        if (layer == nullptr) {
-            break;
+    auto add_fields = [](OGRLayerH l, std::initializer_list<std::pair<const char*, OGRFieldType>> fields) {
+        for (const auto& [name, type] : fields) {
+            if (l != nullptr) {
+                OGRFieldDefnH fd = OGR_Fld_Create(name, type);
+                OGR_L_CreateField(l, fd, TRUE);
+                OGR_Fld_Destroy(fd);
+            }
         }
-        OGRFieldDefnH fd = OGR_Fld_Create(name, type);
-        OGR_L_CreateField(layer, fd, TRUE);
-        OGR_Fld_Destroy(fd);
+    };
+    add_fields(layer, {{"kind", OFTString},
+                       {"level", OFTString},
+                       {"lod", OFTInteger},
+                       {"node", OFTString},
+                       {"chains", OFTString},
+                       {"detail", OFTString}});
+    // The chains, in the tree's own projection, where their segments are
+    // straight (in lon/lat a GIS would bow them, and move the meeting).
+    OGRLayerH chain_layer = nullptr;
+    if (tree != nullptr) {
+        OGRSpatialReferenceH tsrs = nullptr;
+        try {
+            tsrs = tree_srs(view::projection_of(tree->skeleton()), "verify");
+        } catch (const usage_error&) {
+            tsrs = nullptr; // a conic with k0 != 1: the lines without a CRS
+        }
+        chain_layer = GDALDatasetCreateLayer(ds, "violation_chains", tsrs, wkbLineString, nullptr);
+        if (tsrs != nullptr) {
+            OSRDestroySpatialReference(tsrs);
+        }
+        add_fields(chain_layer, {{"violation", OFTInteger64},
+                                 {"kind", OFTString},
+                                 {"level", OFTString},
+                                 {"lod", OFTInteger},
+                                 {"eps_m", OFTReal},
+                                 {"node", OFTString},
+                                 {"chain_id", OFTInteger64},
+                                 {"left", OFTString},
+                                 {"right", OFTString}});
     }
-    // One transaction for all the points: the file is whole or the error is seen.
+    // One transaction for all the features: the file is whole or the error is seen.
     const bool in_transaction = layer != nullptr && GDALDatasetStartTransaction(ds, FALSE) == OGRERR_NONE;
-    bool ok = layer != nullptr;
+    bool ok = layer != nullptr && (tree == nullptr || chain_layer != nullptr);
     for (const auto& v : r.items) {
         if (!ok || trap.failed()) {
             break;
@@ -183,16 +269,42 @@ void write_gpkg(const fs::path& path, const Report& r)
         ok = OGR_L_CreateFeature(layer, f) == OGRERR_NONE;
         OGR_F_Destroy(f);
     }
+    const double g = tree != nullptr ? tree->skeleton().grid_m() : 1.0;
+    for (const auto& c : lines) {
+        if (!ok || trap.failed()) {
+            break;
+        }
+        const Violation& v = r.items[c.item];
+        OGRFeatureH f = OGR_F_Create(OGR_L_GetLayerDefn(chain_layer));
+        OGR_F_SetFieldInteger64(f, 0, static_cast<GIntBig>(c.item + 1)); // the point's fid
+        OGR_F_SetFieldString(f, 1, v.kind.c_str());
+        OGR_F_SetFieldString(f, 2, v.level.c_str());
+        OGR_F_SetFieldInteger(f, 3, static_cast<int>(v.lod));
+        OGR_F_SetFieldDouble(f, 4, c.eps_m);
+        OGR_F_SetFieldString(f, 5, v.node.c_str());
+        OGR_F_SetFieldInteger64(f, 6, static_cast<GIntBig>(c.id));
+        OGR_F_SetFieldString(f, 7, c.left.c_str());
+        OGR_F_SetFieldString(f, 8, c.right.c_str());
+        OGRGeometryH line = OGR_G_CreateGeometry(wkbLineString);
+        for (const auto& p : c.points) {
+            OGR_G_AddPoint_2D(line, double(p.x) * g, double(p.y) * g);
+        }
+        OGR_F_SetGeometryDirectly(f, line);
+        ok = OGR_L_CreateFeature(chain_layer, f) == OGRERR_NONE;
+        OGR_F_Destroy(f);
+    }
     ok = ok && (!in_transaction || GDALDatasetCommitTransaction(ds) == OGRERR_NONE);
     if (!ok) {
         GDALClose(ds);
         throw environment_error("verify: cannot write " + path.string() + ": " +
-                                (trap.failed() ? trap.first() : std::string("GDAL refused the layer or a point")));
+                                (trap.failed() ? trap.first() : std::string("GDAL refused a layer or a feature")));
     }
-    close_and_check(ds, path, {{"violations", static_cast<int64_t>(r.items.size())}}, trap, "verify");
+    std::map<std::string, int64_t> expected{{"violations", static_cast<int64_t>(r.items.size())}};
+    if (tree != nullptr) {
+        expected["violation_chains"] = static_cast<int64_t>(lines.size());
+    }
+    close_and_check(ds, path, expected, trap, "verify");
 }
-
-} // namespace
 
 namespace {
 
@@ -503,7 +615,8 @@ std::string summary_markdown(const Report& r, const std::string& tree, const std
              std::to_string(r.items.size() + r.items_dropped) + " items");
         line("");
         line("Each with its place in longitude and latitude and its node (the unit whose map holds it); "
-             "`violations.gpkg` holds the same items as points, `verify-report.json` as JSON.");
+             "`violations.gpkg` holds the same items as points and their chains as lines, `verify-report.json` as "
+             "JSON.");
         line("");
         line("| kind | level | LOD | node | chains | lon | lat | detail |");
         line("|---|---|---:|---|---|---:|---:|---|");
@@ -804,7 +917,7 @@ int VerifyStage::run(const StageContext& ctx)
     }
     const std::string compare_text = m_compare.empty() ? std::string() : compare_reports(report, old, m_compare);
     write_file_atomic(out.path() / "verify-report.json", report.dump(2) + "\n");
-    write_gpkg(out.path() / "violations.gpkg", r);
+    write_violations_gpkg(out.path() / "violations.gpkg", r, tree ? &*tree : nullptr);
     write_file_atomic(out.path() / "verify-summary.md", summary_markdown(r, m_tree, m_original, compare_text, cgal));
     json manifest = new_manifest("verify", versions());
     add_input(manifest, "pack", packed);

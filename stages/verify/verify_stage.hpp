@@ -5,9 +5,26 @@
 
 #include "core/stage.hpp"
 
+#include <filesystem>
 #include <string>
 
+namespace tigerlod::reader {
+class Tree;
+}
+
 namespace tigerlod::verify {
+
+struct Report;
+
+/// violations.gpkg: the report's items as points in NAD83 lon/lat (layer
+/// `violations`: kind, level, lod, node, chains, detail), and with `tree`
+/// their chains as the tree holds them at the item's LOD, in the tree's own
+/// projection where its segments are straight (layer `violation_chains`:
+/// violation, the point's fid; kind, level, lod, eps_m, node, chain_id, and
+/// the unit codes left and right). An item of a node that does not decode
+/// has no lines. Throws environment_error if the file cannot be written
+/// whole.
+void write_violations_gpkg(const std::filesystem::path& path, const Report& r, const reader::Tree* tree);
 
 class VerifyStage final : public Stage {
   public:

@@ -4,6 +4,10 @@
 #include "stages/pack/packer.hpp"
 #include "stages/verify/cgal_check.hpp"
 #include "stages/verify/verifier.hpp"
+#include "stages/verify/verify_stage.hpp"
+
+#include <gdal.h>
+#include <ogr_api.h>
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -267,6 +271,53 @@ TEST_F(Verify, ShortcutAcrossAnIslandIsACrossing)
     EXPECT_EQ(v.x, 500.0);
     EXPECT_TRUE(v.y == 450.0 || v.y == 550.0) << v.y;
     EXPECT_NEAR(v.lon, -96.0, 0.1); // grid 1 m around the Albers origin
+}
+
+TEST_F(Verify, ViolationsGpkgHoldsEachItemsChainsAsLinesWithTheirUnits)
+{
+    Map m = county_a(true, {300, 200});
+    m.simplified[12] = {{500, 0}, {500, 400}, {500, 600}, {500, 1000}}; // through island I, as above
+    const auto r = run(m);
+    ASSERT_EQ(r.items.size(), 1U);
+    std::string error;
+    const auto t = reader::Tree::open(dir / "tree", error);
+    ASSERT_TRUE(t) << error;
+    const fs::path gpkg = dir / "violations.gpkg";
+    verify::write_violations_gpkg(gpkg, r, &*t);
+    GDALAllRegister();
+    GDALDatasetH ds = GDALOpenEx(gpkg.c_str(), GDAL_OF_VECTOR, nullptr, nullptr, nullptr);
+    ASSERT_NE(ds, nullptr);
+    OGRLayerH points = GDALDatasetGetLayerByName(ds, "violations");
+    OGRLayerH lines = GDALDatasetGetLayerByName(ds, "violation_chains");
+    ASSERT_NE(points, nullptr);
+    ASSERT_NE(lines, nullptr);
+    EXPECT_EQ(OGR_L_GetFeatureCount(points, TRUE), 1);
+    // Chain 12 as LOD 1 holds it (the shortcut), and island I's ring, each
+    // with its units, the item's point fid, LOD and eps, in grid metres.
+    std::map<int64_t, std::string> got;
+    OGR_L_ResetReading(lines);
+    while (OGRFeatureH f = OGR_L_GetNextFeature(lines)) {
+        std::string text = std::to_string(OGR_F_GetFieldAsInteger64(f, 0)) + " " + OGR_F_GetFieldAsString(f, 1) + " " +
+                           OGR_F_GetFieldAsString(f, 2) + " " + std::to_string(OGR_F_GetFieldAsInteger(f, 3)) + " " +
+                           std::to_string(OGR_F_GetFieldAsDouble(f, 4)) + " " + OGR_F_GetFieldAsString(f, 5) + " " +
+                           OGR_F_GetFieldAsString(f, 7) + "|" + OGR_F_GetFieldAsString(f, 8) + " ";
+        OGRGeometryH g = OGR_F_GetGeometryRef(f);
+        for (int i = 0; g != nullptr && i < OGR_G_GetPointCount(g); ++i) {
+            text += std::to_string(int(OGR_G_GetX(g, i))) + "," + std::to_string(int(OGR_G_GetY(g, i))) + " ";
+        }
+        got[OGR_F_GetFieldAsInteger64(f, 6)] = text;
+        OGR_F_Destroy(f);
+    }
+    GDALClose(ds);
+    ASSERT_EQ(got.size(), 2U);
+    EXPECT_EQ(got[12], "1 crossings tract 1 300.000000 A A1|A2 500,0 500,400 500,600 500,1000 ");
+    EXPECT_EQ(got[13], "1 crossings tract 1 300.000000 A I|A1 450,450 550,450 550,550 450,550 450,450 ");
+    // Without the tree (its skeleton unreadable): the points alone.
+    verify::write_violations_gpkg(dir / "points.gpkg", r, nullptr);
+    ds = GDALOpenEx((dir / "points.gpkg").c_str(), GDAL_OF_VECTOR, nullptr, nullptr, nullptr);
+    ASSERT_NE(ds, nullptr);
+    EXPECT_EQ(GDALDatasetGetLayerByName(ds, "violation_chains"), nullptr);
+    GDALClose(ds);
 }
 
 TEST_F(Verify, TheCgalCheckFindsTheCrossingAndNamesAMissedOne)
