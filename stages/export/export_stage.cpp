@@ -3,6 +3,7 @@
 #include "core/fs.hpp"
 #include "core/gdal_output.hpp"
 #include "core/manifest.hpp"
+#include "core/progress.hpp"
 #include "reader/tree_view.hpp"
 #include "simplification/stage_options.hpp"
 #include "stages/export/lonlat_line.hpp"
@@ -400,11 +401,13 @@ int ExportStage::run(const StageContext& ctx)
                   max_bow_m, std::move(class_scale), tmp, trap);
     const auto home =
         writer.writes_units() ? home_nodes(*tree, nodes) : std::map<std::string, std::pair<size_t, uint32_t>>{};
+    Progress progress(ctx.progress, "export", nodes.size(), "nodes", "chains");
     for (uint32_t n : nodes) {
         const auto m = view::read_node(*tree, n, lod);
         const std::string code = n == 0 ? "root" : s.strings[s.nodes[n].code];
         writer.write_chains(m, code);
         writer.write_units(m, code, n, home);
+        progress.advance(m.table.chains.size());
     }
     std::map<std::string, int64_t> expected;
     if (gpkg || m_layer == "chains") {

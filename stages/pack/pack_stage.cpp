@@ -5,6 +5,7 @@
 #include "core/fs.hpp"
 #include "core/manifest.hpp"
 #include "core/partitions.hpp"
+#include "core/progress.hpp"
 #include "formats/chains/chain_store.hpp"
 #include "stages/pack/packer.hpp"
 
@@ -309,6 +310,15 @@ int PackStage::run(const StageContext& ctx)
     }
     // Every eps folder, checked against the ladder (simplify --finish removed
     // those of other tolerances; one lost since would give an LOD fewer).
+    std::optional<Progress> progress;
+    if (!m_finish) {
+        progress.emplace(ctx.progress, "pack", stores_of(m_original).size(), "stores");
+        options.on_level = [&](size_t stores) {
+            for (size_t i = 0; i < stores; ++i) {
+                progress->advance();
+            }
+        };
+    }
     const PackedTree tree = m_finish ? assemble_parts(m_original, m_simplified, m_parts, options)
                                      : build_tree(m_original, m_simplified, options);
     const std::vector<double> found(tree.skeleton.lod_eps_m.begin() + 1, tree.skeleton.lod_eps_m.end());

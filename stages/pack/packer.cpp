@@ -878,6 +878,9 @@ PackedTree build_tree(const fs::path& original, const fs::path& simplified, cons
         }
         auto nodes = nodes_of(l, names);
         ctx.pack_level(l, nodes, ctx.files_of(l), false);
+        if (options.on_level) {
+            options.on_level(nodes.size());
+        }
         for (auto& nb : nodes) {
             PartNode p{nb.level, nb.partition, std::move(nb.units), std::move(nb.node), std::move(nb.table), {}};
             for (const auto& g : nb.payloads) {

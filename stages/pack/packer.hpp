@@ -25,6 +25,9 @@ struct PackOptions {
     /// The tolerances to pack, one LOD each (the simplify ladder); empty:
     /// every eps-<E>m folder of SIMPLIFIED.
     std::vector<double> lods;
+    /// Called after each level is packed, with its number of stores (a
+    /// stage's progress); from the calling thread.
+    std::function<void(size_t stores)> on_level;
 };
 
 /// Per-LOD totals, for the report and the benchmarks.

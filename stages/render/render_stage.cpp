@@ -1,5 +1,6 @@
 #include "stages/render/render_stage.hpp"
 
+#include "core/progress.hpp"
 #include "core/digest.hpp"
 
 #include "config/config_file.hpp"
@@ -125,6 +126,7 @@ struct Run {
     fs::path out;
     int png_every = 0;
     double fps = 0;
+    Progress* progress = nullptr; ///< a frame drawn on the path: one step
 
     /// Wait for frame f's slot from `start` (frames at `fps` a second).
     void pace(Clock::time_point start, size_t f) const
@@ -143,6 +145,9 @@ struct Run {
         const auto list = reader::draw_list(sk(), front);
         m.duplicate_chains += duplicates(sk(), front, list);
         const DrawStats ds = renderer.draw(views[frame], front, list, levels());
+        if (progress != nullptr) {
+            progress->advance(ds.vertices);
+        }
         row.front_nodes = front.size();
         row.lods = lod_histogram(front);
         row.chains = ds.chains;
@@ -452,6 +457,12 @@ int RenderStage::run(const StageContext& ctx)
     ctx.log.info("render: " + m_tree + ", " + std::to_string(views.size()) + " frames of " + m_path + " at " +
                  std::to_string(m_width) + "x" + std::to_string(m_height) + " on " + context->describe());
 
+    size_t nmodes = 0;
+    for (const auto& mode : all_modes) {
+        nmodes += m_mode == "all" || m_mode == mode ? 1 : 0;
+    }
+    Progress progress(ctx.progress, "render", nmodes * views.size(), "frames", "vertices");
+    run.progress = &progress;
     std::vector<ModeRun> runs;
     for (const auto& mode : all_modes) { // none: the previews alone
         if (m_mode != "all" && m_mode != mode) {
@@ -469,6 +480,7 @@ int RenderStage::run(const StageContext& ctx)
         write_file(out.path() / ("frames-" + mode + ".csv"), csv_of(runs.back()));
     }
 
+    run.progress = nullptr; // the previews are not on the path
     // The previews: the whole tree, and the path's closest view.
     const auto closest = *std::min_element(
         views.begin(), views.end(), [](const auto& a, const auto& b) { return a.units_per_pixel < b.units_per_pixel; });

@@ -544,6 +544,9 @@ class Verifier {
             m_report.points += ll.points;
             m_report.ground_ratio_max = std::max(m_report.ground_ratio_max, ll.ground_ratio_max);
             m_report.ground_geodesics += ll.ground_geodesics;
+            if (m_options.on_level_lod) {
+                m_options.on_level_lod(ll.segments);
+            }
             m_report.by_level_lod.push_back(std::move(ll));
         }
         check_across_lods(level, lods, rule, input_meetings);

@@ -9,6 +9,7 @@
 
 #include <array>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <set>
 #include <string>
@@ -77,6 +78,9 @@ struct Options {
     /// the level window by window, each of about this many segments: their
     /// memory follows a window, not the level. The report does not depend on it.
     size_t window_segments = size_t{1} << 22;
+    /// Called after each level's LOD is checked, with its segments (a
+    /// stage's progress); from the calling thread.
+    std::function<void(uint64_t segments)> on_level_lod;
 };
 
 struct Report {

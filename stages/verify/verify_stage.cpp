@@ -7,6 +7,7 @@
 #include "core/gdal_output.hpp"
 #include "core/manifest.hpp"
 #include "core/partitions.hpp"
+#include "core/progress.hpp"
 #include "simplification/stage_options.hpp"
 #include "stages/pack/packer.hpp"
 #include "stages/verify/cgal_check.hpp"
@@ -896,6 +897,10 @@ int VerifyStage::run(const StageContext& ctx)
     } else if (m_finish) {
         r = merge_shares(*tree, list_items(m_shares, "--shares"), options);
     } else {
+        const auto& sk = tree->skeleton();
+        Progress progress(ctx.progress, "verify", sk.level_names.size() * sk.lod_eps_m.size(), "level LODs",
+                          "segments");
+        options.on_level_lod = [&](uint64_t segments) { progress.advance(segments); };
         r = verify_tree(*tree, m_original, options);
     }
     ctx.log.info("verify: checked");

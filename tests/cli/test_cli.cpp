@@ -1043,6 +1043,45 @@ TEST_F(Cli, ProgressAsJsonLinesForAnEngine)
         }
         EXPECT_EQ(total, stores) << "every store of the input";
     }
+    // The stages after simplify: each its own unit of work, the last line the end.
+    auto json_lines = [&](const Result& r, const std::string& stage, const std::string& unit) {
+        std::istringstream lines(r.err);
+        size_t objects = 0, last_done = 0, total = 0;
+        for (std::string line; std::getline(lines, line);) {
+            const auto j = nlohmann::json::parse(line);
+            EXPECT_EQ(j.at("stage"), stage);
+            EXPECT_EQ(j.at("unit"), unit);
+            EXPECT_GT(j.at("done").get<size_t>(), last_done);
+            last_done = j.at("done").get<size_t>();
+            total = j.at("total").get<size_t>();
+            ++objects;
+        }
+        EXPECT_GE(objects, 1U) << stage;
+        EXPECT_EQ(last_done, total) << stage << ": the last line is the end";
+        return total;
+    };
+    const std::string tree = (m_dir / "tree").string();
+    const Result pack = run("pack", in + " " + (m_dir / "simplify").string() + " " + tree + " --progress json");
+    ASSERT_EQ(pack.code, 0) << pack.err;
+    size_t stores = 0;
+    for (const auto& e : fs::recursive_directory_iterator(m_dir / "in")) {
+        stores += e.path().extension() == ".tlc" ? 1 : 0;
+    }
+    EXPECT_EQ(json_lines(pack, "pack", "stores"), stores);
+    const Result verify = run("verify", tree + " " + in + " " + (m_dir / "verify").string() + " --progress json");
+    ASSERT_EQ(verify.code, 0) << verify.err;
+    const auto report = nlohmann::json::parse(std::ifstream(m_dir / "verify" / "verify-report.json"));
+    EXPECT_EQ(json_lines(verify, "verify", "level LODs"),
+              report.at("by_level_lod").size()); // each level, LODs 0 and 8 m
+    const Result exported =
+        run("export", tree + " " + (m_dir / "all.gpkg").string() + " --level tract --progress json");
+    ASSERT_EQ(exported.code, 0) << exported.err;
+    EXPECT_EQ(exported.out.rfind("export: " + std::to_string(json_lines(exported, "export", "nodes")) + " nodes, ", 0),
+              0U)
+        << exported.out;
+    const Result render = run("render", tree + " " + (m_dir / "render").string() + " --frames 2 --progress json");
+    ASSERT_EQ(render.code, 0) << render.err;
+    EXPECT_EQ(json_lines(render, "render", "frames"), 3U * 2U); // three modes, two frames each
     // On a pipe, by default, nothing; a mode that does not exist: exit 2.
     const Result quiet = run("color", in + " " + (m_dir / "c2").string() + " --tolerances 8");
     EXPECT_TRUE(quiet.err.empty()) << quiet.err;
