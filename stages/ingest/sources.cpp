@@ -960,13 +960,15 @@ void read_tiger(const IngestConfig& cfg, RawMap& raw, const Log& log)
 }
 
 /// A ring's longitudes as the plane lays them out: micro-degrees east of
-/// the central meridian, in (-180, 180] degrees. Read straight, 180 and -180
+/// the central meridian (a UTM zone's own), in (-180, 180] degrees. Read straight, 180 and -180
 /// are a turn apart, and a ring that touches the meridian 180 from the east
 /// (written 180 there, see fit_to_globe) would wind the wrong way round.
 std::vector<int64_t> eastings(const std::vector<LonLatE6>& r, const ProjectionParams& proj)
 {
     constexpr int64_t half = 180000000, turn = 2 * half;
-    const int64_t lon0 = std::llround(proj.lon0_deg * 1e6);
+    // UTM's central meridian is its zone's.
+    const double central = proj.kind == ProjectionParams::Kind::utm ? proj.utm_zone * 6.0 - 183.0 : proj.lon0_deg;
+    const int64_t lon0 = std::llround(central * 1e6);
     std::vector<int64_t> x(r.size());
     for (size_t i = 0; i < r.size(); ++i) {
         int64_t d = (r[i].lon - lon0) % turn;

@@ -67,8 +67,18 @@ open(f"{d}/seam.yaml", "w").write(
     "name: seam\ndataset: {kind: polygons, inputs: [seam.geojson], code_field: code}\n"
     "levels:\n  - {name: world, code: W}\n  - {name: unit, prefix: 2}\n" + cone.replace("lon0: 0", "lon0: 100") +
     "ingest: {halo_m: 20000}\nsimplify: {tolerances_m: [1000, 5000], shortcut_test: exact}\n")
+# UTM zone 45 (central meridian 87 E): two squares either side of 84.5 E,
+# near 84 E, where the default lon0's (-96) opposite meridian falls; the
+# zone's own meridian orients them.
+utm = [[[83.5, 30], [84.5, 30], [84.5, 31], [83.5, 31], [83.5, 30]], [[84.5, 30], [85.5, 30], [85.5, 31], [84.5, 31], [84.5, 30]]]
+json.dump(fc([poly("U1", utm[0]), poly("U2", utm[1])]), open(f"{d}/utm.geojson", "w"))
+open(f"{d}/utm.yaml", "w").write(
+    "name: utm\ndataset: {kind: polygons, inputs: [utm.geojson], code_field: code}\n"
+    "levels:\n  - {name: all, code: W}\n  - {name: unit, prefix: 2}\nprojection: {kind: utm, utm_zone: 45}\n")
 PY
 g=$work/globe
+"$bin/tigerlod-ingest" "$g/utm.yaml" "$g/utm" >"$g/utm.log" 2>&1 || fail "utm ingest: $(cat "$g/utm.log")"
+grep -q "problems: none" "$g/utm.log" || fail "utm: $(cat "$g/utm.log")"
 end_to_end globe "$g/globe.yaml" "$g"
 grep -Eq "^ +unit +3 +4 +4 " "$g/ingest.log" || fail "globe: not 3 units in 4 rings: $(cat "$g/ingest.log")"
 grep -q "problems: none" "$g/ingest.log" || fail "globe: $(cat "$g/ingest.log")"
