@@ -421,7 +421,7 @@ std::vector<std::vector<XY>> clip_ring(const std::vector<XY>& in, double x, bool
         return {x, p.second + t * (q.second - p.second)};
     };
     const size_t n = in.size() - 1; // the ring's points once
-    // Start just after a point outside, so that the walk begins with an entry.
+    // Start at a point outside, so that the walk begins with an entry.
     size_t start = n;
     for (size_t i = 0; i < n && start == n; ++i) {
         start = inside(in[i]) ? start : i;
