@@ -13,6 +13,7 @@
 # every unit there, clean on the ground, the checkers agreeing.
 #   tests/world/test_globe_property.sh REPO BIN_DIR [SEEDS]
 . "$(dirname "$0")/../support/script.sh" globe-property "$1" "$2"
+. "$(dirname "$0")/end_to_end.sh"
 seeds=${3:-1 2 3 4}
 [ "${TIGERLOD_SANITIZED:-0}" = 1 ] && seeds=${3:-1}
 passed=0
@@ -107,17 +108,9 @@ open(f"{d}/map.yaml", "w").write(
 open(f"{d}/units", "w").write(str(n))
 PY
   units=$(cat "$d/units")
-  "$bin/tigerlod-ingest" "$d/map.yaml" "$d/in" >"$d/ingest.log" 2>&1 || fail "seed $seed ingest: $(cat "$d/ingest.log")"
+  end_to_end "seed $seed" "$d/map.yaml" "$d"
   grep -q "problems: none" "$d/ingest.log" || fail "seed $seed ingest: $(cat "$d/map.yaml" "$d/ingest.log")"
   grep -Eq "^ +unit +$units " "$d/ingest.log" || fail "seed $seed: not $units units: $(cat "$d/ingest.log")"
-  "$bin/tigerlod-simplify" --config "$d/map.yaml" "$d/in" "$d/simp" >"$d/simp.log" 2>&1 ||
-    fail "seed $seed simplify: $(cat "$d/simp.log")"
-  "$bin/tigerlod-pack" "$d/in" "$d/simp" "$d/tree" >"$d/pack.log" 2>&1 || fail "seed $seed pack: $(cat "$d/pack.log")"
-  "$bin/tigerlod-verify" --cgal "$d/tree" "$d/in" "$d/verify" >"$d/verify.log" 2>&1 ||
-    fail "seed $seed verify: $(cat "$d/verify.log")"
-  grep -q "CLEAN: no violations" "$d/verify.log" || fail "seed $seed verify: $(cat "$d/verify.log")"
-  grep -q "CGAL check: agrees" "$d/verify.log" || fail "seed $seed CGAL: $(cat "$d/verify.log")"
-  grep -q "on the ellipsoid: skipped vertices at most 0\." "$d/verify.log" || fail "seed $seed ground: $(cat "$d/verify.log")"
   passed=$((passed + 1))
 done
 echo "globe-property: seeds $seeds: no problem at ingest, every unit, clean on the ground, the checkers agreeing"

@@ -14,22 +14,7 @@
 # which scripts/test fetches.
 #   tests/world/test_world.sh REPO BIN_DIR
 . "$(dirname "$0")/../support/script.sh" world "$1" "$2"
-# end_to_end NAME CONFIG DIR: ingest (its log in DIR, checked by the
-# caller), simplify, pack, and verify with the CGAL checker; clean, the
-# checkers agreeing, and measured on the ellipsoid.
-end_to_end() {
-  local name=$1 cfg=$2 d=$3
-  mkdir -p "$d"
-  "$bin/tigerlod-ingest" "$cfg" "$d/in" >"$d/ingest.log" 2>&1 || fail "$name ingest: $(cat "$d/ingest.log")"
-  "$bin/tigerlod-simplify" --config "$cfg" "$d/in" "$d/simp" >"$d/simp.log" 2>&1 ||
-    fail "$name simplify: $(cat "$d/simp.log")"
-  "$bin/tigerlod-pack" "$d/in" "$d/simp" "$d/tree" >"$d/pack.log" 2>&1 || fail "$name pack: $(cat "$d/pack.log")"
-  "$bin/tigerlod-verify" --cgal "$d/tree" "$d/in" "$d/verify" >"$d/verify.log" 2>&1 ||
-    fail "$name verify: $(cat "$d/verify.log")"
-  grep -q "CLEAN: no violations" "$d/verify.log" || fail "$name verify: $(cat "$d/verify.log")"
-  grep -q "CGAL check: agrees" "$d/verify.log" || fail "$name CGAL: $(cat "$d/verify.log")"
-  grep -q "on the ellipsoid: skipped vertices at most 0\." "$d/verify.log" || fail "$name ground: $(cat "$d/verify.log")"
-}
+. "$(dirname "$0")/end_to_end.sh"
 # Hand-made maps on a cone cut at the antimeridian (lon0 0): a square
 # across the antimeridian (two parts, one each side), a ring round the
 # south pole (closed along the pole), and a line across the cut (refused).
