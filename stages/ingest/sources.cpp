@@ -256,6 +256,14 @@ class Source {
     OGRLayerH m_layer = nullptr;
 };
 
+/// A longitude difference in micro-degrees, wrapped to (-180, 180] degrees.
+int64_t wrap_micro(int64_t d)
+{
+    constexpr int64_t half = 180000000, turn = 2 * half;
+    d %= turn;
+    return d + (d <= -half ? turn : d > half ? -turn : 0);
+}
+
 /// Snap a whole simple geometry's points; checks lon/lat ranges.
 void snap_points(OGRGeometryH g, std::vector<LonLatE6>& out, const std::string& where)
 {
@@ -315,11 +323,7 @@ void fit_to_globe(std::vector<LonLatE6>& pts, const ProjectionParams& proj, cons
         return;
     }
     // Longitude east of the central meridian, in (-180, 180] degrees (micro).
-    auto east = [&](int64_t lon) {
-        int64_t d = (lon - lon0) % turn;
-        d += d <= -half ? turn : d > half ? -turn : 0;
-        return d;
-    };
+    auto east = [&](int64_t lon) { return wrap_micro(lon - lon0); };
     auto on_cut = [&](const LonLatE6& p) { return east(p.lon) == half; };
     int64_t cut = lon0 + half; // for messages, in (-180, 180]
     cut += cut > half ? -turn : 0;
@@ -522,17 +526,13 @@ std::vector<std::vector<LonLatE6>> split_at_cut(const std::vector<LonLatE6>& rin
     }
     constexpr int64_t half = 180000000, turn = 2 * half;
     const int64_t lon0 = std::llround(proj.lon0_deg * 1e6);
-    auto wrap = [&](int64_t d) {
-        d %= turn;
-        return d + (d <= -half ? turn : d > half ? -turn : 0);
-    };
     // Unwrapped eastings (micro-degrees east of lon0) and latitudes.
     std::vector<std::pair<double, double>> u;
     u.reserve(ring.size());
-    int64_t e = wrap(ring[0].lon - lon0);
+    int64_t e = wrap_micro(ring[0].lon - lon0);
     u.emplace_back(double(e), double(ring[0].lat));
     for (size_t i = 1; i < ring.size(); ++i) {
-        e += wrap(int64_t{ring[i].lon} - ring[i - 1].lon);
+        e += wrap_micro(int64_t{ring[i].lon} - ring[i - 1].lon);
         u.emplace_back(double(e), double(ring[i].lat));
     }
     if (const int64_t winding = std::llround(u.back().first - u.front().first); winding != 0) {
@@ -965,14 +965,12 @@ void read_tiger(const IngestConfig& cfg, RawMap& raw, const Log& log)
 /// (written 180 there, see fit_to_globe) would wind the wrong way round.
 std::vector<int64_t> eastings(const std::vector<LonLatE6>& r, const ProjectionParams& proj)
 {
-    constexpr int64_t half = 180000000, turn = 2 * half;
     // UTM's central meridian is its zone's.
     const double central = proj.kind == ProjectionParams::Kind::utm ? proj.utm_zone * 6.0 - 183.0 : proj.lon0_deg;
     const int64_t lon0 = std::llround(central * 1e6);
     std::vector<int64_t> x(r.size());
     for (size_t i = 0; i < r.size(); ++i) {
-        int64_t d = (r[i].lon - lon0) % turn;
-        x[i] = d + (d <= -half ? turn : d > half ? -turn : 0);
+        x[i] = wrap_micro(r[i].lon - lon0);
     }
     return x;
 }
