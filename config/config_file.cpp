@@ -7,6 +7,7 @@
 #include <cmath>
 #include <map>
 #include <optional>
+#include <set>
 #include <sstream>
 
 namespace fs = std::filesystem;
@@ -42,6 +43,8 @@ std::string wanted(const Key& k)
         return "a non-empty list";
     case Type::codes:
         return "a code or a list of codes, e.g. [51063, 51067]";
+    case Type::fields:
+        return "a list of attribute names, none twice, e.g. [ALAND, AWATER]";
     case Type::viewport:
         return "WIDTHxHEIGHT, each " + k.limits.text();
     }
@@ -246,6 +249,18 @@ class Checker {
                 wrong(v, k);
             }
             return;
+        case Type::fields: {
+            if (!v.IsSequence()) {
+                wrong(v, k);
+            }
+            std::set<std::string> seen;
+            for (const auto& item : v) {
+                if (!item.IsScalar() || item.as<std::string>().empty() || !seen.insert(item.as<std::string>()).second) {
+                    wrong(item, k);
+                }
+            }
+            return;
+        }
         }
     }
 

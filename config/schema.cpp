@@ -93,6 +93,15 @@ std::vector<Key> input_keys()
               "`error` (ingest stops, exit 1, with their count and the first three) or `merge` (one unit in parts, "
               "its borders between them gone, each named on stderr)",
               "`error`", {}, {"error", "merge"}),
+        entry("dataset.name_field", Type::text,
+              "polygons, tiger: the attribute that names each unit of the finest level (us-atlas and Natural Earth "
+              "`name`, TIGER tracts `NAMELSAD`): kept in the Data Tree, the export's `name`",
+              "none"),
+        entry("dataset.attributes", Type::fields,
+              "polygons, tiger: further attributes kept for each unit of the finest level (e.g. `[ALAND, AWATER]`) "
+              "and written by tigerlod-export beside its name, as integers or reals where every input file's field "
+              "is one; a unit of features merged by `duplicate_code: merge` takes the values of its largest",
+              "none"),
         entry("dataset.class_field", Type::text,
               "attribute stored as each chain's feature class (the class covering most of the chain)",
               "tiger: `MTFCC`"),
@@ -286,6 +295,8 @@ std::string type_text(const Key& k)
         return "list of levels";
     case Type::codes:
         return "code or list of codes";
+    case Type::fields:
+        return "list of attribute names";
     case Type::viewport:
         return "`WIDTHxHEIGHT`, each " + k.limits.text();
     }

@@ -32,6 +32,7 @@ enum class Type {
     mapping,   ///< a section holding further keys
     levels,    ///< the list of semantic levels (checked by ingest, which knows the data)
     codes,     ///< a unit code or a list of them (strings or integers)
+    fields,    ///< a list of attribute names, none twice
     viewport,  ///< `WIDTHxHEIGHT` pixels, each an integer within Key::limits
 };
 

@@ -77,5 +77,14 @@ int main(int argc, char** argv)
             }
         }
     }
+    // A units payload's body (prefix byte 2), with text, integer and real fields.
+    datatree::UnitTable units;
+    units.fields = {{"NAMELSAD", 0}, {"ALAND", 1}, {"SHARE", 2}};
+    units.units = {{"51063", "Floyd", {120, -40}, {"Floyd County", "988", "0.25"}},
+                   {"51067", "", {-7, 3}, {"", "", "1e-3"}}};
+    const std::string bytes = datatree::encode_units(units, {0, 0});
+    std::string prefix(13, '\0');
+    prefix[0] = 2;
+    std::ofstream(pay / "units", std::ios::binary) << prefix << bytes.substr(datatree::units_head_size);
     return 0;
 }

@@ -189,6 +189,56 @@ Status Tree::read_payload(uint32_t node, int lod, std::string& bytes) const
     return {};
 }
 
+Status Tree::read_units(uint32_t node, datatree::UnitTable& out) const
+{
+    const auto& s = m_skeleton;
+    out = {};
+    if (node >= s.nodes.size()) {
+        return {"no node " + std::to_string(node) + " in " + m_dir.string()};
+    }
+    if (s.minor < 2) {
+        return {};
+    }
+    const auto& n = s.nodes[node];
+    const auto& tile = s.tiles[n.lods.empty() ? n.table.tile : n.lods.back().payload.tile];
+    const auto path = m_dir / tile.file;
+    const std::string name = path.string() + ": " + node_name(s, node) + " units";
+    const std::string where = name + ": ";
+    Fd f(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
+    struct stat st {};
+    if (f.fd < 0 || ::fstat(f.fd, &st) != 0) {
+        return {where + "cannot open: " + std::strerror(errno)};
+    }
+    if (static_cast<uint64_t>(st.st_size) != tile.size) {
+        return {where + "tile has " + std::to_string(st.st_size) + " bytes, the skeleton says " +
+                std::to_string(tile.size)};
+    }
+    const uint64_t at = datatree::units_at(n);
+    char head[datatree::units_head_size];
+    if (at > tile.size || tile.size - at < sizeof head || !read_at(f.fd, head, sizeof head, at)) {
+        return {where + "no units payload after the last LOD's (past the end of the tile)"};
+    }
+    try {
+        const auto [size, crc] = datatree::units_body(std::as_bytes(std::span(head)), name);
+        if (size > tile.size - at - sizeof head) {
+            return {where + "units payload past the end of the tile"};
+        }
+        std::string body(size, '\0');
+        if (!read_at(f.fd, body.data(), size, at + sizeof head)) {
+            return {where + "units payload past the end of the tile"};
+        }
+        const auto bytes = std::as_bytes(std::span(body.data(), body.size()));
+        if (crc32(bytes) != crc) {
+            return {where + "checksum mismatch"};
+        }
+        out = datatree::decode_units(bytes, origin(node), name);
+    } catch (const std::exception& e) {
+        out = {};
+        return {e.what()};
+    }
+    return {};
+}
+
 Status Tree::read_geometry(uint32_t node, uint32_t lod, datatree::Geometry& out) const
 {
     std::string bytes;

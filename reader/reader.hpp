@@ -50,6 +50,10 @@ class Tree {
     Status read_payload(uint32_t node, int lod, std::string& bytes) const;
     Status read_geometry(uint32_t node, uint32_t lod, datatree::Geometry& out) const;
     Status read_table(uint32_t node, datatree::ChainTable& out) const;
+    /// The node's units (format 2.2: codes, internal points, names and the
+    /// config's attributes). A tree of an earlier minor version has none:
+    /// an empty table and ok.
+    Status read_units(uint32_t node, datatree::UnitTable& out) const;
 
     /// The node of unit `code` of the map of level `map_level` (a unit that
     /// has units below it is a node of level map_level + 1), or no_node.

@@ -121,6 +121,15 @@ std::string skeleton_text(const reader::Tree& tree)
             out << "  lod " << k << " eps=" << s.lod_eps_m[k] << " error_m=" << err
                 << " vertices=" << n.lods[k].vertices << " " << ref_text(n.lods[k].payload) << "\n";
         }
+        if (s.minor >= 2) {
+            datatree::UnitTable units;
+            const auto st = tree.read_units(static_cast<uint32_t>(i), units);
+            out << "  units " << (st.ok() ? "n=" + std::to_string(units.units.size()) : "error: " + st.error);
+            for (const auto& f : units.fields) {
+                out << " field=" << f.name << ":" << int{f.type};
+            }
+            out << "\n";
+        }
     }
     return out.str();
 }
@@ -159,6 +168,17 @@ std::string node_text(const reader::Tree& tree, const NodeMap& m)
             << " :";
         for (const auto& p : pts) {
             out << " " << p.x << "," << p.y;
+        }
+        out << "\n";
+    }
+    datatree::UnitTable units;
+    if (const auto st = tree.read_units(m.node, units); !st.ok()) {
+        throw input_error(st.error);
+    }
+    for (const auto& u : units.units) {
+        out << "unit " << u.code << " point=" << u.point.x << "," << u.point.y << " name=" << u.name;
+        for (size_t k = 0; k < units.fields.size(); ++k) {
+            out << " " << units.fields[k].name << "=" << u.values[k];
         }
         out << "\n";
     }

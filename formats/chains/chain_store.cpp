@@ -82,6 +82,21 @@ void ChainStore::canonicalize()
         }
         return a.p < b.p;
     });
+    std::sort(units.begin(), units.end(),
+              [&](const UnitRecord& a, const UnitRecord& b) { return strings[a.unit] < strings[b.unit]; });
+}
+
+const char* attribute_type_name(AttributeType t) noexcept
+{
+    switch (t) {
+    case AttributeType::integer:
+        return "integer";
+    case AttributeType::real:
+        return "real";
+    case AttributeType::text:
+        break;
+    }
+    return "text";
 }
 
 PointLocation unit_location(const ChainStore& store, uint32_t unit, GridPoint p)
@@ -153,6 +168,19 @@ std::string encode(const ChainStore& s)
         w.put(c.kind);
         w.put(c.p.x);
         w.put(c.p.y);
+    }
+    w.put(static_cast<uint32_t>(s.fields.size()));
+    for (const auto& f : s.fields) {
+        w.put_str(f.name);
+        w.put(static_cast<uint8_t>(f.type));
+    }
+    w.put(static_cast<uint32_t>(s.units.size()));
+    for (const auto& u : s.units) {
+        w.put(u.unit);
+        w.put_str(u.name);
+        for (size_t k = 0; k < s.fields.size(); ++k) {
+            w.put_str(k < u.values.size() ? u.values[k] : std::string_view{});
+        }
     }
     std::string& out = w.bytes();
     const uint64_t size = out.size() + 4;
@@ -304,6 +332,32 @@ ChainStore decode(std::span<const std::byte> bytes, const std::string& name)
         }
         s.constraints.push_back(c);
     }
+    if (minor >= 3) {
+        const uint32_t nfields = body.get_count(5, "unit attributes");
+        for (uint32_t i = 0; i < nfields; ++i) {
+            AttributeField f;
+            f.name = body.get_str("unit attributes");
+            const auto type = body.get<uint8_t>("unit attributes");
+            if (type > static_cast<uint8_t>(AttributeType::real)) {
+                body.fail("unknown attribute type " + std::to_string(type));
+            }
+            f.type = static_cast<AttributeType>(type);
+            s.fields.push_back(std::move(f));
+        }
+        const uint32_t nunits = body.get_count(8 + 4 * size_t{nfields}, "unit records");
+        s.units.reserve(nunits);
+        for (uint32_t i = 0; i < nunits; ++i) {
+            UnitRecord u;
+            u.unit = body.get<uint32_t>("unit record");
+            check_index(u.unit, "unit record's unit");
+            u.name = body.get_str("unit record");
+            u.values.reserve(nfields);
+            for (uint32_t k = 0; k < nfields; ++k) {
+                u.values.push_back(body.get_str("unit record"));
+            }
+            s.units.push_back(std::move(u));
+        }
+    }
     if (body.left() != 0) {
         body.fail(std::to_string(body.left()) + " unread bytes before the trailer");
     }
@@ -348,7 +402,7 @@ std::string to_text(const ChainStore& s)
     c.canonicalize();
     std::ostringstream out;
     out.precision(17);
-    out << "chain-store " << major_version << "." << minor_version << "\n";
+    out << "chain-store " << major_version << "." << c.minor << "\n"; // the version it was read from
     out << "level " << c.level_index << "/" << c.level_count << " " << c.level_name << "\n";
     out << "partition " << c.partition << "\n";
     out << "projection " << Projection(c.projection).describe() << "\n";
@@ -375,6 +429,16 @@ std::string to_text(const ChainStore& s)
     for (const auto& cp : c.constraints) {
         out << "point " << c.strings[cp.unit] << ' ' << constraint_kind_name(cp.kind) << ' ' << cp.p.x << ',' << cp.p.y
             << "\n";
+    }
+    for (const auto& f : c.fields) {
+        out << "field " << f.name << ' ' << attribute_type_name(f.type) << "\n";
+    }
+    for (const auto& u : c.units) {
+        out << "unit " << c.strings[u.unit] << " name=" << u.name;
+        for (size_t k = 0; k < u.values.size(); ++k) {
+            out << ' ' << (k < c.fields.size() ? c.fields[k].name : "?") << '=' << u.values[k];
+        }
+        out << "\n";
     }
     return out.str();
 }

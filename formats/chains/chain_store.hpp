@@ -19,8 +19,8 @@
 namespace tigerlod::chains {
 
 constexpr uint16_t major_version = 1;
-constexpr uint16_t minor_version = 2;
-/// "chain store format 1.2", for --version.
+constexpr uint16_t minor_version = 3;
+/// "chain store format 1.3", for --version.
 inline std::string format_version_text()
 {
     return "chain store format " + std::to_string(major_version) + "." + std::to_string(minor_version);
@@ -66,6 +66,28 @@ struct ConstraintPoint {
     GridPoint p;
 };
 
+/// How a unit attribute's values read (since 1.3): all are kept as text,
+/// the type says what a GIS should make of them.
+enum class AttributeType : uint8_t { text = 0, integer = 1, real = 2 };
+
+/// A source attribute the config names for the level's units (since 1.3).
+struct AttributeField {
+    std::string name; ///< the source's field name
+    AttributeType type = AttributeType::text;
+    friend bool operator==(const AttributeField&, const AttributeField&) = default;
+};
+
+/// What the source says of one of the partition's own units (since 1.3):
+/// its name and the values of ChainStore::fields, in order ("" for none).
+struct UnitRecord {
+    uint32_t unit = 0; ///< string index of the unit code
+    std::string name;
+    std::vector<std::string> values;
+};
+
+/// "text", "integer" or "real".
+const char* attribute_type_name(AttributeType t) noexcept;
+
 /// The map of one level within one partition.
 struct ChainStore {
     uint32_t level_index = 0;
@@ -82,6 +104,11 @@ struct ChainStore {
     std::vector<GridPoint> points;
     std::vector<Junction> junctions;
     std::vector<ConstraintPoint> constraints;
+    /// Since 1.3: the attributes the config names for the level's units, and
+    /// a record per own unit (one with a kind 0 point) that has a name or a
+    /// value; none when the config names none.
+    std::vector<AttributeField> fields;
+    std::vector<UnitRecord> units;
 
     std::span<const GridPoint> chain_points(const ChainInfo& c) const noexcept
     {
@@ -92,7 +119,7 @@ struct ChainStore {
     /// Append a chain with the given points; sets first and count.
     void add_chain(ChainInfo info, std::span<const GridPoint> pts);
     /// Sort chains by (halo, id), junctions by id, constraints by (code, kind, x, y),
-    /// and compact points into that order. Writers call this; it makes output canonical.
+    /// unit records by code, and compact points into that order. Writers call this; it makes output canonical.
     void canonicalize();
 
   private:
@@ -127,7 +154,8 @@ const char* constraint_kind_name(uint32_t kind) noexcept;
 /// folder's tolerance from its name and holds each store to it).
 std::string tolerance_dir(double eps_m);
 
-/// Canonical sorted text of a store, one item per line, for diffs and goldens.
+/// Canonical sorted text of a store, one item per line, for diffs and goldens;
+/// its first line names the version it was read from (a new store's: the current).
 std::string to_text(const ChainStore& store);
 
 } // namespace tigerlod::chains

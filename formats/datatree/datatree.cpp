@@ -18,6 +18,7 @@ constexpr size_t ref_size = 4 + 8 + 4 + 4;
 constexpr size_t node_fixed_size = 7 * 4 + 4 * 4 + ref_size;
 constexpr size_t lod_size = 8 + 8 + ref_size;
 constexpr uint8_t kind_table = 1;
+constexpr uint8_t kind_units = 3; // 2 is the geometry payload (geometry.cpp)
 
 void put_header(ByteWriter& w, const char (&magic)[8], uint64_t file_size, uint16_t minor = minor_version)
 {
@@ -342,6 +343,86 @@ ChainTable decode_table(std::span<const std::byte> bytes, const std::string& nam
     }
     if (r.left() != 0) {
         r.fail("trailing bytes after the chain table");
+    }
+    return t;
+}
+
+std::string encode_units(const UnitTable& t, GridPoint origin)
+{
+    ByteWriter w;
+    w.put_varint(t.fields.size());
+    for (const auto& f : t.fields) {
+        w.put_vstr(f.name);
+        w.put(f.type);
+    }
+    w.put_varint(t.units.size());
+    GridPoint prev = origin;
+    for (const auto& u : t.units) {
+        w.put_vstr(u.code);
+        w.put_vstr(u.name);
+        w.put_svarint(int64_t{u.point.x} - prev.x);
+        w.put_svarint(int64_t{u.point.y} - prev.y);
+        prev = u.point;
+        for (size_t k = 0; k < t.fields.size(); ++k) {
+            w.put_vstr(k < u.values.size() ? u.values[k] : std::string_view{});
+        }
+    }
+    const std::string& body = w.bytes();
+    ByteWriter out;
+    out.put(kind_units);
+    out.put(uint8_t{0});
+    out.put(uint16_t{0});
+    out.put(static_cast<uint32_t>(body.size()));
+    out.put(crc32(std::as_bytes(std::span(body.data(), body.size()))));
+    out.put_bytes(body);
+    return std::move(out.bytes());
+}
+
+std::pair<uint32_t, uint32_t> units_body(std::span<const std::byte> head, const std::string& name)
+{
+    ByteReader r(head.first(std::min(head.size(), units_head_size)), name);
+    if (r.get<uint8_t>("units payload") != kind_units || r.get<uint8_t>("units payload") != 0 ||
+        r.get<uint16_t>("units payload") != 0) {
+        r.fail("not a units payload");
+    }
+    const auto size = r.get<uint32_t>("units payload");
+    return {size, r.get<uint32_t>("units payload")};
+}
+
+UnitTable decode_units(std::span<const std::byte> body, GridPoint origin, const std::string& name)
+{
+    ByteReader r(body, name);
+    UnitTable t;
+    const uint64_t nfields = r.get_varint("field count");
+    r.check_count(nfields, 2, "fields");
+    t.fields.resize(static_cast<size_t>(nfields));
+    for (auto& f : t.fields) {
+        f.name = r.get_vstr("field");
+        f.type = r.get<uint8_t>("field");
+        if (f.type > 2) {
+            r.fail("unknown field type " + std::to_string(f.type));
+        }
+    }
+    const uint64_t nunits = r.get_varint("unit count");
+    r.check_count(nunits, 4 + static_cast<size_t>(nfields), "units");
+    t.units.resize(static_cast<size_t>(nunits));
+    GridPoint prev = origin;
+    for (auto& u : t.units) {
+        u.code = r.get_vstr("unit code");
+        u.name = r.get_vstr("unit name");
+        // Modular, as geometry payloads: damaged bytes give wrong points, never undefined behaviour.
+        u.point.x =
+            static_cast<int32_t>(static_cast<uint32_t>(prev.x) + static_cast<uint32_t>(r.get_svarint("unit point")));
+        u.point.y =
+            static_cast<int32_t>(static_cast<uint32_t>(prev.y) + static_cast<uint32_t>(r.get_svarint("unit point")));
+        prev = u.point;
+        u.values.resize(static_cast<size_t>(nfields));
+        for (auto& v : u.values) {
+            v = r.get_vstr("unit value");
+        }
+    }
+    if (r.left() != 0) {
+        r.fail("trailing bytes after the units");
     }
     return t;
 }

@@ -18,8 +18,8 @@
 namespace tigerlod::datatree {
 
 constexpr uint16_t major_version = 2;
-constexpr uint16_t minor_version = 1;
-/// "Data Tree format 2.0", for --version.
+constexpr uint16_t minor_version = 2;
+/// "Data Tree format 2.2", for --version.
 inline std::string format_version_text()
 {
     return "Data Tree format " + std::to_string(major_version) + "." + std::to_string(minor_version);
@@ -127,6 +127,47 @@ struct ChainTable {
 
 std::string encode_table(const ChainTable& t);
 ChainTable decode_table(std::span<const std::byte> bytes, const std::string& name);
+
+/// A node's units (format 2.2): the units of its map as its own (a county
+/// node's tracts), each with its internal point and what the source says
+/// of it (the config's dataset.name_field and dataset.attributes). The
+/// payload has no reference in the skeleton: it follows the node's last LOD
+/// payload in the same tile (units_at), behind a head that gives its size
+/// and CRC, so that readers of 2.0 and 2.1 never see it.
+struct UnitTable {
+    /// How a field's values read (they are text either way): 0 text, 1 integer, 2 real.
+    struct Field {
+        std::string name;
+        uint8_t type = 0;
+        friend bool operator==(const Field&, const Field&) = default;
+    };
+    struct Unit {
+        std::string code;
+        std::string name;                ///< "" when the source names none
+        GridPoint point;                 ///< its internal point, strictly inside it
+        std::vector<std::string> values; ///< one per field, "" for none
+        friend bool operator==(const Unit&, const Unit&) = default;
+    };
+    std::vector<Field> fields;
+    std::vector<Unit> units; ///< sorted by code
+    friend bool operator==(const UnitTable&, const UnitTable&) = default;
+};
+
+/// The units payload's head: kind (1 byte), 3 bytes 0, the body's size
+/// (u32) and CRC-32 (u32).
+constexpr size_t units_head_size = 12;
+/// Where a 2.2 node's units payload begins in its tile: right after its last LOD payload.
+inline uint64_t units_at(const Node& n) noexcept
+{
+    const PayloadRef& last = n.lods.empty() ? n.table : n.lods.back().payload;
+    return last.offset + last.size;
+}
+/// Encode head and body; points relative to `origin` (the node box's minimum corner).
+std::string encode_units(const UnitTable& t, GridPoint origin);
+/// The body's size and CRC from a head (format_error naming `name` if it is not one).
+std::pair<uint32_t, uint32_t> units_body(std::span<const std::byte> head, const std::string& name);
+/// Decode a body (after its head, its CRC checked by the caller).
+UnitTable decode_units(std::span<const std::byte> body, GridPoint origin, const std::string& name);
 
 /// A node's map at one LOD: chain i is points[offsets[i], offsets[i + 1]), absolute grid coordinates.
 struct Geometry {

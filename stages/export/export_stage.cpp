@@ -15,7 +15,10 @@
 #include <ogr_geometry.h>
 #include <ogr_srs_api.h>
 
+#include <algorithm>
+#include <charconv>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <set>
 #include <utility>
@@ -33,7 +36,10 @@ void ExportStage::add_args(ArgSet& args)
     args.add("level", &m_level, "every node showing this level's map, each chain once (default: the root's map)",
              "NAME");
     args.add("lod", &m_lod, "the LOD, 0 for the original chains", "K");
-    args.add("layer", &m_layer, "for GeoJSON, which layer: chains or units", "NAME");
+    args.add("layer", &m_layer,
+             "for GeoJSON, which layer: chains, units (polygons) or unit_points (each unit's internal point); a "
+             "GeoPackage holds all three",
+             "NAME");
     args.group("Coordinates");
     args.add("crs", &m_crs,
              "tree: the tree's projection in metres, its CRS named (EPSG:5070 for the default CONUS Albers, else "
@@ -60,8 +66,8 @@ void ExportStage::initialize()
     if (!(m_max_bow > 0) || !(m_max_bow <= 1)) {
         throw usage_error("export: option '--max-bow' must be in (0, 1]");
     }
-    if (m_layer != "chains" && m_layer != "units") {
-        throw usage_error("export: option '--layer' must be chains or units");
+    if (m_layer != "chains" && m_layer != "units" && m_layer != "unit_points") {
+        throw usage_error("export: option '--layer' must be chains, units or unit_points");
     }
     const auto ext = fs::path(m_output).extension();
     if (ext != ".gpkg" && ext != ".geojson" && ext != ".json") {
@@ -177,14 +183,52 @@ std::map<std::string, std::pair<size_t, uint32_t>> home_nodes(const reader::Tree
     return home;
 }
 
+/// The units of the exported nodes' maps (their units payloads, Data Tree
+/// 2.2): each with its node, and the fields they carry, each field's type
+/// joined over the nodes as ingest joins it over files.
+struct ExportUnits {
+    std::vector<datatree::UnitTable::Field> fields;
+    /// (map level, code) -> (node, the unit); a unit is in one node's table.
+    std::map<std::pair<uint32_t, std::string>, std::pair<uint32_t, const datatree::UnitTable::Unit*>> by_code;
+    std::vector<datatree::UnitTable> tables; ///< per exported node
+};
+
+ExportUnits export_units(const reader::Tree& tree, const std::vector<uint32_t>& nodes)
+{
+    ExportUnits out;
+    out.tables.resize(nodes.size());
+    for (size_t i = 0; i < nodes.size(); ++i) {
+        if (const auto st = tree.read_units(nodes[i], out.tables[i]); !st.ok()) {
+            throw format_error("export: " + st.error);
+        }
+        const auto& t = out.tables[i];
+        for (const auto& f : t.fields) {
+            auto it =
+                std::find_if(out.fields.begin(), out.fields.end(), [&](const auto& g) { return g.name == f.name; });
+            if (it == out.fields.end()) {
+                out.fields.push_back(f);
+            } else if (it->type != f.type) {
+                it->type = it->type == 0 || f.type == 0 ? 0 : 2; // text in either: text; integer and real: real
+            }
+        }
+    }
+    for (size_t i = 0; i < nodes.size(); ++i) {
+        for (const auto& u : out.tables[i].units) {
+            out.by_code.emplace(std::pair{tree.skeleton().nodes[nodes[i]].level, u.code}, std::pair{nodes[i], &u});
+        }
+    }
+    return out;
+}
+
 /// The layers of the file being written, and what went into them.
 class Writer {
   public:
     /// `max_bow_m` > 0: lon/lat, densified to it; 0: the tree's projection.
-    Writer(GDALDatasetH ds, bool with_chains, bool with_units, const Projection& proj, int lod, double eps_m,
-           double max_bow_m, std::map<std::string, double> class_scale, fs::path tmp, const GdalErrorTrap& trap)
+    Writer(GDALDatasetH ds, bool with_chains, bool with_units, bool with_points, const Projection& proj, int lod,
+           double eps_m, double max_bow_m, std::map<std::string, double> class_scale, const ExportUnits& unit_tables,
+           fs::path tmp, const GdalErrorTrap& trap)
         : m_proj(proj), m_lod(lod), m_eps_m(eps_m), m_max_bow_m(max_bow_m), m_class_scale(std::move(class_scale)),
-          m_tmp(std::move(tmp)), m_trap(trap)
+          m_tmp(std::move(tmp)), m_trap(trap), m_units_of(unit_tables)
     {
         OGRSpatialReferenceH srs = nullptr;
         if (m_max_bow_m > 0) {
@@ -211,10 +255,43 @@ class Writer {
             field(m_units, "node", OFTString);
             field(m_units, "lod", OFTInteger);
             field(m_units, "eps_m", OFTReal);
+            attribute_fields(m_units);
+        }
+        if (with_points) {
+            m_points = layer(ds, "unit_points", srs, wkbPoint);
+            field(m_points, "unit", OFTString);
+            field(m_points, "node", OFTString);
+            attribute_fields(m_points);
         }
         OSRDestroySpatialReference(srs);
     }
     bool writes_units() const { return m_units != nullptr; }
+
+    /// The internal point of each unit of the node's map (its units payload), with its name and attributes.
+    void write_points(const datatree::UnitTable& t, const std::string& code)
+    {
+        if (m_points == nullptr) {
+            return;
+        }
+        for (const auto& u : t.units) {
+            OGRFeatureH f = OGR_F_Create(OGR_L_GetLayerDefn(m_points));
+            OGR_F_SetFieldString(f, 0, u.code.c_str());
+            OGR_F_SetFieldString(f, 1, code.c_str());
+            set_attributes(f, 2, t, u);
+            double x = 0, y = 0;
+            if (m_geographic) {
+                m_proj.to_lonlat(double(u.point.x), double(u.point.y), x, y);
+            } else {
+                x = double(u.point.x) * m_proj.params().grid_m;
+                y = double(u.point.y) * m_proj.params().grid_m;
+            }
+            OGRGeometryH pt = OGR_G_CreateGeometry(wkbPoint);
+            OGR_G_SetPoint_2D(pt, 0, x, y);
+            OGR_F_SetGeometryDirectly(f, pt);
+            create(m_points, f);
+            ++points;
+        }
+    }
 
     /// The node's chains not written before (a border shown by two nodes: once).
     void write_chains(const view::NodeMap& m, const std::string& code)
@@ -245,7 +322,7 @@ class Writer {
 
     /// The node's units whose home it is, as valid multipolygons; a unit
     /// whose boundary does not close here is counted in `incomplete`.
-    void write_units(const view::NodeMap& m, const std::string& code, uint32_t n,
+    void write_units(const view::NodeMap& m, const std::string& code, uint32_t n, uint32_t level,
                      const std::map<std::string, std::pair<size_t, uint32_t>>& home)
     {
         if (m_units == nullptr) {
@@ -277,15 +354,57 @@ class Writer {
             OGR_F_SetFieldString(f, 1, code.c_str());
             OGR_F_SetFieldInteger(f, 2, m_lod);
             OGR_F_SetFieldDouble(f, 3, m_eps_m);
+            const auto rec = m_units_of.by_code.find({level, m.table.strings[u]});
+            if (rec != m_units_of.by_code.end()) {
+                const auto& t = m_units_of.tables[table_index(rec->second.first)];
+                set_attributes(f, 4, t, *rec->second.second);
+            }
             OGR_F_SetGeometryDirectly(f, OGRGeometry::ToHandle(polygons));
             create(m_units, f);
             ++units;
         }
     }
 
-    size_t chains = 0, units = 0, incomplete = 0;
+    size_t chains = 0, units = 0, incomplete = 0, points = 0;
+    /// Where the node's units table is in ExportUnits::tables: the exported nodes, in order.
+    std::function<size_t(uint32_t)> table_index;
 
   private:
+    /// `name`, then the units' attribute fields, typed (ExportUnits::fields).
+    void attribute_fields(OGRLayerH l) const
+    {
+        field(l, "name", OFTString);
+        for (const auto& a : m_units_of.fields) {
+            field(l, a.name.c_str(), a.type == 1 ? OFTInteger64 : a.type == 2 ? OFTReal : OFTString);
+        }
+    }
+    /// The unit's name at field `first`, then its values (null where it has none).
+    void set_attributes(OGRFeatureH f, int first, const datatree::UnitTable& t,
+                        const datatree::UnitTable::Unit& u) const
+    {
+        OGR_F_SetFieldString(f, first, u.name.c_str());
+        for (size_t k = 0; k < t.fields.size(); ++k) {
+            const auto it = std::find_if(m_units_of.fields.begin(), m_units_of.fields.end(),
+                                         [&](const auto& g) { return g.name == t.fields[k].name; });
+            const int i = first + 1 + static_cast<int>(it - m_units_of.fields.begin());
+            const std::string& v = u.values[k];
+            if (v.empty()) {
+                OGR_F_SetFieldNull(f, i);
+            } else if (it->type == 1) {
+                int64_t n = 0;
+                const auto r = std::from_chars(v.data(), v.data() + v.size(), n);
+                r.ec == std::errc() && r.ptr == v.data() + v.size() ? OGR_F_SetFieldInteger64(f, i, n)
+                                                                    : OGR_F_SetFieldNull(f, i);
+            } else if (it->type == 2) {
+                double d = 0;
+                const auto r = std::from_chars(v.data(), v.data() + v.size(), d);
+                r.ec == std::errc() && r.ptr == v.data() + v.size() ? OGR_F_SetFieldDouble(f, i, d)
+                                                                    : OGR_F_SetFieldNull(f, i);
+            } else {
+                OGR_F_SetFieldString(f, i, v.c_str());
+            }
+        }
+    }
     /// The points a line of the file gets for `pts`: projected metres (grid
     /// units times the grid step), or lon/lat densified.
     std::vector<std::pair<double, double>> coordinates(std::span<const GridPoint> pts) const
@@ -347,7 +466,8 @@ class Writer {
     bool m_geographic = false;
     const fs::path m_tmp;
     const GdalErrorTrap& m_trap;
-    OGRLayerH m_chains = nullptr, m_units = nullptr;
+    const ExportUnits& m_units_of;
+    OGRLayerH m_chains = nullptr, m_units = nullptr, m_points = nullptr;
     std::set<uint64_t> m_written;
 };
 
@@ -397,8 +517,14 @@ int ExportStage::run(const StageContext& ctx)
     } catch (const input_error&) {
         // A tree without pack's manifest (made by hand): the LOD's eps for every chain.
     }
-    Writer writer(g.ds, gpkg || m_layer == "chains", gpkg || m_layer == "units", proj, m_lod, s.lod_eps_m[lod],
-                  max_bow_m, std::move(class_scale), tmp, trap);
+    const ExportUnits units = export_units(*tree, nodes);
+    Writer writer(g.ds, gpkg || m_layer == "chains", gpkg || m_layer == "units", gpkg || m_layer == "unit_points", proj,
+                  m_lod, s.lod_eps_m[lod], max_bow_m, std::move(class_scale), units, tmp, trap);
+    std::map<uint32_t, size_t> index_of;
+    for (size_t i = 0; i < nodes.size(); ++i) {
+        index_of.emplace(nodes[i], i);
+    }
+    writer.table_index = [&](uint32_t n) { return index_of.at(n); };
     const auto home =
         writer.writes_units() ? home_nodes(*tree, nodes) : std::map<std::string, std::pair<size_t, uint32_t>>{};
     Progress progress(ctx.progress, "export", nodes.size(), "nodes", "chains");
@@ -406,7 +532,8 @@ int ExportStage::run(const StageContext& ctx)
         const auto m = view::read_node(*tree, n, lod);
         const std::string code = n == 0 ? "root" : s.strings[s.nodes[n].code];
         writer.write_chains(m, code);
-        writer.write_units(m, code, n, home);
+        writer.write_units(m, code, n, s.nodes[n].level, home);
+        writer.write_points(units.tables[index_of.at(n)], code);
         progress.advance(m.table.chains.size());
     }
     std::map<std::string, int64_t> expected;
@@ -415,6 +542,9 @@ int ExportStage::run(const StageContext& ctx)
     }
     if (writer.writes_units()) {
         expected["units"] = static_cast<int64_t>(writer.units);
+    }
+    if (gpkg || m_layer == "unit_points") {
+        expected["unit_points"] = static_cast<int64_t>(writer.points);
     }
     GDALDatasetH ds = std::exchange(g.ds, nullptr);
     close_and_check(ds, tmp, expected, trap, "export");
@@ -427,9 +557,10 @@ int ExportStage::run(const StageContext& ctx)
     g.kept = true;
     sync_to_disk(out.parent_path());
     ctx.log.info("export: done");
-    std::printf("export: %zu nodes, %zu chains, %zu unit polygons (%zu units not whole in their node, skipped)\n"
+    std::printf("export: %zu nodes, %zu chains, %zu unit polygons (%zu units not whole in their node, skipped), "
+                "%zu unit points\n"
                 "outputs in %s\n",
-                nodes.size(), writer.chains, writer.units, writer.incomplete, m_output.c_str());
+                nodes.size(), writer.chains, writer.units, writer.incomplete, writer.points, m_output.c_str());
     return exit_ok;
 }
 

@@ -128,6 +128,15 @@ DatasetSpec read_dataset_section(const Reader& ctx, const YAML::Node& root)
             ctx.fail(fetch, "'dataset.fetch' needs 'npm' (package@version) and 'into' (a folder)");
         }
     }
+    d.name_field = ctx.get<std::string>("dataset.name_field", "");
+    d.attributes = ctx.get<std::vector<std::string>>("dataset.attributes", {}); // none twice: the schema
+    if ((!d.name_field.empty() || !d.attributes.empty()) && d.kind == DatasetSpec::Kind::lines) {
+        ctx.fail(ds[d.name_field.empty() ? "attributes" : "name_field"],
+                 "'dataset.name_field' and 'dataset.attributes' apply to units: polygons and tiger datasets");
+    }
+    if (std::find(d.attributes.begin(), d.attributes.end(), d.name_field) != d.attributes.end()) {
+        ctx.fail(ds["attributes"], "'dataset.attributes' names the name_field '" + d.name_field + "' again");
+    }
     if (d.intpt_lat_field.empty() != d.intpt_lon_field.empty()) {
         ctx.fail(ds, "'intpt_lat_field' and 'intpt_lon_field' go together");
     }

@@ -30,6 +30,8 @@ struct DatasetSpec {
     std::string code_field;                                  ///< polygons: the finest unit code (e.g. GEOID10)
     std::string class_field;                                 ///< feature class attribute (TIGER: MTFCC)
     std::string intpt_lat_field, intpt_lon_field;            ///< internal point attributes
+    std::string name_field;                                  ///< names the finest level's units ("": none)
+    std::vector<std::string> attributes;                     ///< further attributes kept for them
     bool skip_empty_codes = false;                           ///< dataset.empty_code: skip (else error)
     bool merge_duplicate_codes = false;                      ///< dataset.duplicate_code: merge (else error)
 };

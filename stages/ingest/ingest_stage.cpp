@@ -503,6 +503,13 @@ void put_meta(json& j, const RegionPlan& plan)
     j["kind"] = static_cast<int>(plan.meta.kind);
     j["files"] = plan.meta.files;
     j["classes"] = plan.meta.classes;
+    if (plan.meta.has_attributes()) { // written only when named: older plans keep their bytes
+        json fields = json::array();
+        for (const auto& f : plan.meta.fields) {
+            fields.push_back({f.name, static_cast<int>(f.type)});
+        }
+        j["unit_fields"] = {{"named", plan.meta.named}, {"fields", fields}};
+    }
     j["nparts"] = plan.boxes.size();
 }
 
@@ -515,6 +522,16 @@ RegionPlan get_meta(const json& j, const fs::path& file)
         plan.meta.kind = static_cast<RawMap::Kind>(j.at("kind").get<int>());
         plan.meta.files = j.at("files").get<std::vector<std::string>>();
         plan.meta.classes = j.at("classes").get<std::vector<std::string>>();
+        if (j.contains("unit_fields")) {
+            plan.meta.named = j.at("unit_fields").at("named").get<bool>();
+            for (const auto& f : j.at("unit_fields").at("fields")) {
+                const int t = f.at(1).get<int>();
+                if (t < 0 || t > static_cast<int>(chains::AttributeType::real)) {
+                    throw input_error(file.string() + ": unknown attribute type " + std::to_string(t));
+                }
+                plan.meta.fields.push_back({f.at(0).get<std::string>(), static_cast<chains::AttributeType>(t)});
+            }
+        }
         const auto n = j.at("nparts").get<size_t>();
         plan.boxes.resize(n);
         plan.class_of.resize(n);
@@ -752,14 +769,18 @@ size_t write_specs(const fs::path& dir, const fs::path& out, JobSpecs& specs,
 std::string reading_of(const IngestConfig& cfg)
 {
     const DatasetSpec& d = cfg.dataset;
-    return json{{"kind", static_cast<int>(d.kind)},
-                {"layer", d.layer},
-                {"code_field", d.code_field},
-                {"class_field", d.class_field},
-                {"intpt_lat_field", d.intpt_lat_field},
-                {"intpt_lon_field", d.intpt_lon_field},
-                {"levels", levels_json(cfg)}}
-        .dump();
+    json j{{"kind", static_cast<int>(d.kind)},
+           {"layer", d.layer},
+           {"code_field", d.code_field},
+           {"class_field", d.class_field},
+           {"intpt_lat_field", d.intpt_lat_field},
+           {"intpt_lon_field", d.intpt_lon_field},
+           {"levels", levels_json(cfg)}};
+    if (!d.name_field.empty() || !d.attributes.empty()) { // written only when named: older specs keep their bytes
+        j["name_field"] = d.name_field;
+        j["attributes"] = d.attributes;
+    }
+    return j.dump();
 }
 
 /// The number of parts a dataset is read in (0: it is read by its one job).

@@ -344,6 +344,8 @@ BuildResult build_coarse(const RawMap& meta, std::vector<RawUnit> units, const s
     raw.level_names = meta.level_names;
     raw.files = meta.files;
     raw.classes = meta.classes;
+    raw.fields = meta.fields;
+    raw.named = meta.named;
     raw.units = std::move(units);
     // The units stand for their region-level codes.
     std::unordered_map<std::string, uint32_t> unit_of_code;

@@ -147,6 +147,7 @@ class LevelBuild {
         find_needed_units();
         compute_internal_points();
         record_points();
+        record_attributes();
         collect_own_chains();
         parallel_each(m_npart, m_options.threads, [&](size_t part) { write_store(static_cast<uint32_t>(part)); });
         for (uint32_t v : m_lev.junctions) {
@@ -386,6 +387,32 @@ class LevelBuild {
         }
     }
 
+    /// The finest level's units' attributes (dataset.name_field and
+    /// attributes), each partition's own: a unit takes the values of its
+    /// largest feature (by weight, the least values among equal ones, so
+    /// that the choice does not depend on the order features are read in).
+    void record_attributes()
+    {
+        m_part_units.resize(m_npart);
+        if (!m_raw.has_attributes() || m_L + 1 != m_lcs.size() || m_raw.kind == RawMap::Kind::lines) {
+            return;
+        }
+        std::vector<uint32_t> rep(m_lc.codes.size(), none);
+        for (uint32_t u = 0; u < m_raw.units.size(); ++u) {
+            uint32_t& r = rep[m_lc.of_unit[u]];
+            const RawUnit& c = m_raw.units[u];
+            if (r == none || c.weight > m_raw.units[r].weight ||
+                (c.weight == m_raw.units[r].weight && c.attrs < m_raw.units[r].attrs)) {
+                r = u;
+            }
+        }
+        for (uint32_t code = 0; code < m_lc.codes.size(); ++code) {
+            if (owns(m_L, code) && rep[code] != none) {
+                m_part_units[parent(code)].emplace_back(code, rep[code]);
+            }
+        }
+    }
+
     /// Each partition's own chains in order of id (unique within the
     /// level), so that a store's strings come in an order that depends on
     /// its content alone; the level's counts.
@@ -488,6 +515,18 @@ class LevelBuild {
                 s.constraints.push_back({str(cp.unit), cp.kind, cp.p});
             }
         }
+        if (m_raw.has_attributes() && m_L + 1 == m_lcs.size()) {
+            s.fields = m_raw.fields;
+            for (const auto& [code, u] : m_part_units[part]) {
+                const auto& attrs = m_raw.units[u].attrs;
+                chains::UnitRecord rec;
+                rec.unit = str(code);
+                rec.name = attrs.empty() ? std::string() : attrs.front();
+                rec.values.assign(attrs.begin() + (attrs.empty() ? 0 : 1), attrs.end());
+                rec.values.resize(s.fields.size());
+                s.units.push_back(std::move(rec));
+            }
+        }
         s.canonicalize();
         m_sink(s);
     }
@@ -517,7 +556,10 @@ class LevelBuild {
         m_neighbours; ///< (partition, unit of another partition its chain bounds)
     std::vector<std::vector<chains::ConstraintPoint>> m_part_points, m_neighbour_points;
     std::vector<std::vector<uint32_t>> m_own; ///< per partition, its chains
-};                                            // class LevelBuild
+    /// Per partition, its own units of the finest level as (code, the raw
+    /// unit whose attributes it takes); empty without attributes.
+    std::vector<std::vector<std::pair<uint32_t, uint32_t>>> m_part_units;
+}; // class LevelBuild
 
 } // namespace
 

@@ -28,7 +28,7 @@ int32_t round_half_away(double x) noexcept
 
 namespace {
 
-constexpr char raw_magic[] = "TLRAWPT2"; // 2: empty_codes
+constexpr char raw_magic[] = "TLRAWPT3"; // 2: empty_codes; 3: unit attributes
 
 template <class T> void put_vec(ByteWriter& w, const std::vector<T>& v)
 {
@@ -85,6 +85,50 @@ void put_unit(ByteWriter& w, const RawUnit& u)
     w.put(u.source.file);
     w.put(u.source.feature);
     w.put(u.sid);
+    put_strings(w, u.attrs);
+}
+
+void put_fields(ByteWriter& w, const std::vector<chains::AttributeField>& fields, bool named)
+{
+    w.put(static_cast<uint8_t>(named));
+    w.put(static_cast<uint32_t>(fields.size()));
+    for (const auto& f : fields) {
+        w.put_vstr(f.name);
+        w.put(static_cast<uint8_t>(f.type));
+    }
+}
+
+bool get_fields(ByteReader& r, std::vector<chains::AttributeField>& fields)
+{
+    const bool named = r.get<uint8_t>("the unit attributes") != 0;
+    const auto n = r.get<uint32_t>("the unit attributes");
+    r.check_count(n, 2, "the unit attributes");
+    fields.resize(n);
+    for (auto& f : fields) {
+        f.name = r.get_vstr("a unit attribute");
+        const auto t = r.get<uint8_t>("a unit attribute");
+        if (t > static_cast<uint8_t>(chains::AttributeType::real)) {
+            r.fail("unknown attribute type " + std::to_string(t));
+        }
+        f.type = static_cast<chains::AttributeType>(t);
+    }
+    return named;
+}
+
+void join_fields(std::vector<chains::AttributeField>& into, const std::vector<chains::AttributeField>& more)
+{
+    if (into.empty()) {
+        into = more;
+        return;
+    }
+    using chains::AttributeType;
+    for (size_t k = 0; k < into.size() && k < more.size(); ++k) {
+        AttributeType& t = into[k].type;
+        if (t != more[k].type) {
+            t = t == AttributeType::text || more[k].type == AttributeType::text ? AttributeType::text
+                                                                                : AttributeType::real;
+        }
+    }
 }
 
 RawUnit get_unit(ByteReader& r)
@@ -102,6 +146,7 @@ RawUnit get_unit(ByteReader& r)
     u.source.file = r.get<uint32_t>("a unit");
     u.source.feature = r.get<int64_t>("a unit");
     u.sid = r.get<uint64_t>("a unit");
+    u.attrs = get_strings(r, "a unit's attributes");
     return u;
 }
 
@@ -114,6 +159,7 @@ std::string encode_raw(const RawMap& raw)
     put_strings(w, raw.level_names);
     put_strings(w, raw.files);
     put_strings(w, raw.classes);
+    put_fields(w, raw.fields, raw.named);
     w.put(static_cast<uint64_t>(raw.units.size()));
     for (const auto& u : raw.units) {
         put_unit(w, u);
@@ -158,6 +204,7 @@ RawMap decode_raw(std::span<const std::byte> bytes, const std::string& name)
     raw.level_names = get_strings(r, "level names");
     raw.files = get_strings(r, "files");
     raw.classes = get_strings(r, "classes");
+    raw.named = get_fields(r, raw.fields);
     const auto nunits = r.get<uint64_t>("units");
     r.check_count(nunits, 33, "units");
     raw.units.resize(static_cast<size_t>(nunits));
@@ -244,6 +291,8 @@ void RawMap::append(RawMap&& part)
     const auto file0 = static_cast<uint32_t>(files.size());
     const auto unit0 = static_cast<uint32_t>(units.size());
     files.insert(files.end(), part.files.begin(), part.files.end());
+    join_fields(fields, part.fields);
+    named = named || part.named;
     for (auto& u : part.units) {
         u.source.file += file0;
         units.push_back(std::move(u));

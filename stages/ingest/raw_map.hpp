@@ -5,6 +5,8 @@
 /// units with their codes per semantic level. No GDAL here, so tests can
 /// build maps by hand.
 
+#include "formats/chains/chain_store.hpp"
+
 #include <cstdint>
 #include <filesystem>
 #include <optional>
@@ -56,6 +58,10 @@ struct RawUnit {
     double weight = 0.0;            ///< area or similar: the largest unit's point represents a coarser unit
     SourceRef source;
     uint64_t sid = 0; ///< a TIGER face's TFID, or 0
+    /// What the source says of it (dataset.name_field, dataset.attributes):
+    /// its name, then its values of RawMap::fields ("" for none); empty
+    /// when the config names neither (RawMap::has_attributes).
+    std::vector<std::string> attrs{};
 };
 
 /// A side of a polyline whose unit another part holds: a TIGER county's EDGES
@@ -80,6 +86,10 @@ struct RawMap {
     std::vector<std::string> files; ///< input names, for messages
     std::vector<RawUnit> units;
     std::vector<std::string> classes{""}; ///< feature classes; 0 is "unknown"
+    /// dataset.attributes, each with what the files read hold (join_fields),
+    /// and whether the config names a name_field: what RawUnit::attrs hold.
+    std::vector<chains::AttributeField> fields;
+    bool named = false;
 
     std::vector<LonLatE6> coords;
     std::vector<uint64_t> offsets{0}; ///< polyline i is coords[offsets[i], offsets[i+1])
@@ -93,6 +103,7 @@ struct RawMap {
     uint64_t empty_codes = 0;         ///< features with an empty code, left out (dataset.empty_code: skip)
 
     size_t polyline_count() const noexcept { return left.size(); }
+    bool has_attributes() const noexcept { return named || !fields.empty(); }
     void add_polyline(std::span<const LonLatE6> pts, uint32_t left_unit, uint32_t right_unit, uint32_t cls,
                       uint64_t sid, SourceRef src);
     uint32_t intern_class(const std::string& name);
@@ -119,12 +130,20 @@ struct RawMap {
     uint64_t share_seam_vertices();
 };
 
+/// Fields read from another file into `into`: the first file's as they
+/// are; then a field integer in one and real in another is real, and one
+/// text in either is text (its values are text either way).
+void join_fields(std::vector<chains::AttributeField>& into, const std::vector<chains::AttributeField>& more);
+
 /// A unit and a list of strings as bytes and back (the parts and the
 /// regions' shares): fields one by one, little-endian; the reads throw
 /// format_error as ByteReader does.
 void put_strings(ByteWriter& w, const std::vector<std::string>& v);
 std::vector<std::string> get_strings(ByteReader& r, const char* what);
 void put_unit(ByteWriter& w, const RawUnit& u);
+/// RawMap::fields and RawMap::named as bytes and back (get_fields returns named).
+void put_fields(ByteWriter& w, const std::vector<chains::AttributeField>& fields, bool named);
+bool get_fields(ByteReader& r, std::vector<chains::AttributeField>& fields);
 RawUnit get_unit(ByteReader& r);
 /// The 8-byte tag that opens each of ingest's job files (a part, a share, a
 /// read job's parts); a file without it fails as "not `what` this version

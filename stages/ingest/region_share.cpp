@@ -6,8 +6,8 @@ namespace tigerlod::ingest {
 
 namespace {
 
-constexpr char share_magic[] = "TLSHARE1";
-constexpr char reads_magic[] = "TLREADS2"; // 2: empty_codes
+constexpr char share_magic[] = "TLSHARE2"; // 2: units' attributes
+constexpr char reads_magic[] = "TLREADS3"; // 2: empty_codes; 3: unit attributes
 
 void put_source(ByteWriter& w, const SourceRef& s)
 {
@@ -232,6 +232,7 @@ std::string encode_reads(const ReadJob& job)
         w.put(static_cast<uint8_t>(s.kind));
         put_strings(w, s.files);
         put_strings(w, s.classes);
+        put_fields(w, s.fields, s.named);
         w.put_varint(s.unpaired_edges);
     }
     return std::move(w.bytes());
@@ -276,6 +277,7 @@ ReadJob decode_reads(std::span<const std::byte> bytes, const std::string& name)
         s.kind = static_cast<RawMap::Kind>(kind);
         s.files = get_strings(r, "a part's files");
         s.classes = get_strings(r, "a part's classes");
+        s.named = get_fields(r, s.fields);
         s.unpaired_edges = r.get_varint("a part's counts");
     }
     if (r.left() != 0) {

@@ -68,6 +68,8 @@ class Assembly {
         m_raw.level_names = meta.level_names;
         m_raw.files = meta.files;
         m_raw.classes = meta.classes;
+        m_raw.fields = meta.fields;
+        m_raw.named = meta.named;
     }
 
     /// Add part i: its units where `take`, and its polylines with a taken unit
@@ -294,6 +296,8 @@ PartSummary summarize_part(const RawMap& part, size_t max_codes)
     s.kind = part.kind;
     s.files = part.files;
     s.classes = part.classes;
+    s.fields = part.fields;
+    s.named = part.named;
     if (part.kind == RawMap::Kind::edges) {
         for (size_t p = 0; p < part.polyline_count(); ++p) {
             s.unpaired_edges += part.left[p] == no_unit && part.right[p] == no_unit ? 1 : 0;
@@ -657,6 +661,8 @@ RegionPlan plan_regions(const std::vector<PartSummary>& parts, const std::vector
         }
     }
     for (size_t i = 0; i < nparts; ++i) {
+        join_fields(meta.fields, parts[i].fields);
+        meta.named = meta.named || parts[i].named;
         for (const auto& c : parts[i].classes) {
             plan.class_of[i].push_back(meta.intern_class(c));
         }

@@ -60,6 +60,8 @@ struct PartSummary {
     RawMap::Kind kind = RawMap::Kind::polygon_rings;
     std::vector<std::string> files; ///< the part's files, for messages
     std::vector<std::string> classes;
+    std::vector<chains::AttributeField> fields; ///< RawMap::fields and RawMap::named of the part
+    bool named = false;
     /// TIGER: edges with none of the part's faces on either side (0 where the
     /// part's EDGES and FACES are one county's).
     uint64_t unpaired_edges = 0;

@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -651,6 +652,63 @@ std::string level_code(const LevelSpec& level, OGRFeatureH f, const std::vector<
     return s;
 }
 
+/// The config's unit attributes on a layer (dataset.name_field, then
+/// dataset.attributes): their field indices (-1 for no name_field), none
+/// when the config names neither. What each field holds is joined into
+/// `raw.fields`; a missing field is an input_error naming the layer and the key.
+std::vector<int> attribute_fields(const IngestConfig& cfg, const Source& src, RawMap& raw)
+{
+    const DatasetSpec& d = cfg.dataset;
+    std::vector<int> idx;
+    if (d.name_field.empty() && d.attributes.empty()) {
+        return idx;
+    }
+    raw.named = !d.name_field.empty();
+    idx.push_back(d.name_field.empty() ? -1 : src.field(d.name_field, "dataset.name_field"));
+    std::vector<chains::AttributeField> fields;
+    for (const auto& a : d.attributes) {
+        const int i = src.field(a, "dataset.attributes");
+        idx.push_back(i);
+        const OGRFieldType t = OGR_Fld_GetType(OGR_FD_GetFieldDefn(OGR_L_GetLayerDefn(src.layer()), i));
+        fields.push_back({a, t == OFTInteger || t == OFTInteger64 ? chains::AttributeType::integer
+                             : t == OFTReal                       ? chains::AttributeType::real
+                                                                  : chains::AttributeType::text});
+    }
+    join_fields(raw.fields, fields);
+    return idx;
+}
+
+/// A feature's values of attribute_fields as text: integers in decimal,
+/// reals in the shortest form that reads back as the same double, "" where
+/// a field is null or unset.
+std::vector<std::string> attribute_values(OGRFeatureH f, const std::vector<int>& idx)
+{
+    std::vector<std::string> out;
+    out.reserve(idx.size());
+    for (const int i : idx) {
+        if (i < 0 || !OGR_F_IsFieldSetAndNotNull(f, i)) {
+            out.emplace_back();
+            continue;
+        }
+        switch (OGR_Fld_GetType(OGR_F_GetFieldDefnRef(f, i))) {
+        case OFTInteger:
+        case OFTInteger64:
+            out.push_back(std::to_string(OGR_F_GetFieldAsInteger64(f, i)));
+            break;
+        case OFTReal: {
+            char buf[40];
+            const auto r = std::to_chars(buf, buf + sizeof buf, OGR_F_GetFieldAsDouble(f, i));
+            out.emplace_back(buf, r.ptr);
+            break;
+        }
+        default:
+            out.emplace_back(OGR_F_GetFieldAsString(f, i));
+            break;
+        }
+    }
+    return out;
+}
+
 /// What a code field needs: text, or an integer (whose codes have no leading zeros).
 constexpr const char* code_type = "text or an integer";
 constexpr const char* id_type = "an integer (Integer or Integer64)";
@@ -774,6 +832,7 @@ void read_faces_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw,
     Source& src = layer.src;
     const int tfid = layer.tfid, lat_i = layer.lat, lon_i = layer.lon, area_i = layer.area;
     const auto& fields = layer.levels;
+    const std::vector<int> attrs = attribute_fields(cfg, src, raw);
     OGR_L_SetIgnoredFields(src.layer(), std::array<const char*, 2>{"OGR_GEOMETRY", nullptr}.data());
     const auto file = static_cast<uint32_t>(raw.files.size());
     raw.files.push_back(src.name());
@@ -790,6 +849,7 @@ void read_faces_file(const IngestConfig& cfg, const fs::path& path, RawMap& raw,
         u.weight = area_i >= 0 ? OGR_F_GetFieldAsDouble(f, area_i) : 0.0;
         u.source = {file, index};
         u.sid = static_cast<uint64_t>(id);
+        u.attrs = attribute_values(f, attrs);
         face_unit.emplace(id, static_cast<uint32_t>(raw.units.size()));
         raw.units.push_back(std::move(u));
     });
@@ -1018,6 +1078,7 @@ void read_polygon_file(const IngestConfig& cfg, const fs::path& path, RawMap& ra
         Source& src = layer.src;
         const int code_i = layer.code, lat_i = layer.lat, lon_i = layer.lon, cls = layer.cls;
         const auto& fields = layer.levels;
+        const std::vector<int> attrs = attribute_fields(cfg, src, raw);
         const auto file = static_cast<uint32_t>(raw.files.size());
         raw.files.push_back(src.name());
         uint64_t empty_codes = 0; // features with an empty code, and the first three
@@ -1058,6 +1119,7 @@ void read_polygon_file(const IngestConfig& cfg, const fs::path& path, RawMap& ra
             }
             u.intpt = intpt(f, lat_i, lon_i);
             u.source = {file, index};
+            u.attrs = attribute_values(f, attrs);
             const auto unit = static_cast<uint32_t>(raw.units.size());
             const uint32_t c = cls >= 0 ? raw.intern_class(OGR_F_GetFieldAsString(f, cls)) : 0;
             const int nparts = type == wkbPolygon ? 1 : OGR_G_GetGeometryCount(g);

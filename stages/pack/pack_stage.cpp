@@ -378,6 +378,7 @@ int PackStage::run(const StageContext& ctx)
     report["lods"] = std::move(lods);
     report["geometry_bytes_per_vertex"] = vertices ? double(bytes) / double(vertices) : 0.0;
     report["chain_table_bytes"] = tree.table_bytes;
+    report["unit_table_bytes"] = tree.unit_bytes;
     report["skeleton_bytes"] = ws.skeleton_bytes;
     report["tree_bytes"] = ws.tree_bytes;
     report["skeleton_fraction"] = ws.tree_bytes ? double(ws.skeleton_bytes) / double(ws.tree_bytes) : 0.0;

@@ -114,10 +114,41 @@ struct NodeBuild {
     datatree::Geometry original;
     datatree::Node node;               ///< chains, box, lods (error_m, vertices); no links or refs yet
     std::string table;                 ///< encoded, border levels 0 (assemble sets them)
+    std::string unit_table;            ///< the units payload (format 2.2), encoded
     std::vector<std::string> payloads; ///< geometry per LOD
     std::vector<Source> sources;       ///< the stores it was made from (write_parts records them)
     double last_error = 0.0;
 };
+
+/// A store's own units (those with a kind 0 point), each with its point and
+/// the record ingest wrote for it (name and attributes), as a node's units
+/// payload holds them.
+datatree::UnitTable unit_table(const chains::ChainStore& s)
+{
+    datatree::UnitTable t;
+    for (const auto& f : s.fields) {
+        t.fields.push_back({f.name, static_cast<uint8_t>(f.type)});
+    }
+    std::unordered_map<uint32_t, const chains::UnitRecord*> record;
+    for (const auto& u : s.units) {
+        record.emplace(u.unit, &u);
+    }
+    for (const auto& c : s.constraints) {
+        if (c.kind != chains::constraint_internal) {
+            continue;
+        }
+        datatree::UnitTable::Unit u{s.strings[c.unit], {}, c.p, std::vector<std::string>(s.fields.size())};
+        if (const auto it = record.find(c.unit); it != record.end()) {
+            u.name = it->second->name;
+            for (size_t k = 0; k < u.values.size() && k < it->second->values.size(); ++k) {
+                u.values[k] = it->second->values[k];
+            }
+        }
+        t.units.push_back(std::move(u));
+    }
+    std::sort(t.units.begin(), t.units.end(), [](const auto& a, const auto& b) { return a.code < b.code; });
+    return t;
+}
 
 /// Where each owned chain of a level lies, by id.
 using ChainIndex = std::unordered_map<uint64_t, std::pair<const chains::ChainStore*, const chains::ChainInfo*>>;
@@ -428,6 +459,7 @@ class TreeContext {
             }
             std::set<size_t> used;
             pack_node(nb, one, 0, paths, chains_of, 0, used);
+            nb.unit_table = datatree::encode_units(unit_table(one[0]), {nb.node.box.min_x, nb.node.box.min_y});
             if (record) {
                 nb.sources.push_back(source(0, rel));
             }
@@ -535,6 +567,7 @@ struct PartNode {
     datatree::Node node;
     std::string table;           ///< encoded, border levels 0
     std::vector<uint64_t> sizes; ///< geometry payloads per LOD
+    std::string unit_table;      ///< the units payload, encoded
 };
 
 /// The root of a line layer cut into tiles has no store: its place in `order`.
@@ -715,6 +748,7 @@ PackedTree assemble(const TreeContext& ctx, uint8_t metric, std::vector<PartNode
     const std::vector<size_t> order = build_hierarchy(ctx, parts, sk);
     std::vector<std::string> tables = fill_nodes(ctx, parts, order, tree);
     const std::string empty_geometry = datatree::encode_geometry({}, {0, 0}, {draco_speed});
+    const std::string no_units = datatree::encode_units({}, {0, 0});
     std::vector<std::vector<uint64_t>> sizes(order.size());
     for (size_t i = 0; i < order.size(); ++i) {
         tree.table_bytes += tables[i].size();
@@ -722,12 +756,17 @@ PackedTree assemble(const TreeContext& ctx, uint8_t metric, std::vector<PartNode
         for (size_t k = 0; k < nlods; ++k) {
             sizes[i].push_back(order[i] == no_part ? empty_geometry.size() : parts[order[i]].sizes[k]);
         }
+        sizes[i].push_back(order[i] == no_part ? no_units.size() : parts[order[i]].unit_table.size());
+        tree.unit_bytes += sizes[i].back();
     }
     layout_tiles(
         tree, sizes,
         [&](uint32_t n, size_t j) {
             if (j == 0) {
                 return std::move(tables[n]);
+            }
+            if (j == nlods + 1) {
+                return order[n] == no_part ? no_units : std::move(parts[order[n]].unit_table);
             }
             return order[n] == no_part ? empty_geometry : fetch(order[n], j - 1);
         },
@@ -738,7 +777,7 @@ PackedTree assemble(const TreeContext& ctx, uint8_t metric, std::vector<PartNode
 /// A part file (write_parts): "TLDPART1", the header's size (u64), the
 /// header (ByteWriter fields, its CRC-32 last), then the geometry payloads
 /// back to back. Work files of one pack, not a published format.
-constexpr std::string_view part_magic = "TLDPART1";
+constexpr std::string_view part_magic = "TLDPART2"; // 2: the units payload
 
 struct PartHeader {
     PartNode node;
@@ -775,6 +814,7 @@ std::string encode_part(const NodeBuild& nb, const std::vector<double>& lod_eps,
         h.put<uint32_t>(crc32(std::as_bytes(std::span(p.data(), p.size()))));
     }
     h.put_str(nb.table);
+    h.put_str(nb.unit_table);
     h.put<uint32_t>(static_cast<uint32_t>(sources.size()));
     for (const auto& [s, crc] : sources) {
         h.put<uint32_t>(s.lod);
@@ -839,6 +879,7 @@ PartHeader read_part_header(const fs::path& path)
         h.crcs.push_back(r.get<uint32_t>("LOD"));
     }
     h.node.table = r.get_str("table");
+    h.node.unit_table = r.get_str("units");
     const auto nsources = r.get<uint32_t>("sources");
     for (uint32_t i = 0; i < nsources; ++i) {
         Source s;
@@ -882,7 +923,13 @@ PackedTree build_tree(const fs::path& original, const fs::path& simplified, cons
             options.on_level(nodes.size());
         }
         for (auto& nb : nodes) {
-            PartNode p{nb.level, nb.partition, std::move(nb.units), std::move(nb.node), std::move(nb.table), {}};
+            PartNode p{nb.level,
+                       nb.partition,
+                       std::move(nb.units),
+                       std::move(nb.node),
+                       std::move(nb.table),
+                       {},
+                       std::move(nb.unit_table)};
             for (const auto& g : nb.payloads) {
                 p.sizes.push_back(g.size());
             }
@@ -1232,6 +1279,9 @@ void layout_tiles(PackedTree& tree, const std::vector<std::vector<uint64_t>>& si
             sk.nodes[n].table = place(n, 0);
             for (size_t k = 0; k < sk.nodes[n].lods.size(); ++k) {
                 sk.nodes[n].lods[k].payload = place(n, 1 + k);
+            }
+            if (sizes[n].size() > 1 + sk.nodes[n].lods.size()) {
+                place(n, 1 + sk.nodes[n].lods.size()); // the units payload: where units_at says, no reference
             }
         }
         const std::string head = datatree::tile_header(bytes.size());

@@ -44,6 +44,7 @@ struct PackedTree {
     std::vector<std::string> tile_bytes; ///< parallel to skeleton.tiles
     std::vector<LodTotals> lods;
     uint64_t table_bytes = 0;
+    uint64_t unit_bytes = 0; ///< units payloads (format 2.2)
 };
 
 /// Build from an ingest output folder (LOD 0) and a simplify output folder

@@ -944,10 +944,68 @@ class Verifier {
                           std::to_string(worst * m_sk.grid_m()));
         }
         check_units(r, store, area_sign, violation);
+        if (k == 0) {
+            check_unit_table(n, store, violation, corner);
+        }
         if (m_options.tolerance.point_constraints) { // else simplify let points change side
             check_points(r, store, user_points, violation);
         }
         return r;
+    }
+
+    /// A 2.2 node's units payload (read_units) against its original store:
+    /// its own units (kind 0 points), each with that point, and the name
+    /// and values ingest recorded for it.
+    void check_unit_table(uint32_t n, const chains::ChainStore& store, const Emit& violation, GridPoint corner) const
+    {
+        if (m_sk.minor < 2) {
+            return; // a tree before the units payload
+        }
+        datatree::UnitTable t;
+        if (auto st = m_tree.read_units(n, t); !st.ok()) {
+            violation("skeleton", {}, corner, st.error);
+            return;
+        }
+        std::map<std::string, const datatree::UnitTable::Unit*> by_code;
+        for (const auto& u : t.units) {
+            by_code.emplace(u.code, &u);
+        }
+        std::map<uint32_t, const chains::UnitRecord*> records;
+        for (const auto& rec : store.units) {
+            records.emplace(rec.unit, &rec);
+        }
+        size_t own = 0;
+        for (const auto& c : store.constraints) {
+            if (c.kind != chains::constraint_internal) {
+                continue;
+            }
+            ++own;
+            const std::string& code = store.strings[c.unit];
+            const auto it = by_code.find(code);
+            if (it == by_code.end() || !(it->second->point == c.p)) {
+                violation("skeleton", {}, c.p,
+                          "units payload: unit " + code + (it == by_code.end() ? " missing" : " has another point"));
+                continue;
+            }
+            const auto rec = records.find(c.unit);
+            const std::string name = rec == records.end() ? std::string() : rec->second->name;
+            std::vector<std::string> values(store.fields.size());
+            if (rec != records.end()) {
+                std::copy_n(rec->second->values.begin(), std::min(values.size(), rec->second->values.size()),
+                            values.begin());
+            }
+            if (it->second->name != name || it->second->values != values || t.fields.size() != store.fields.size()) {
+                violation("skeleton", {}, c.p,
+                          "units payload: unit " + code +
+                              "'s name or attributes differ from "
+                              "its store's");
+            }
+        }
+        if (own != t.units.size()) {
+            violation("skeleton", {}, corner,
+                      "units payload: " + std::to_string(t.units.size()) + " units, the store has " +
+                          std::to_string(own));
+        }
     }
 
     /// Chain c of a node's result: its points in the node's box, a chain of

@@ -287,7 +287,7 @@ TEST_F(Cli, IngestSucceedsQuietlyAndDeterministically)
     // dump prints a store as sorted text.
     const Result d = run("dump", (m_dir / "out" / "tract" / "51063.tlc").string());
     EXPECT_EQ(d.code, 0);
-    EXPECT_EQ(d.out.rfind("chain-store 1.2\nlevel 2/5 tract\npartition 51063\n", 0), 0U) << d.out;
+    EXPECT_EQ(d.out.rfind("chain-store 1.3\nlevel 2/5 tract\npartition 51063\n", 0), 0U) << d.out;
 }
 
 TEST_F(Cli, MissingInputFile)
@@ -1684,7 +1684,8 @@ TEST_F(Cli, PackDumpExportAndVerifyRejectBadInput)
     expect_failure(run("export", tree + " " + gpkg + " --node root --level tract"), 2,
                    "give '--node' or '--level', not both");
     expect_failure(run("export", tree + " " + (m_dir / "x.shp").string()), 2, "OUTPUT must end in .gpkg or .geojson");
-    expect_failure(run("export", tree + " " + gpkg + " --layer roads"), 2, "option '--layer' must be chains or units");
+    expect_failure(run("export", tree + " " + gpkg + " --layer roads"), 2,
+                   "option '--layer' must be chains, units or unit_points");
     expect_failure(run("export", tree + " " + gpkg + " --lod 7"), 2, "no LOD 7 (the tree has 2)");
     expect_failure(run("export", tree + " " + gpkg + " --node nowhere"), 2, "no node 'nowhere'");
     expect_failure(run("export", tree + " " + gpkg + " --level nowhere"), 2, "no level 'nowhere' in the tree");

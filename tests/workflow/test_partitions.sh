@@ -46,7 +46,7 @@ readjobs() { sed -n 's/^\[[0-9]*\/[0-9?]*\] ingest read \([^:]*\):.*/\1/p' "$1" 
 # Two versions of DC: as published, and with one tract's code changed.
 ogr2ogr -f "ESRI Shapefile" dc_v1.shp.zip "/vsizip/$data/tl_2010_11_tract10.zip/tl_2010_11_tract10.shp" -nln dc
 ogr2ogr -f "ESRI Shapefile" dc_v2.shp.zip "/vsizip/$data/tl_2010_11_tract10.zip/tl_2010_11_tract10.shp" -nln dc \
-  -dialect SQLite -sql "SELECT Geometry, MTFCC10, INTPTLAT10, INTPTLON10, CASE WHEN GEOID10 = '11001000100'
+  -dialect SQLite -sql "SELECT Geometry, MTFCC10, INTPTLAT10, INTPTLON10, NAMELSAD10, ALAND10, AWATER10, CASE WHEN GEOID10 = '11001000100'
     THEN '11001990100' ELSE GEOID10 END AS GEOID10 FROM tl_2010_11_tract10"
 cp dc_v1.shp.zip dc.shp.zip
 cat >p.yaml <<EOF
@@ -59,6 +59,8 @@ dataset:
   class_field: MTFCC10
   intpt_lat_field: INTPTLAT10
   intpt_lon_field: INTPTLON10
+  name_field: NAMELSAD10
+  attributes: [ALAND10, AWATER10]
 levels:
   - {name: nation, code: US}
   - {name: state, prefix: 2}
@@ -91,6 +93,10 @@ diff -r -x '*-report.json' whole-color out/p/color >/dev/null || fail "color by 
 diff -r -x '*-report.json' whole-simp out/p/simplified >/dev/null || fail "simplify by jobs differs from a whole run"
 "$bin/tigerlod-pack" --config p.yaml out/p/ingest whole-simp whole-tree >/dev/null || fail "tigerlod-pack whole failed"
 diff -r -x '*-report.json' whole-tree out/p/tree >/dev/null || fail "pack by jobs differs from a whole run"
+# The names and attributes came through the jobs: DC's tracts in its county node.
+dc_units=$("$bin/tigerlod-dump" out/p/tree --node 11001)
+grep -q '^unit 11001000100 point=.* name=Census Tract 1 ALAND10=[1-9][0-9]* AWATER10=' <<<"$dc_units" ||
+  fail "the tree's units lack the names and attributes: $(grep '^unit' <<<"$dc_units" | head -3)"
 "$bin/tigerlod-verify" --config p.yaml out/p/tree out/p/ingest whole-verify >/dev/null || fail "a whole verify failed"
 same_report() { python3 - "$1" "$2" <<'PY'
 import json, sys
@@ -237,7 +243,8 @@ grep -q "Nothing to be done" r12.out || fail "a run after the rezipped input ran
 # a tract code in two counties: the tract level built from the fields
 # STATEFP10 + TRACTCE10 does not nest in the counties.)
 ogr2ogr -f "ESRI Shapefile" ri_bad.shp.zip "/vsizip/$data/tl_2010_44_tract10.zip/tl_2010_44_tract10.shp" -nln ri \
-  -dialect SQLite -sql "SELECT Geometry, MTFCC10, INTPTLAT10, INTPTLON10, GEOID10, STATEFP10, COUNTYFP10,
+  -dialect SQLite -sql "SELECT Geometry, MTFCC10, INTPTLAT10, INTPTLON10, NAMELSAD10, ALAND10, AWATER10, GEOID10,
+    STATEFP10, COUNTYFP10,
     CASE WHEN GEOID10 = '44005041300' THEN '017800' ELSE TRACTCE10 END AS TRACTCE10 FROM tl_2010_44_tract10"
 ogr2ogr -f "ESRI Shapefile" ri_good.shp.zip "/vsizip/$data/tl_2010_44_tract10.zip/tl_2010_44_tract10.shp" -nln ri
 cp ri_bad.shp.zip ri.shp.zip

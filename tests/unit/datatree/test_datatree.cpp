@@ -303,3 +303,46 @@ TEST(Tile, HeaderChecked)
     EXPECT_NE(error_of([&] { check_tile_header(as_span(h.substr(0, 10)), 100, "t.tlt"); }).find("truncated in header"),
               std::string::npos);
 }
+
+TEST(UnitTable, RoundTripsExactlyAndDamageIsRefused)
+{
+    datatree::UnitTable t;
+    t.fields = {{"ALAND", 1}, {"NOTE", 0}};
+    t.units = {{"51063", "Floyd", {-5, 7}, {"987654321", ""}},
+               {"51067", "", {INT32_MAX, INT32_MIN}, {"", "é"}},
+               {"51071", "Giles", {0, 0}, {"-3", "x"}}};
+    const GridPoint origin{-100, 100};
+    const std::string bytes = datatree::encode_units(t, origin);
+    const auto all = std::as_bytes(std::span(bytes.data(), bytes.size()));
+    const auto [size, crc] = datatree::units_body(all, "t");
+    ASSERT_EQ(size, bytes.size() - datatree::units_head_size);
+    const auto body = all.subspan(datatree::units_head_size);
+    EXPECT_EQ(crc, crc32(body));
+    EXPECT_EQ(datatree::decode_units(body, origin, "t"), t);
+    // Not a units payload: another kind, or reserved bytes set.
+    for (const size_t at : {size_t{0}, size_t{1}, size_t{3}}) {
+        std::string bad = bytes;
+        bad[at] = static_cast<char>(bad[at] ^ 0x40);
+        EXPECT_THROW(datatree::units_body(std::as_bytes(std::span(bad.data(), bad.size())), "t"), format_error);
+    }
+    // A body cut short, with a byte more, or an unknown field type.
+    EXPECT_THROW(datatree::decode_units(body.first(body.size() - 1), origin, "t"), format_error);
+    std::string more(reinterpret_cast<const char*>(body.data()), body.size());
+    more += '\0';
+    EXPECT_THROW(datatree::decode_units(std::as_bytes(std::span(more.data(), more.size())), origin, "t"), format_error);
+    std::string typed(reinterpret_cast<const char*>(body.data()), body.size());
+    typed[1 + 1 + 5] = 3; // the first field's type, after its count and its name "ALAND"
+    EXPECT_THROW(datatree::decode_units(std::as_bytes(std::span(typed.data(), typed.size())), origin, "t"),
+                 format_error);
+    // Every damaged byte of the body: refused, or decoded to a table that round-trips.
+    for (size_t i = 0; i < body.size(); ++i) {
+        std::string d(reinterpret_cast<const char*>(body.data()), body.size());
+        d[i] = static_cast<char>(d[i] ^ 0x5A);
+        try {
+            const auto u = datatree::decode_units(std::as_bytes(std::span(d.data(), d.size())), origin, "t");
+            const std::string back = datatree::encode_units(u, origin);
+            EXPECT_EQ(datatree::decode_units(as_span(back).subspan(datatree::units_head_size), origin, "t"), u) << i;
+        } catch (const format_error&) {
+        }
+    }
+}

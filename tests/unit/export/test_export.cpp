@@ -288,3 +288,150 @@ TEST(LonLatLine, AShortSegmentIsLeftAloneALongOneBisected)
     EXPECT_GT(exporter::lonlat_bow_m(proj, long_segment[0].x, long_segment[0].y, long_segment[1].x, long_segment[1].y),
               1e4);
 }
+
+namespace {
+
+/// A square feature of a GeoJSON polygon layer: its code and its properties' JSON.
+struct Square {
+    double lon, lat, side;
+    std::string props;
+};
+void write_squares(const fs::path& file, const std::vector<Square>& squares)
+{
+    std::ofstream out(file);
+    out << R"({"type": "FeatureCollection", "features": [)";
+    for (size_t i = 0; i < squares.size(); ++i) {
+        const auto& [x, y, d, props] = squares[i];
+        out << (i ? "," : "") << R"({"type": "Feature", "properties": {)" << props
+            << R"(}, "geometry": {"type": "Polygon", "coordinates": [[[)" << x << "," << y << "],[" << x + d << "," << y
+            << "],[" << x + d << "," << y + d << "],[" << x << "," << y + d << "],[" << x << "," << y << "]]]}}";
+    }
+    out << "]}";
+}
+
+/// One feature of a layer read back: its fields as text ("<null>" for
+/// null), its geometry kept.
+struct ReadFeature {
+    std::map<std::string, std::string> fields;
+    OGRGeometryH geometry = nullptr;
+};
+
+} // namespace
+
+// From the source through ingest, simplify, pack and the reader to the
+// export: the units' names and the attributes the config names, typed as
+// every input file's field holds them, with each unit's internal point, in
+// both CRSs; the point lies inside its unit's polygon at every LOD.
+TEST(ExportUnits, NamesAttributesAndInternalPointsComeFromTheSourceThroughTheTree)
+{
+    const fs::path dir = fs::temp_directory_path() / ("tigerlod-export-units-" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    // 01001 in two parts (merged), the larger first; 01002 beside it with
+    // nulls; 02001 in another file, where ALAND is real and SHARE an integer.
+    write_squares(
+        dir / "a.geojson",
+        {{-99.0, 40.0, 0.02, R"("code": "01001", "name": "Alpha small", "ALAND": 7, "SHARE": 9.25, "NOTE": "s")"},
+         {-100.0, 40.0, 0.1, R"("code": "01001", "name": "Alpha", "ALAND": 100, "SHARE": 0.5, "NOTE": "x")"},
+         {-99.9, 40.0, 0.1, R"("code": "01002", "name": "Beta", "ALAND": null, "SHARE": 2, "NOTE": null)"}});
+    write_squares(dir / "b.geojson",
+                  {{-90.0, 40.0, 0.1, R"("code": "02001", "name": "Gamma", "ALAND": 3.5, "SHARE": 1, "NOTE": "z")"}});
+    std::ofstream(dir / "config.yaml")
+        << "name: t\ndataset: {kind: polygons, inputs: [a.geojson, b.geojson], code_field: code, name_field: name,\n"
+           "  attributes: [ALAND, SHARE, NOTE], duplicate_code: merge}\n"
+           "levels:\n  - {name: state, prefix: 2}\n  - {name: county, prefix: 5}\n";
+    auto tool = [&](const std::string& name, const std::string& args) {
+        const int rc = tigerlod::testing::run_tool(TIGERLOD_BIN_DIR, name, args, dir / "log");
+        EXPECT_EQ(rc, 0) << name << " " << args << ": " << tigerlod::testing::slurp(dir / "log");
+        return rc == 0;
+    };
+    const std::string d = dir.string() + "/";
+    ASSERT_TRUE(tool("ingest", d + "config.yaml " + d + "orig"));
+    ASSERT_TRUE(tool("simplify", "--shortcut-test exact --tolerances 100,500 " + d + "orig " + d + "simp"));
+    ASSERT_TRUE(tool("pack", d + "orig " + d + "simp " + d + "tree"));
+    GDALAllRegister();
+    auto read_layer = [&](const fs::path& file, const char* name, std::map<std::string, OGRFieldType>& types) {
+        std::map<std::string, ReadFeature> out;
+        GDALDatasetH ds = GDALOpenEx(file.c_str(), GDAL_OF_VECTOR, nullptr, nullptr, nullptr);
+        EXPECT_TRUE(ds) << file;
+        OGRLayerH layer = ds ? GDALDatasetGetLayerByName(ds, name) : nullptr;
+        EXPECT_TRUE(layer) << file << " " << name;
+        if (layer) {
+            OGRFeatureDefnH defn = OGR_L_GetLayerDefn(layer);
+            for (int i = 0; i < OGR_FD_GetFieldCount(defn); ++i) {
+                OGRFieldDefnH fd = OGR_FD_GetFieldDefn(defn, i);
+                types[OGR_Fld_GetNameRef(fd)] = OGR_Fld_GetType(fd);
+            }
+            while (OGRFeatureH f = OGR_L_GetNextFeature(layer)) {
+                ReadFeature rf;
+                for (int i = 0; i < OGR_FD_GetFieldCount(defn); ++i) {
+                    rf.fields[OGR_Fld_GetNameRef(OGR_FD_GetFieldDefn(defn, i))] =
+                        OGR_F_IsFieldSetAndNotNull(f, i) ? OGR_F_GetFieldAsString(f, i) : "<null>";
+                }
+                rf.geometry = OGR_G_Clone(OGR_F_GetGeometryRef(f));
+                out[rf.fields["unit"]] = rf;
+                OGR_F_Destroy(f);
+            }
+        }
+        if (ds) {
+            GDALClose(ds);
+        }
+        return out;
+    };
+    for (const int lod : {0, 1, 2}) {
+        for (const std::string crs : {"tree", "lonlat"}) {
+            const fs::path gpkg = dir / ("u" + std::to_string(lod) + crs + ".gpkg");
+            ASSERT_TRUE(tool("export", d + "tree " + gpkg.string() + " --level county --lod " + std::to_string(lod) +
+                                           " --crs " + crs));
+            std::map<std::string, OGRFieldType> ptypes, utypes;
+            auto points = read_layer(gpkg, "unit_points", ptypes);
+            auto units = read_layer(gpkg, "units", utypes);
+            ASSERT_EQ(points.size(), 3U);
+            ASSERT_EQ(units.size(), 3U);
+            // Integer in one file and real in the other: real; text stays text.
+            for (auto* types : {&ptypes, &utypes}) {
+                EXPECT_EQ((*types)["name"], OFTString);
+                EXPECT_EQ((*types)["ALAND"], OFTReal);
+                EXPECT_EQ((*types)["SHARE"], OFTReal);
+                EXPECT_EQ((*types)["NOTE"], OFTString);
+            }
+            const std::map<std::string, std::vector<std::string>> want{{"01001", {"Alpha", "100", "0.5", "x"}},
+                                                                       {"01002", {"Beta", "<null>", "2", "<null>"}},
+                                                                       {"02001", {"Gamma", "3.5", "1", "z"}}};
+            for (auto* layer : {&points, &units}) {
+                for (const auto& [code, values] : want) {
+                    const auto& f = (*layer)[code].fields;
+                    EXPECT_EQ(std::vector<std::string>({f.at("name"), f.at("ALAND"), f.at("SHARE"), f.at("NOTE")}),
+                              values)
+                        << code << " LOD " << lod << " " << crs;
+                }
+            }
+            for (auto& [code, p] : points) {
+                ASSERT_TRUE(units[code].geometry) << code;
+                EXPECT_TRUE(OGR_G_Within(p.geometry, units[code].geometry)) << code << " LOD " << lod << " " << crs;
+                if (crs == "lonlat") {
+                    // 01002's square: lon -99.9..-99.8, lat 40..40.1.
+                    const double lon = OGR_G_GetX(p.geometry, 0), lat = OGR_G_GetY(p.geometry, 0);
+                    if (code == "01002") {
+                        EXPECT_TRUE(lon > -99.9 && lon < -99.8 && lat > 40 && lat < 40.1) << lon << " " << lat;
+                    }
+                }
+            }
+            for (auto* layer : {&points, &units}) {
+                for (auto& [code, f] : *layer) {
+                    OGR_G_DestroyGeometry(f.geometry);
+                }
+            }
+        }
+    }
+    // GeoJSON: one layer, the points.
+    ASSERT_TRUE(tool("export", d + "tree " + d + "p.geojson --level county --layer unit_points"));
+    std::map<std::string, OGRFieldType> types;
+    auto gj = read_layer(dir / "p.geojson", "unit_points", types);
+    EXPECT_EQ(gj.size(), 3U);
+    EXPECT_EQ(gj["02001"].fields["name"], "Gamma");
+    for (auto& [code, f] : gj) {
+        OGR_G_DestroyGeometry(f.geometry);
+    }
+    fs::remove_all(dir);
+}

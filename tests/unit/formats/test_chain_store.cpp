@@ -137,7 +137,7 @@ TEST(ChainStore, NeighbourPointsAreVersionOneTwo)
     s.canonicalize();
     const std::string good = encode(s);
     const ChainStore back = decode(as_span(good), "x.tlc");
-    EXPECT_EQ(back.minor, 2);
+    EXPECT_EQ(back.minor, minor_version);
     EXPECT_EQ(encode(back), good);
     EXPECT_NE(to_text(back).find("point C neighbour 20,1"), std::string::npos) << to_text(back);
     auto with_crc = [](std::string b) {
@@ -176,24 +176,49 @@ TEST(ChainStore, UnitLocationUsesChainsWithTheUnitOnOneSideOnly)
     EXPECT_EQ(unit_location(s, B, {5, 5}), PointLocation::outside); // B's boundary here is one open chain
 }
 
-// Format golden: chain store files checked in at format 1.2 (tests/data/
-// formats/chain-store-1.2, written by tigerlod-ingest and -simplify from the
-// small-map golden) still read, as the same text, and re-encode to the same
-// bytes. When the format's version changes, these files stay: the test then
-// says whether the new reader still reads them.
+// Format goldens: chain store files checked in at each format version
+// (tests/data/formats/chain-store-1.2, written by tigerlod-ingest and
+// -simplify from the small-map golden; chain-store-1.3, by tigerlod-ingest
+// from a hand-made map with unit attributes) still read, as the same text.
+// A file of the current version re-encodes to its bytes; an older one
+// re-encodes to a current file that reads back as the same text but for
+// its version. When the format's version changes, these files stay: the
+// test then says whether the new reader still reads them.
 
-TEST(FormatGolden, ChainStore12ReadsAsItsTextAndReencodesToItsBytes)
+static void expect_golden_reads(const char* version, std::initializer_list<const char*> names, uint16_t minor)
 {
-    const std::filesystem::path dir = std::filesystem::path(TIGERLOD_SOURCE_DIR) / "tests/data/formats/chain-store-1.2";
+    const std::filesystem::path dir =
+        std::filesystem::path(TIGERLOD_SOURCE_DIR) / "tests/data/formats" / (std::string("chain-store-") + version);
     size_t files = 0;
-    for (const char* name : {"unit-1", "unit-1-eps-8m"}) {
+    for (const char* name : names) {
         SCOPED_TRACE(name);
         const auto tlc = dir / (std::string(name) + ".tlc");
         const auto store = chains::read(tlc);
-        EXPECT_EQ(store.minor, 2U);
-        EXPECT_EQ(chains::to_text(store), tigerlod::testing::slurp(dir / (std::string(name) + ".txt")));
-        EXPECT_EQ(chains::encode(store), tigerlod::testing::slurp(tlc));
+        EXPECT_EQ(store.minor, minor);
+        const std::string text = tigerlod::testing::slurp(dir / (std::string(name) + ".txt"));
+        EXPECT_EQ(chains::to_text(store), text);
+        const std::string again = chains::encode(store);
+        if (minor == minor_version) {
+            EXPECT_EQ(again, tigerlod::testing::slurp(tlc));
+        } else {
+            const auto back = decode(as_span(again), "again");
+            EXPECT_EQ(back.minor, minor_version);
+            const std::string old_head = "chain-store 1." + std::to_string(minor) + "\n";
+            ASSERT_EQ(text.substr(0, old_head.size()), old_head);
+            EXPECT_EQ(chains::to_text(back),
+                      "chain-store 1." + std::to_string(minor_version) + "\n" + text.substr(old_head.size()));
+        }
         ++files;
     }
-    EXPECT_EQ(files, 2U);
+    EXPECT_EQ(files, names.size());
+}
+
+TEST(FormatGolden, ChainStore12ReadsAsItsTextAndReencodesAsTheCurrentVersion)
+{
+    expect_golden_reads("1.2", {"unit-1", "unit-1-eps-8m"}, 2);
+}
+
+TEST(FormatGolden, ChainStore13WithUnitAttributesReadsAsItsTextAndReencodesToItsBytes)
+{
+    expect_golden_reads("1.3", {"county-01"}, 3);
 }

@@ -142,15 +142,17 @@ TEST(UnitPolygons, AnOpenBoundaryIsIncomplete)
     EXPECT_TRUE(polygons(chains, {0, 1}, 0, U).polygons.empty());
 }
 
-// Format golden: a Data Tree checked in at format 2.0 (tests/data/formats/
-// data-tree-2.0, packed from the small-map golden) opens, its skeleton
-// re-encodes to the same bytes, and every node at every LOD decodes to the
-// same text. When the format's version changes, the tree stays: the test
-// then says whether the new reader still reads it.
+// Format goldens: Data Trees checked in at format 2.0 (tests/data/formats/
+// data-tree-2.0, packed from the small-map golden) and 2.2 (data-tree-2.2,
+// packed from a hand-made map whose counties have names and attributes)
+// open, their skeletons re-encode to the same bytes, and every node at every
+// LOD decodes to the same text, its units with it (none before 2.2). When the
+// format's version changes, the trees stay: the test then says whether the
+// new reader still reads them.
 
-TEST(FormatGolden, DataTree20ReadsAsItsText)
+static void expect_tree_reads_as_its_text(const char* folder, size_t nodes_expected)
 {
-    const std::filesystem::path dir = std::filesystem::path(TIGERLOD_SOURCE_DIR) / "tests/data/formats/data-tree-2.0";
+    const std::filesystem::path dir = std::filesystem::path(TIGERLOD_SOURCE_DIR) / "tests/data/formats" / folder;
     std::string error;
     const auto tree = reader::Tree::open(dir, error);
     ASSERT_TRUE(tree) << error;
@@ -164,5 +166,25 @@ TEST(FormatGolden, DataTree20ReadsAsItsText)
         }
     }
     EXPECT_EQ(nodes, tigerlod::testing::slurp(dir / "nodes.txt"));
-    EXPECT_EQ(tree->skeleton().nodes.size(), 3U);
+    EXPECT_EQ(tree->skeleton().nodes.size(), nodes_expected);
+}
+
+TEST(FormatGolden, DataTree20ReadsAsItsText)
+{
+    expect_tree_reads_as_its_text("data-tree-2.0", 3);
+}
+
+TEST(FormatGolden, DataTree22ReadsAsItsTextWithItsUnits)
+{
+    expect_tree_reads_as_its_text("data-tree-2.2", 2);
+    std::string error;
+    const auto tree =
+        reader::Tree::open(std::filesystem::path(TIGERLOD_SOURCE_DIR) / "tests/data/formats/data-tree-2.2", error);
+    ASSERT_TRUE(tree) << error;
+    datatree::UnitTable units;
+    ASSERT_TRUE(tree->read_units(1, units).ok());
+    ASSERT_EQ(units.units.size(), 3U);
+    EXPECT_EQ(units.units[2].code, "01003");
+    EXPECT_EQ(units.units[2].name, "Gamma \xc3\xa9");
+    EXPECT_EQ(units.units[2].values, (std::vector<std::string>{"7", "1.25", "z"}));
 }

@@ -106,6 +106,12 @@ class Verify : public ::testing::Test {
                 for (const auto& l : sk.nodes[n].lods) {
                     payloads[n].push_back(get(l.payload));
                 }
+                // Its units payload, where it follows the last LOD's (Data Tree 2.2).
+                const std::string& tile = tree.tile_bytes[sk.nodes[n].lods.back().payload.tile];
+                const uint64_t at = datatree::units_at(sk.nodes[n]);
+                const auto [size, crc] =
+                    datatree::units_body(std::as_bytes(std::span(tile.data() + at, tile.size() - at)), "units");
+                payloads[n].push_back(tile.substr(at, datatree::units_head_size + size));
             }
             tamper(tree, payloads);
             pack::layout_tiles(tree, std::move(payloads), 1ULL << 30);
