@@ -119,6 +119,119 @@ struct SegmentKeyHash {
     }
 };
 
+/// What verify found, keyed as the CGAL check keys its own: meetings within
+/// one LOD by (level, LOD, chains), across two LODs by (level, chains).
+using Within = std::set<std::tuple<std::string, uint32_t, uint64_t, uint64_t>>;
+using Across = std::set<std::tuple<std::string, uint64_t, uint64_t>>;
+
+void verify_pairs(const Report& report, Within& within, Across& across)
+{
+    for (const auto& v : report.items) {
+        if (v.chains.empty()) {
+            continue;
+        }
+        if (v.kind == "crossings" || v.kind == "overlaps" || v.kind == "self_intersections") {
+            within.insert({v.level, v.lod, v.chains.front(), v.chains.back()});
+        } else if (v.kind == "lod_crossings") {
+            across.insert({v.level, v.chains.front(), v.chains.back()});
+        }
+    }
+}
+
+/// Level l's chains at every LOD, each once, from the first node that shows
+/// it; a payload that does not decode is left out (verify reports it).
+std::vector<LodMap> level_maps(const reader::Tree& tree, uint32_t l)
+{
+    const auto& sk = tree.skeleton();
+    const size_t lods = sk.lod_eps_m.size();
+    std::vector<LodMap> maps(lods);
+    std::vector<std::set<uint64_t>> seen(lods);
+    for (uint32_t n = 0; n < sk.nodes.size(); ++n) {
+        if (sk.nodes[n].level != l || sk.nodes[n].chains == 0) {
+            continue;
+        }
+        datatree::ChainTable table;
+        if (!tree.read_table(n, table).ok()) {
+            continue;
+        }
+        for (uint32_t k = 0; k < lods; ++k) {
+            datatree::Geometry g;
+            if (!tree.read_geometry(n, k, g).ok()) {
+                continue;
+            }
+            for (size_t c = 0; c < table.chains.size() && c < g.chain_count(); ++c) {
+                if (seen[k].insert(table.chains[c].id).second) {
+                    const auto pts = g.chain(c);
+                    maps[k].ids.push_back(table.chains[c].id);
+                    maps[k].chains.emplace_back(pts.begin(), pts.end());
+                }
+            }
+        }
+    }
+    return maps;
+}
+
+/// One level at every LOD: its segments, their boxes (made once per LOD;
+/// each sweep sorts a copy) and each LOD's directed segments by chain.
+struct LevelSegments {
+    std::vector<LodMap> maps;
+    std::vector<std::vector<Seg>> segs;
+    std::vector<std::vector<Box>> boxes;
+    std::vector<std::unordered_set<SegmentKey, SegmentKeyHash>> has;
+};
+
+LevelSegments level_segments(std::vector<LodMap> maps)
+{
+    LevelSegments ls;
+    ls.maps = std::move(maps);
+    const size_t lods = ls.maps.size();
+    ls.segs.resize(lods);
+    ls.boxes.resize(lods);
+    ls.has.resize(lods);
+    for (size_t k = 0; k < lods; ++k) {
+        ls.segs[k] = segments_of(ls.maps[k]);
+        ls.boxes[k] = boxes_of(ls.segs[k]);
+        for (const auto& s : ls.segs[k]) {
+            ls.has[k].insert({ls.maps[k].ids[s.chain], s.a, s.b});
+        }
+    }
+    return ls;
+}
+
+/// The chain pairs that meet at LOD k (a chain meeting itself included).
+std::set<Pair> meetings_within(const LevelSegments& ls, size_t k)
+{
+    std::set<Pair> found;
+    auto boxes = ls.boxes[k];
+    CGAL::box_self_intersection_d(boxes.begin(), boxes.end(), [&](const Box& x, const Box& y) {
+        const Seg &s = ls.segs[k][x.info()], &t = ls.segs[k][y.info()];
+        if (meet(s, t)) {
+            found.insert(ordered(ls.maps[k].ids[s.chain], ls.maps[k].ids[t.chain]));
+        }
+    });
+    return found;
+}
+
+/// The pairs of different chains that meet at LODs i and j, but for a
+/// meeting that one of the two segments also has at the other LOD (that
+/// LOD's own, found within it).
+std::set<Pair> meetings_across(const LevelSegments& ls, size_t i, size_t j)
+{
+    std::set<Pair> across;
+    auto bi = ls.boxes[i], bj = ls.boxes[j];
+    CGAL::box_intersection_d(bi.begin(), bi.end(), bj.begin(), bj.end(), [&](const Box& x, const Box& y) {
+        const Seg &s = ls.segs[i][x.info()], &t = ls.segs[j][y.info()];
+        const uint64_t a = ls.maps[i].ids[s.chain], b = ls.maps[j].ids[t.chain];
+        if (a == b || ls.has[i].contains({b, t.a, t.b}) || ls.has[j].contains({a, s.a, s.b})) {
+            return;
+        }
+        if (meet(s, t)) {
+            across.insert(ordered(a, b));
+        }
+    });
+    return across;
+}
+
 } // namespace
 
 CgalCheck cgal_check(const reader::Tree& tree, const Report& report)
@@ -127,67 +240,19 @@ CgalCheck cgal_check(const reader::Tree& tree, const Report& report)
     const auto& sk = tree.skeleton();
     const size_t lods = sk.lod_eps_m.size();
     CgalCheck out;
-    // What verify found, keyed as the CGAL check keys it.
-    std::set<std::tuple<std::string, uint32_t, uint64_t, uint64_t>> verify_within;
-    std::set<std::tuple<std::string, uint64_t, uint64_t>> verify_across;
-    for (const auto& v : report.items) {
-        if (v.chains.empty()) {
-            continue;
-        }
-        if (v.kind == "crossings" || v.kind == "overlaps" || v.kind == "self_intersections") {
-            verify_within.insert({v.level, v.lod, v.chains.front(), v.chains.back()});
-        } else if (v.kind == "lod_crossings") {
-            verify_across.insert({v.level, v.chains.front(), v.chains.back()});
-        }
-    }
-    std::set<std::tuple<std::string, uint32_t, uint64_t, uint64_t>> cgal_within;
-    std::set<std::tuple<std::string, uint64_t, uint64_t>> cgal_across;
+    Within verify_within, cgal_within;
+    Across verify_across, cgal_across;
+    verify_pairs(report, verify_within, verify_across);
     for (uint32_t l = 0; l < sk.level_names.size(); ++l) {
         const std::string& level = sk.level_names[l];
-        std::vector<LodMap> maps(lods);
-        std::vector<std::set<uint64_t>> seen(lods);
-        for (uint32_t n = 0; n < sk.nodes.size(); ++n) {
-            if (sk.nodes[n].level != l || sk.nodes[n].chains == 0) {
-                continue;
-            }
-            datatree::ChainTable table;
-            if (!tree.read_table(n, table).ok()) {
-                continue; // verify reports it as a skeleton violation
-            }
-            for (uint32_t k = 0; k < lods; ++k) {
-                datatree::Geometry g;
-                if (!tree.read_geometry(n, k, g).ok()) {
-                    continue;
-                }
-                for (size_t c = 0; c < table.chains.size() && c < g.chain_count(); ++c) {
-                    if (seen[k].insert(table.chains[c].id).second) {
-                        const auto pts = g.chain(c);
-                        maps[k].ids.push_back(table.chains[c].id);
-                        maps[k].chains.emplace_back(pts.begin(), pts.end());
-                    }
-                }
-            }
-        }
-        std::vector<std::vector<Seg>> segs(lods);
-        std::vector<std::unordered_set<SegmentKey, SegmentKeyHash>> has(lods);
-        for (uint32_t k = 0; k < lods; ++k) {
-            segs[k] = segments_of(maps[k]);
-            out.segments += segs[k].size();
-            for (const auto& s : segs[k]) {
-                has[k].insert({maps[k].ids[s.chain], s.a, s.b});
-            }
+        const LevelSegments ls = level_segments(level_maps(tree, l));
+        for (const auto& segs : ls.segs) {
+            out.segments += segs.size();
         }
         // Within each LOD; LOD 0's meetings are the input's.
         std::set<Pair> input;
         for (uint32_t k = 0; k < lods; ++k) {
-            std::set<Pair> found;
-            auto boxes = boxes_of(segs[k]);
-            CGAL::box_self_intersection_d(boxes.begin(), boxes.end(), [&](const Box& x, const Box& y) {
-                const Seg &s = segs[k][x.info()], &t = segs[k][y.info()];
-                if (meet(s, t)) {
-                    found.insert(ordered(maps[k].ids[s.chain], maps[k].ids[t.chain]));
-                }
-            });
+            const std::set<Pair> found = meetings_within(ls, k);
             if (k == 0) {
                 input = found;
             }
@@ -198,26 +263,13 @@ CgalCheck cgal_check(const reader::Tree& tree, const Report& report)
             }
         }
         out.input_pairs += input.size();
-        // Across two LODs: different chains, and not a meeting one LOD already has.
-        std::set<Pair> across;
         for (uint32_t i = 0; i < lods; ++i) {
             for (uint32_t j = i + 1; j < lods; ++j) {
-                auto bi = boxes_of(segs[i]), bj = boxes_of(segs[j]);
-                CGAL::box_intersection_d(bi.begin(), bi.end(), bj.begin(), bj.end(), [&](const Box& x, const Box& y) {
-                    const Seg &s = segs[i][x.info()], &t = segs[j][y.info()];
-                    const uint64_t a = maps[i].ids[s.chain], b = maps[j].ids[t.chain];
-                    if (a == b || has[i].contains({b, t.a, t.b}) || has[j].contains({a, s.a, s.b})) {
-                        return;
+                for (const auto& p : meetings_across(ls, i, j)) {
+                    if (!input.contains(p)) {
+                        cgal_across.insert({level, p.first, p.second});
                     }
-                    if (meet(s, t)) {
-                        across.insert(ordered(a, b));
-                    }
-                });
-            }
-        }
-        for (const auto& p : across) {
-            if (!input.contains(p)) {
-                cgal_across.insert({level, p.first, p.second});
+                }
             }
         }
     }

@@ -244,6 +244,7 @@ struct NodeResult {
     uint64_t points = 0;
     double ground_ratio = 0; ///< LevelLod::ground_ratio_max of the node
     uint64_t ground_geodesics = 0;
+    double ground_seconds = 0; ///< spent in check_ground
 };
 
 /// Which unit of a node's map contains each user point (found on the original map).
@@ -689,6 +690,7 @@ class Verifier {
             ll.points += r.points;
             ll.ground_ratio_max = std::max(ll.ground_ratio_max, r.ground_ratio);
             ll.ground_geodesics += r.ground_geodesics;
+            m_report.ground_seconds += r.ground_seconds;
             for (auto& v : r.violations) {
                 v.level = level;
                 v.lod = k;
@@ -1069,7 +1071,9 @@ class Verifier {
         if (k > 0 && m_options.ground) {
             // Measured even where the planar check failed (the report's
             // largest ratio is then the ground's), reported only where it did not.
+            const auto g0 = std::chrono::steady_clock::now();
             check_ground(r, e.id, *o.store, *o.info, orig, pts, at, k, exceeded ? nullptr : &violation);
+            r.ground_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - g0).count();
         }
         // Check 4: rings keep 3 vertices and their orientation.
         if (e.flags & chains::chain_closed) {
@@ -1359,6 +1363,7 @@ Report merge_reports(std::vector<Report>&& shares, const std::vector<std::string
         out.ground = r.ground;
         out.ground_ratio_max = std::max(out.ground_ratio_max, r.ground_ratio_max);
         out.ground_geodesics += r.ground_geodesics;
+        out.ground_seconds += r.ground_seconds;
         for (const auto& [k, v] : r.violations) {
             out.violations[k] += v;
         }

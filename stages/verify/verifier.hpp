@@ -97,6 +97,9 @@ struct Report {
     std::vector<Violation> items;
     uint64_t items_dropped = 0;
     double seconds = 0;
+    /// Time the ground check took, summed over the threads that ran it
+    /// (the rest of a verify's work at one thread is seconds minus this).
+    double ground_seconds = 0;
     uint64_t total() const
     {
         uint64_t n = 0;

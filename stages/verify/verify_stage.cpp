@@ -403,6 +403,7 @@ json report_json(const Report& r, const Options& options, const std::string& tre
     report["items"] = items;
     report["items_dropped"] = r.items_dropped;
     report["seconds"] = r.seconds;
+    report["ground_seconds"] = r.ground_seconds;
     report["segments_per_second"] = r.seconds > 0 ? double(r.segments) / r.seconds : 0.0;
 
     return report;
@@ -472,8 +473,8 @@ void print_summary(const Report& r, const std::string& tree, const std::string& 
                 static_cast<unsigned long long>(r.points), r.seconds);
     if (r.ground) {
         std::printf("  on the ellipsoid: skipped vertices at most %.6f of their eps from their shortcuts "
-                    "(%llu measured by geodesics)\n",
-                    r.ground_ratio_max, static_cast<unsigned long long>(r.ground_geodesics));
+                    "(%llu measured by geodesics; %.1f s of the threads' time)\n",
+                    r.ground_ratio_max, static_cast<unsigned long long>(r.ground_geodesics), r.ground_seconds);
     } else {
         std::printf("  on the ellipsoid: not checked (the tree's eps are projected metres: projection_scale off)\n");
     }
@@ -684,6 +685,7 @@ Report report_from_json(const json& j)
     }
     r.items_dropped = j.at("items_dropped");
     r.seconds = j.at("seconds");
+    r.ground_seconds = j.value("ground_seconds", 0.0);
     return r;
 }
 
