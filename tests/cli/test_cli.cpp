@@ -214,7 +214,8 @@ TEST_F(Cli, HelpAndVersion)
         {"pack", {"Draco ", "chain store format ", "Data Tree format "}},
         {"export", {"GDAL ", "Data Tree format "}},
         {"verify", {"GDAL ", "GeographicLib ", "chain store format ", "Data Tree format "}},
-        {"synth", {"GDAL ", "zlib "}}};
+        {"synth", {"GDAL ", "zlib "}},
+        {"serve", {"cpp-httplib ", "Data Tree format "}}};
     for (const auto& [tool, libs] : versions) {
         SCOPED_TRACE(tool);
         const Result h = run(tool, "--help");

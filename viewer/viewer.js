@@ -1,0 +1,210 @@
+// The tigerlod viewer: the server chooses the front for the view (the
+// reader runtime's Algorithm 6.1, one implementation: /api/front), the page
+// holds the decoded payloads under a byte budget and draws them. Keys: L
+// colours by LOD, U shows unit labels, 0 frames the map again.
+
+const budgetBytes = Number(new URLSearchParams(location.search).get("budget_mb") ?? 32) * 1024 * 1024;
+const canvas = document.getElementById("map");
+const ctx = canvas.getContext("2d");
+const hud = document.getElementById("hud");
+const state = { tree: null, cx: 0, cy: 0, upp: 1, lodColours: false, labels: true, front: [], frameMs: 0 };
+const cache = new Map(); // "node/lod" -> { geometry, bytes, used }
+const units = new Map(); // node -> units payload (JSON)
+const stats = { loads: 0, evictions: 0, resident: 0, peak: 0, errors: 0 };
+let clock = 0;
+
+function parseGeometry(buffer) {
+  const view = new DataView(buffer);
+  const chains = view.getUint32(0, true), points = view.getUint32(4, true);
+  const offsets = new Uint32Array(buffer.slice(8, 8 + 4 * (chains + 1)));
+  const xy = new Int32Array(buffer.slice(8 + 4 * (chains + 1), 8 + 4 * (chains + 1) + 8 * points));
+  return { chains, offsets, xy };
+}
+
+function evictFor(bytes, keep) {
+  // Least recently used first, never what the current front draws.
+  const entries = [...cache.entries()].filter(([k]) => !keep.has(k)).sort((a, b) => a[1].used - b[1].used);
+  while (stats.resident + bytes > budgetBytes && entries.length > 0) {
+    const [k, e] = entries.shift();
+    cache.delete(k);
+    stats.resident -= e.bytes;
+    stats.evictions++;
+  }
+  return stats.resident + bytes <= budgetBytes;
+}
+
+async function load(node, lod, keep) {
+  const key = `${node}/${lod}`;
+  if (cache.has(key)) {
+    cache.get(key).used = ++clock;
+    return;
+  }
+  const response = await fetch(`/api/node/${node}/${lod}`);
+  if (!response.ok) {
+    stats.errors++;
+    return;
+  }
+  const buffer = await response.arrayBuffer();
+  if (cache.has(key) || !evictFor(buffer.byteLength, keep)) {
+    return;
+  }
+  cache.set(key, { geometry: parseGeometry(buffer), bytes: buffer.byteLength, used: ++clock });
+  stats.resident += buffer.byteLength;
+  stats.peak = Math.max(stats.peak, stats.resident);
+  stats.loads++;
+}
+
+async function loadUnits(node) {
+  if (units.has(node)) return;
+  units.set(node, null);
+  const response = await fetch(`/api/units/${node}`);
+  if (response.ok) units.set(node, await response.json());
+}
+
+function frame() {
+  const tree = state.tree;
+  const root = tree.nodes[0].box;
+  state.cx = (root[0] + root[2]) / 2;
+  state.cy = (root[1] + root[3]) / 2;
+  state.upp = Math.max((root[2] - root[0]) / canvas.width, (root[3] - root[1]) / canvas.height) * 1.05;
+}
+
+let pending = null, again = false;
+async function update() {
+  // One front request at a time; a view change meanwhile asks again after it.
+  if (pending) {
+    again = true;
+    return pending;
+  }
+  pending = fetchFront();
+  await pending;
+  pending = null;
+  if (again) {
+    again = false;
+    await update();
+  }
+}
+
+async function fetchFront() {
+  const w = canvas.width, h = canvas.height;
+  const q = `cx=${state.cx}&cy=${state.cy}&upp=${state.upp}&w=${w}&h=${h}`;
+  const response = await fetch(`/api/front?${q}`);
+  const front = (await response.json()).front;
+  const keep = new Set(front.map(([n, k]) => `${n}/${k}`));
+  await Promise.all(front.map(([n, k]) => load(n, k, keep)));
+  if (state.labels) await Promise.all(front.map(([n]) => loadUnits(n)));
+  state.front = front;
+  draw();
+}
+
+const lodPalette = ["#000000", "#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e", "#e6ab02", "#a6761d"];
+
+function draw() {
+  const t0 = performance.now();
+  const w = canvas.width, h = canvas.height;
+  ctx.clearRect(0, 0, w, h);
+  const sx = (x) => (x - state.cx) / state.upp + w / 2;
+  const sy = (y) => h / 2 - (y - state.cy) / state.upp;
+  ctx.lineWidth = Math.max(1, devicePixelRatio);
+  for (const [node, lod] of state.front) {
+    const e = cache.get(`${node}/${lod}`);
+    if (!e) continue;
+    const { chains, offsets, xy } = e.geometry;
+    ctx.strokeStyle = state.lodColours ? lodPalette[lod % lodPalette.length] : "#333333";
+    ctx.beginPath();
+    for (let c = 0; c < chains; c++) {
+      for (let i = offsets[c]; i < offsets[c + 1]; i++) {
+        const x = sx(xy[2 * i]), y = sy(xy[2 * i + 1]);
+        if (i === offsets[c]) ctx.moveTo(x, y); else ctx.lineTo(x, y);
+      }
+    }
+    ctx.stroke();
+  }
+  if (state.labels) {
+    // Each unit's name (or code) at its internal point, once few enough are in view to read.
+    const shown = [];
+    for (const [node] of state.front) {
+      for (const unit of units.get(node)?.units ?? []) {
+        const x = sx(unit.point[0]), y = sy(unit.point[1]);
+        if (x >= 0 && y >= 0 && x <= w && y <= h) shown.push([unit.name || unit.code, x, y]);
+      }
+    }
+    if (shown.length <= 150) {
+      ctx.fillStyle = "#7a2e0e";
+      ctx.font = `${11 * devicePixelRatio}px system-ui, sans-serif`;
+      ctx.textAlign = "center";
+      for (const [text, x, y] of shown) ctx.fillText(text, x, y);
+    }
+  }
+  state.frameMs = performance.now() - t0;
+  const lods = state.front.map(([, k]) => k);
+  hud.textContent =
+    `frame ${state.frameMs.toFixed(1)} ms   front ${state.front.length} nodes (LODs ${Math.min(...lods)}-${Math.max(...lods)})\n` +
+    `resident ${(stats.resident / 1048576).toFixed(2)} of ${(budgetBytes / 1048576).toFixed(0)} MiB   ` +
+    `loads ${stats.loads}   evictions ${stats.evictions}   errors ${stats.errors}\n` +
+    `L: colour by LOD (${state.lodColours ? "on" : "off"})   U: labels   0: frame the map`;
+  // A scale bar in projected metres (the grid's), about 120 px long.
+  const metres = 120 * state.upp * state.tree.grid_m;
+  const nice = Math.pow(10, Math.floor(Math.log10(metres)));
+  const length = [5, 2, 1].map((m) => m * nice).find((m) => m <= metres) ?? nice;
+  document.getElementById("bar").style.width = `${length / (state.upp * state.tree.grid_m) / devicePixelRatio}px`;
+  document.getElementById("label").textContent = length >= 1000 ? `${length / 1000} km` : `${length} m`;
+  window.tigerlodStats = { ...stats, budget: budgetBytes, front: state.front, frameMs: state.frameMs };
+}
+
+function resize() {
+  canvas.width = innerWidth * devicePixelRatio;
+  canvas.height = innerHeight * devicePixelRatio;
+}
+
+let drag = null;
+canvas.addEventListener("mousedown", (e) => { drag = { x: e.clientX, y: e.clientY }; });
+addEventListener("mouseup", () => { drag = null; });
+addEventListener("mousemove", (e) => {
+  if (!drag) return;
+  state.cx -= (e.clientX - drag.x) * devicePixelRatio * state.upp;
+  state.cy += (e.clientY - drag.y) * devicePixelRatio * state.upp;
+  drag = { x: e.clientX, y: e.clientY };
+  draw();
+  update();
+});
+canvas.addEventListener("wheel", (e) => {
+  e.preventDefault();
+  const f = Math.exp(e.deltaY * 0.002);
+  const px = (e.clientX * devicePixelRatio - canvas.width / 2) * state.upp;
+  const py = (canvas.height / 2 - e.clientY * devicePixelRatio) * state.upp;
+  state.cx += px * (1 - f);
+  state.cy += py * (1 - f);
+  state.upp *= f;
+  draw();
+  update();
+}, { passive: false });
+addEventListener("keydown", (e) => {
+  if (e.key === "l" || e.key === "L") state.lodColours = !state.lodColours;
+  if (e.key === "u" || e.key === "U") state.labels = !state.labels;
+  if (e.key === "0") frame();
+  draw();
+  update();
+});
+addEventListener("resize", () => { resize(); draw(); update(); });
+
+// For scripted use (tests, a camera path): fly to a view and wait for it.
+window.tigerlodView = async (cx, cy, upp) => {
+  state.cx = cx; state.cy = cy; state.upp = upp;
+  await update();
+  return window.tigerlodStats;
+};
+
+resize();
+state.tree = await (await fetch("/api/tree")).json();
+frame();
+// A view in the address (?cx=&cy=&upp=, grid units): a link to a place.
+const params = new URLSearchParams(location.search);
+if (params.has("cx") && params.has("cy") && params.has("upp")) {
+  state.cx = Number(params.get("cx"));
+  state.cy = Number(params.get("cy"));
+  state.upp = Number(params.get("upp"));
+}
+if (params.get("lod_colours") === "1") state.lodColours = true;
+await update();
+window.tigerlodReady = true;
