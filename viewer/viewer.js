@@ -70,19 +70,21 @@ function frame() {
 }
 
 let pending = null, again = false;
-async function update() {
-  // One front request at a time; a view change meanwhile asks again after it.
+function update() {
+  // One front request at a time; a view change meanwhile asks again after
+  // it, and whoever waits resolves once the front of the latest view is drawn.
   if (pending) {
     again = true;
     return pending;
   }
-  pending = fetchFront();
-  await pending;
-  pending = null;
-  if (again) {
-    again = false;
-    await update();
-  }
+  pending = (async () => {
+    do {
+      again = false;
+      await fetchFront();
+    } while (again);
+    pending = null;
+  })();
+  return pending;
 }
 
 async function fetchFront() {
