@@ -7,9 +7,11 @@ const budgetBytes = Number(new URLSearchParams(location.search).get("budget_mb")
 const canvas = document.getElementById("map");
 const ctx = canvas.getContext("2d");
 const hud = document.getElementById("hud");
-const state = { tree: null, cx: 0, cy: 0, upp: 1, lodColours: false, labels: true, front: [], frameMs: 0 };
+const state = { tree: null, cx: 0, cy: 0, upp: 1, lodColours: false, labels: true, front: [], frameMs: 0,
+                hover: null, violations: [], pinned: null };
 const cache = new Map(); // "node/lod" -> { geometry, bytes, used }
 const units = new Map(); // node -> units payload (JSON)
+const tables = new Map(); // node -> chain table (JSON): ids, left, right units
 const stats = { loads: 0, evictions: 0, resident: 0, peak: 0, errors: 0 };
 let clock = 0;
 
@@ -61,6 +63,38 @@ async function loadUnits(node) {
   if (response.ok) units.set(node, await response.json());
 }
 
+async function loadTable(node) {
+  if (tables.has(node)) return tables.get(node);
+  const response = await fetch(`/api/table/${node}`);
+  const t = response.ok ? await response.json() : null;
+  tables.set(node, t);
+  return t;
+}
+
+// The unit under a point of the grid, from what is drawn: the first chain
+// segment a ray from the point to the east crosses, and the side of it the
+// point is on (a chain has its left and right units; the map's chains bound
+// every unit). Exact for the drawn LOD, which keeps every unit's point inside.
+function unitAt(gx, gy) {
+  let best = null;
+  for (const [node, lod] of state.front) {
+    const e = cache.get(`${node}/${lod}`), t = tables.get(node);
+    if (!e || !t) continue;
+    const { chains, offsets, xy } = e.geometry;
+    for (let c = 0; c < chains; c++) {
+      for (let i = offsets[c]; i + 1 < offsets[c + 1]; i++) {
+        const ax = xy[2 * i], ay = xy[2 * i + 1], bx = xy[2 * i + 2], by = xy[2 * i + 3];
+        if ((ay > gy) === (by > gy)) continue;
+        const x = ax + ((gy - ay) * (bx - ax)) / (by - ay);
+        if (x < gx || (best && x >= best.x)) continue;
+        // Going up (north), the point to the west of the segment is on its left.
+        best = { x, unit: by > ay ? t.left[c] : t.right[c], node };
+      }
+    }
+  }
+  return best && best.unit ? best : null;
+}
+
 function frame() {
   const tree = state.tree;
   const root = tree.nodes[0].box;
@@ -94,6 +128,7 @@ async function fetchFront() {
   const front = (await response.json()).front;
   const keep = new Set(front.map(([n, k]) => `${n}/${k}`));
   await Promise.all(front.map(([n, k]) => load(n, k, keep)));
+  await Promise.all(front.map(([n]) => loadTable(n)));
   if (state.labels) await Promise.all(front.map(([n]) => loadUnits(n)));
   state.front = front;
   draw();
@@ -122,6 +157,28 @@ function draw() {
     }
     ctx.stroke();
   }
+  if (state.pinned?.geometry) {
+    // The chains of the violation clicked, at its LOD, over the map.
+    const { item, geometry, table } = state.pinned;
+    ctx.strokeStyle = "#d7191c";
+    ctx.lineWidth = 3 * devicePixelRatio;
+    ctx.beginPath();
+    for (let c = 0; c < geometry.chains; c++) {
+      if (!item.chains.includes(table.ids[c])) continue;
+      for (let i = geometry.offsets[c]; i < geometry.offsets[c + 1]; i++) {
+        const x = sx(geometry.xy[2 * i]), y = sy(geometry.xy[2 * i + 1]);
+        if (i === geometry.offsets[c]) ctx.moveTo(x, y); else ctx.lineTo(x, y);
+      }
+    }
+    ctx.stroke();
+    ctx.lineWidth = Math.max(1, devicePixelRatio);
+  }
+  for (const v of state.violations) {
+    ctx.fillStyle = v.kind === "input_problem" ? "rgba(120,120,120,0.8)" : "rgba(215,25,28,0.9)";
+    ctx.beginPath();
+    ctx.arc(sx(v.x), sy(v.y), 4 * devicePixelRatio, 0, 2 * Math.PI);
+    ctx.fill();
+  }
   if (state.labels) {
     // Each unit's name (or code) at its internal point, once few enough are in view to read.
     const shown = [];
@@ -144,14 +201,19 @@ function draw() {
     `frame ${state.frameMs.toFixed(1)} ms   front ${state.front.length} nodes (LODs ${Math.min(...lods)}-${Math.max(...lods)})\n` +
     `resident ${(stats.resident / 1048576).toFixed(2)} of ${(budgetBytes / 1048576).toFixed(0)} MiB   ` +
     `loads ${stats.loads}   evictions ${stats.evictions}   errors ${stats.errors}\n` +
-    `L: colour by LOD (${state.lodColours ? "on" : "off"})   U: labels   0: frame the map`;
+    `L: colour by LOD (${state.lodColours ? "on" : "off"})   U: labels   0: frame the map` +
+    (state.hover ? `\nunit ${state.hover.code}${state.hover.name ? " " + state.hover.name : ""}` : "") +
+    (state.pinned ? `\n${state.pinned.item.kind} at LOD ${state.pinned.item.lod} (${state.pinned.item.level} ${state.pinned.item.node}): ` +
+      `chains ${state.pinned.item.chains.join(", ")}; ${state.pinned.units}\n${state.pinned.item.detail}` : "") +
+    (state.violations.length ? `\n${state.violations.length} report items (click one)` : "");
   // A scale bar in projected metres (the grid's), about 120 px long.
   const metres = 120 * state.upp * state.tree.grid_m;
   const nice = Math.pow(10, Math.floor(Math.log10(metres)));
   const length = [5, 2, 1].map((m) => m * nice).find((m) => m <= metres) ?? nice;
   document.getElementById("bar").style.width = `${length / (state.upp * state.tree.grid_m) / devicePixelRatio}px`;
   document.getElementById("label").textContent = length >= 1000 ? `${length / 1000} km` : `${length} m`;
-  window.tigerlodStats = { ...stats, budget: budgetBytes, front: state.front, frameMs: state.frameMs };
+  window.tigerlodStats = { ...stats, budget: budgetBytes, front: state.front, frameMs: state.frameMs,
+                           hover: state.hover, pinned: state.pinned ? state.pinned.item : null };
 }
 
 function resize() {
@@ -162,8 +224,64 @@ function resize() {
 let drag = null;
 canvas.addEventListener("mousedown", (e) => { drag = { x: e.clientX, y: e.clientY }; });
 addEventListener("mouseup", () => { drag = null; });
+function toGrid(clientX, clientY) {
+  return [state.cx + (clientX * devicePixelRatio - canvas.width / 2) * state.upp,
+          state.cy + (canvas.height / 2 - clientY * devicePixelRatio) * state.upp];
+}
+
+async function hoverAt(clientX, clientY) {
+  const [gx, gy] = toGrid(clientX, clientY);
+  const hit = unitAt(gx, gy);
+  if (!hit) {
+    state.hover = null;
+  } else {
+    await loadUnits(hit.node);
+    const u = units.get(hit.node)?.units.find((x) => x.code === hit.unit);
+    state.hover = { code: hit.unit, name: u?.name ?? "" };
+  }
+  draw();
+  return state.hover;
+}
+
+// Fly to a report item and show its chains at its LOD, with their units.
+async function pin(item) {
+  const node = state.tree.nodes.findIndex((n, i) => (i === 0 ? item.node === "root" : n.code === item.node) &&
+                                          state.tree.levels[n.level] === item.level);
+  state.cx = item.x;
+  state.cy = item.y;
+  state.upp = Math.max(state.tree.lod_eps_m[item.lod] || 100, 100) / state.tree.grid_m / 20;
+  state.pinned = { item, geometry: null, table: null, units: "" };
+  if (node >= 0) {
+    const [g, t] = await Promise.all([fetch(`/api/node/${node}/${item.lod}`), loadTable(node)]);
+    if (g.ok && t) {
+      state.pinned.geometry = parseGeometry(await g.arrayBuffer());
+      state.pinned.table = t;
+      state.pinned.units = item.chains.map((id) => {
+        const c = t.ids.indexOf(id);
+        return c < 0 ? `${id}: not in node` : `${t.left[c] || "-"} | ${t.right[c] || "-"}`;
+      }).join("; ");
+    }
+  }
+  await update();
+  return state.pinned.item;
+}
+
+canvas.addEventListener("click", (e) => {
+  const hit = state.violations.find((v) => {
+    const dx = (v.x - state.cx) / state.upp + canvas.width / 2 - e.clientX * devicePixelRatio;
+    const dy = canvas.height / 2 - (v.y - state.cy) / state.upp - e.clientY * devicePixelRatio;
+    return dx * dx + dy * dy <= 64 * devicePixelRatio * devicePixelRatio;
+  });
+  if (hit) pin(hit);
+});
+
+let hoverTimer = null;
 addEventListener("mousemove", (e) => {
-  if (!drag) return;
+  if (!drag) {
+    clearTimeout(hoverTimer);
+    hoverTimer = setTimeout(() => hoverAt(e.clientX, e.clientY), 30);
+    return;
+  }
   state.cx -= (e.clientX - drag.x) * devicePixelRatio * state.upp;
   state.cy += (e.clientY - drag.y) * devicePixelRatio * state.upp;
   drag = { x: e.clientX, y: e.clientY };
@@ -190,7 +308,10 @@ addEventListener("keydown", (e) => {
 });
 addEventListener("resize", () => { resize(); draw(); update(); });
 
-// For scripted use (tests, a camera path): fly to a view and wait for it.
+// For scripted use (tests, a camera path): fly to a view and wait for it;
+// the unit at a point of the page; fly to report item i.
+window.tigerlodHover = (clientX, clientY) => hoverAt(clientX, clientY);
+window.tigerlodPin = (i) => pin(state.violations[i]);
 window.tigerlodView = async (cx, cy, upp) => {
   state.cx = cx; state.cy = cy; state.upp = upp;
   await update();
@@ -208,5 +329,9 @@ if (params.has("cx") && params.has("cy") && params.has("upp")) {
   state.upp = Number(params.get("upp"));
 }
 if (params.get("lod_colours") === "1") state.lodColours = true;
+if (state.tree.verify) {
+  const report = await (await fetch("/api/verify")).json();
+  state.violations = (report.items ?? []).filter((v) => Number.isFinite(v.x) && Number.isFinite(v.y));
+}
 await update();
 window.tigerlodReady = true;

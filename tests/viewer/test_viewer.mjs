@@ -5,8 +5,12 @@
 // view the page draws the front the server's reader chooses for that view
 // (the same nodes and LODs), something is drawn, and the bytes resident in
 // the page never exceed its budget; under the binding budget it evicts.
-// The keys L and U work. Prints the viewer's frame times and leaves
-// screenshots of three views in WORK.
+// The keys L and U work. At the last view, hovering over each unit's
+// internal point names that unit. A report item (written into the report
+// the server was given) shows as a marker; pinning it flies there and names
+// its chains' units as the chain table has them. Prints the viewer's frame
+// times and leaves screenshots of three views in WORK.
+import fs from "node:fs";
 import path from "node:path";
 
 const [pwDir, chromiumPath, base, work] = process.argv.slice(2);
@@ -72,6 +76,43 @@ async function walk(budgetMb, label) {
       await page.screenshot({ path: path.join(work, `view-${i}.png`) });
     }
     last = stats;
+  }
+  if (budgetMb >= 1) {
+    // Hover: every unit of the front's nodes whose internal point is in view.
+    const view = await page.evaluate(() => ({ dpr: devicePixelRatio }));
+    let checked = 0;
+    for (const [node] of last.front) {
+      const u = await (await fetch(`${base}/api/units/${node}`)).json();
+      for (const unit of u.units) {
+        const x = ((unit.point[0] - end.cx) / end.upp + w / 2) / view.dpr;
+        const y = (h / 2 - (unit.point[1] - end.cy) / end.upp) / view.dpr;
+        if (x < 2 || y < 2 || x > w / view.dpr - 2 || y > h / view.dpr - 2) continue;
+        const hover = await page.evaluate(([px, py]) => window.tigerlodHover(px, py), [x, y]);
+        checked++;
+        if (!hover || hover.code !== unit.code || hover.name !== unit.name) {
+          fail(`${label}: hovering at unit ${unit.code}'s internal point gives ${JSON.stringify(hover)}`);
+        }
+      }
+    }
+    if (checked < 3) fail(`${label}: only ${checked} units in view to hover over`);
+    console.log(`${label}: hover named ${checked} units at their internal points`);
+    // A report item on two chains of the state's county map at LOD 2.
+    const t = await (await fetch(`${base}/api/table/${tree.nodes.indexOf(state)}`)).json();
+    const g = new DataView(await (await fetch(`${base}/api/node/${tree.nodes.indexOf(state)}/2`)).arrayBuffer());
+    const chains = g.getUint32(0, true);
+    const x0 = g.getInt32(8 + 4 * (chains + 1), true), y0 = g.getInt32(12 + 4 * (chains + 1), true);
+    const item = { kind: "crossings", level: "county", lod: 2, node: "51", chains: [t.ids[0], t.ids[1]],
+                   x: x0, y: y0, lon: 0, lat: 0, detail: "a test item" };
+    fs.writeFileSync(path.join(work, "report.json"), JSON.stringify({ items: [item] }));
+    await page.reload();
+    await page.waitForFunction(() => window.tigerlodReady === true, null, { timeout: 30000 });
+    const pinned = await page.evaluate(() => window.tigerlodPin(0));
+    const hud = await page.evaluate(() => document.getElementById("hud").textContent);
+    const units = `${t.left[0] || "-"} | ${t.right[0] || "-"}; ${t.left[1] || "-"} | ${t.right[1] || "-"}`;
+    if (!pinned || pinned.detail !== "a test item" || !hud.includes(units) || !hud.includes("1 report items")) {
+      fail(`${label}: pinning the report item: ${JSON.stringify(pinned)}, HUD ${JSON.stringify(hud)}, want ${units}`);
+    }
+    await page.screenshot({ path: path.join(work, "view-pinned.png") });
   }
   await page.keyboard.press("L");
   await page.keyboard.press("U");

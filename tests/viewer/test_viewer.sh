@@ -49,7 +49,8 @@ YAML
 "$bin/tigerlod-simplify" --shortcut-test exact --tolerances 250,500,1000,2000 orig simp >simp.log 2>&1 ||
   { cat simp.log; exit 1; }
 "$bin/tigerlod-pack" orig simp tree >pack.log 2>&1 || { cat pack.log; exit 1; }
-"$bin/tigerlod-serve" --port 0 --viewer "$repo/viewer" tree >serve.out 2>&1 &
+echo '{"items": []}' >report.json # test_viewer.mjs writes its own items (the server reads it per request)
+"$bin/tigerlod-serve" --port 0 --viewer "$repo/viewer" --verify report.json tree >serve.out 2>&1 &
 server=$!
 port=
 for _ in $(seq 100); do
