@@ -256,6 +256,10 @@ std::vector<Key> stage_keys()
               "0", {0, 1e4}, {}, "disk-latency-ms", "render"),
         entry("render.disk_mbps", Type::number, "simulated disk: MB/s a payload is read at (0: no limit)", "0",
               {0, 1e6}, {}, "disk-mbps", "render"),
+        entry("render.gl", Type::choice,
+              "OpenGL backend: `auto` (a GPU through EGL where the machine has one, else OSMesa, as simplify "
+              "chooses; `--verbose` and the summary's `gl` say which ran and why), `osmesa` (llvmpipe) or `egl`",
+              "`auto`", {}, {"auto", "osmesa", "egl"}, "gl", "render"),
     };
 }
 

@@ -319,6 +319,62 @@ void traverse(const datatree::Skeleton& s, uint32_t node, const View& view, cons
 
 } // namespace
 
+datatree::Box main_extent(const Tree& tree, double fraction)
+{
+    const auto& s = tree.skeleton();
+    const datatree::Box root = s.nodes.front().box;
+    uint32_t deepest = 0;
+    for (const auto& n : s.nodes) {
+        deepest = std::max(deepest, n.level);
+    }
+    std::vector<int64_t> xs, ys;
+    for (uint32_t i = 0; i < s.nodes.size(); ++i) {
+        if (s.nodes[i].level != deepest) {
+            continue;
+        }
+        datatree::UnitTable t;
+        if (tree.read_units(i, t).ok() && !t.units.empty()) {
+            for (const auto& u : t.units) {
+                xs.push_back(u.point.x);
+                ys.push_back(u.point.y);
+            }
+        }
+    }
+    if (xs.empty()) { // no units payloads (a line layer, a tree before 2.2): the leaves' centres
+        for (const auto& n : s.nodes) {
+            if (n.child_count == 0 && n.chains > 0) {
+                xs.push_back((int64_t{n.box.min_x} + n.box.max_x) / 2);
+                ys.push_back((int64_t{n.box.min_y} + n.box.max_y) / 2);
+            }
+        }
+    }
+    if (xs.size() < 20 || !(fraction > 0 && fraction <= 1)) {
+        return root;
+    }
+    auto range = [&](std::vector<int64_t>& v, int32_t lo_limit, int32_t hi_limit) {
+        std::sort(v.begin(), v.end());
+        const double cut = (1 - fraction) / 2 * double(v.size() - 1);
+        const int64_t lo = v[static_cast<size_t>(std::floor(cut))];
+        const int64_t hi = v[static_cast<size_t>(std::ceil(double(v.size() - 1) - cut))];
+        const int64_t pad = (hi - lo) / 20;
+        return std::pair{static_cast<int32_t>(std::max<int64_t>(lo - pad, lo_limit)),
+                         static_cast<int32_t>(std::min<int64_t>(hi + pad, hi_limit))};
+    };
+    const auto [x0, x1] = range(xs, root.min_x, root.max_x);
+    const auto [y0, y1] = range(ys, root.min_y, root.max_y);
+    // The nodes of the finest map whose boxes centre in that range, whole:
+    // the main part's own outline, not the cloud of its units' points.
+    datatree::Box out{INT32_MAX, INT32_MAX, INT32_MIN, INT32_MIN};
+    for (const auto& n : s.nodes) {
+        const int64_t cx = (int64_t{n.box.min_x} + n.box.max_x) / 2, cy = (int64_t{n.box.min_y} + n.box.max_y) / 2;
+        if (n.level == deepest && n.chains > 0 && cx >= x0 && cx <= x1 && cy >= y0 && cy <= y1) {
+            out = {std::min(out.min_x, n.box.min_x), std::min(out.min_y, n.box.min_y), std::max(out.max_x, n.box.max_x),
+                   std::max(out.max_y, n.box.max_y)};
+        }
+    }
+    return out.min_x < out.max_x && out.min_y < out.max_y ? out : root;
+}
+
 uint32_t select_lod(const datatree::Skeleton& s, uint32_t node, const View& view, const FrontOptions& options)
 {
     const double metres_per_pixel = view.units_per_pixel * s.grid_m();

@@ -111,6 +111,16 @@ struct FrontItem {
 /// is below the threshold (LOD 0, the original, when none is). Depth-first order.
 std::vector<FrontItem> select_front(const datatree::Skeleton& s, const View& view, const FrontOptions& options = {});
 
+/// Where most of the map is, to frame an overview: the boxes, whole, of the
+/// nodes showing the finest map whose centres lie in the range, in x and in
+/// y apart, that holds the central `fraction` of that map's units (their
+/// internal points, from the units payloads; the leaf nodes' box centres
+/// for a tree without units), widened by 5 % of it on each side. A national
+/// map with territories far out (Alaska, Hawaii and the Pacific for the US)
+/// frames its main part; a compact one (a county) its whole box. The root's
+/// box when the units are too few (fewer than 20) or no node centres there.
+datatree::Box main_extent(const Tree& tree, double fraction = 0.95);
+
 /// The LOD Algorithm 6.1 picks for `node` in `view`.
 uint32_t select_lod(const datatree::Skeleton& s, uint32_t node, const View& view, const FrontOptions& options = {});
 

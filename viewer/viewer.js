@@ -96,8 +96,8 @@ function unitAt(gx, gy) {
 }
 
 function frame() {
-  const tree = state.tree;
-  const root = tree.nodes[0].box;
+  // Where most of the map is (the server's reader::main_extent).
+  const root = state.tree.frame;
   state.cx = (root[0] + root[2]) / 2;
   state.cy = (root[1] + root[3]) / 2;
   state.upp = Math.max((root[2] - root[0]) / canvas.width, (root[3] - root[1]) / canvas.height) * 1.05;

@@ -376,7 +376,7 @@ void RenderStage::add_args(ArgSet& args)
     args.group("Output");
     args.add("png-every", &m_png_every, "also write every N-th frame as OUTPUT/frames/MODE-NNNNN.png (0: none)", "N",
              {0, 1000000, false, false, true});
-    args.add("gl", &m_gl, "OpenGL backend", "NAME", {}, {"osmesa", "egl"});
+    config::add_option(args, "render.gl", &m_gl);
     args.add("overwrite", &m_overwrite, "replace OUTPUT if it exists");
 }
 
@@ -449,7 +449,9 @@ int RenderStage::run(const StageContext& ctx)
     if (m_png_every > 0) {
         fs::create_directories(out.path() / "frames");
     }
-    auto context = gl::Context::create(*gl::parse_backend(m_gl));
+    std::string gl_why = "--gl " + m_gl;
+    auto context = m_gl == "auto" ? gl::Context::create_auto(gl_why) : gl::Context::create(*gl::parse_backend(m_gl));
+    ctx.log.info("render: " + context->describe() + (m_gl == "auto" ? " (--gl auto: " + gl_why + ")" : ""));
     LineRenderer renderer(*context, m_width, m_height);
     reader::FrontOptions fo;
     fo.pixel_error = m_pixel_error;
@@ -481,10 +483,13 @@ int RenderStage::run(const StageContext& ctx)
     }
 
     run.progress = nullptr; // the previews are not on the path
-    // The previews: the whole tree, and the path's closest view.
+    // The previews: where most of the map is (reader::main_extent: the
+    // central 95 % of its finest units, so that far territories do not
+    // leave the main part a corner of the frame), and the path's closest view.
     const auto closest = *std::min_element(
         views.begin(), views.end(), [](const auto& a, const auto& b) { return a.units_per_pixel < b.units_per_pixel; });
-    write_png(out.path() / "overview.png", run.still(fit(sk.nodes[0].box, m_width, m_height)), m_width, m_height);
+    write_png(out.path() / "overview.png", run.still(fit(reader::main_extent(*tree), m_width, m_height)), m_width,
+              m_height);
     write_png(out.path() / "zoom.png", run.still(closest), m_width, m_height);
 
     json summary;
@@ -498,6 +503,7 @@ int RenderStage::run(const StageContext& ctx)
     summary["frames"] = views.size();
     summary["viewport"] = {m_width, m_height};
     summary["gl"] = context->describe();
+    summary["gl_choice"] = m_gl == "auto" ? "auto: " + gl_why : gl_why;
     summary["skeleton_bytes"] = skeleton;
     summary["disk"] = {{"latency_ms", m_disk_latency_ms}, {"mbps", m_disk_mbps}};
     summary["fps"] = m_fps;

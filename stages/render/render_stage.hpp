@@ -28,7 +28,7 @@ class RenderStage final : public Stage {
     std::vector<std::string> config_args(const std::filesystem::path& file) const override;
 
   private:
-    std::string m_tree, m_output, m_path = "zoom", m_mode = "all", m_size = "1280x720", m_gl = "osmesa";
+    std::string m_tree, m_output, m_path = "zoom", m_mode = "all", m_size = "1280x720", m_gl = "auto";
     int m_frames = 240, m_seed = 1, m_png_every = 0;
     double m_budget_mb = 25, m_disk_latency_ms = 0, m_disk_mbps = 0, m_pixel_error = 1, m_fps = 30;
     bool m_overwrite = false;

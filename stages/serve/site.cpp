@@ -149,6 +149,7 @@ Site::Site(std::shared_ptr<const reader::Tree> tree, SiteOptions options)
     Sha256 sha;
     sha.update(std::as_bytes(std::span(m_skeleton_bytes.data(), m_skeleton_bytes.size())));
     m_etag = "\"" + sha.hex_digest().substr(0, 32) + "\"";
+    m_frame = reader::main_extent(*m_tree);
     const auto& tiles = m_tree->skeleton().tiles;
     for (size_t t = 0; t < tiles.size(); ++t) {
         const fs::path file(tiles[t].file);
@@ -351,6 +352,7 @@ Response Site::api_tree() const
          {"levels", sk.level_names},
          {"lod_eps_m", sk.lod_eps_m},
          {"verify", !m_options.verify.empty()},
+         {"frame", {m_frame.min_x, m_frame.min_y, m_frame.max_x, m_frame.max_y}},
          {"nodes", nodes}},
         m_etag);
 }

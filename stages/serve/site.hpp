@@ -86,6 +86,7 @@ class Site {
     SiteOptions m_options;
     std::string m_skeleton_bytes;
     std::string m_etag;                    ///< of the skeleton: a digest of its bytes, quoted
+    datatree::Box m_frame;                 ///< reader::main_extent, for the viewer's first view
     std::map<std::string, size_t> m_tiles; ///< tile file name (no folder) -> index in the skeleton
     std::map<std::string, std::filesystem::path> m_viewer_files;
     mutable std::mutex m_mutex;

@@ -1,6 +1,7 @@
 // tigerlod-pack on a hand-made map of three levels: the border level of each
 // chain in each node's table (Data Tree 2.1).
 #include "formats/chains/chain_store.hpp"
+#include "reader/reader.hpp"
 #include "stages/pack/packer.hpp"
 
 #include <gtest/gtest.h>
@@ -135,4 +136,57 @@ TEST(Pack, EachChainCarriesItsBorderLevel)
     EXPECT_EQ(levels["11"], (M{{100, 0}, {101, 0}, {102, 2}, {103, 1}, {104, 1}})); // 11's tracts
     EXPECT_EQ(levels["12"], (M{{103, 1}, {104, 1}, {110, 0}, {111, 0}, {112, 0}}));
     EXPECT_EQ(levels["21"], (M{{112, 0}, {120, 0}}));
+}
+
+// reader::main_extent frames where most of the map is: 100 units in a
+// 1000-unit square and one far out (a territory), each a node with a map of
+// one unit inside it. The boxes of the nodes whose centres lie in the
+// central 95 % of the finest units' points frame it: the far one is left
+// out. With 10 units in the square there are too few to tell: the root's box.
+TEST(Pack, TheMainExtentLeavesAFarUnitOut)
+{
+    const fs::path dir = fs::temp_directory_path() / ("tigerlod-extent-" + std::to_string(::getpid()));
+    for (const size_t units : {size_t{100}, size_t{10}}) {
+        fs::remove_all(dir);
+        std::vector<Store> stores;
+        stores.emplace_back(0, "region", "all");
+        auto square = [](GridPoint c) {
+            return Pts{{c.x - 40, c.y - 40},
+                       {c.x + 40, c.y - 40},
+                       {c.x + 40, c.y + 40},
+                       {c.x - 40, c.y + 40},
+                       {c.x - 40, c.y - 40}};
+        };
+        for (size_t i = 0; i <= units; ++i) {
+            const std::string code = i == units ? "far" : "u" + std::to_string(i);
+            const GridPoint c = i == units ? GridPoint{100000, 50000}
+                                           : GridPoint{int32_t(100 + 100 * (i % 10)), int32_t(100 + 100 * (i / 10))};
+            stores.front().chain(1 + i, code, "", square(c)).unit(code, c);
+            stores.emplace_back(1, "place", code);
+            stores.back().chain(1000 + i, code + "a", "", square(c)).unit(code + "a", c);
+        }
+        for (auto& st : stores) {
+            ChainStore s = st.s;
+            s.level_count = 2;
+            s.canonicalize();
+            fs::create_directories(dir / "orig" / s.level_name);
+            chains::write(dir / "orig" / s.level_name / (s.partition + ".tlc"), s);
+            s.eps_m = 10;
+            fs::create_directories(dir / "simp" / "eps-10m" / s.level_name);
+            chains::write(dir / "simp" / "eps-10m" / s.level_name / (s.partition + ".tlc"), s);
+        }
+        pack::write_tree(dir / "tree", pack::build_tree(dir / "orig", dir / "simp", {}), "{}\n");
+        std::string error;
+        const auto tree = reader::Tree::open(dir / "tree", error);
+        ASSERT_TRUE(tree) << error;
+        const datatree::Box root = tree->skeleton().nodes.front().box;
+        const datatree::Box e = reader::main_extent(*tree);
+        if (units == 100) {
+            EXPECT_EQ(e, (datatree::Box{60, 60, 1040, 1040})); // the 100 squares, whole
+            EXPECT_EQ(root, (datatree::Box{60, 60, 100040, 50040}));
+        } else {
+            EXPECT_EQ(e, root);
+        }
+    }
+    fs::remove_all(dir);
 }
