@@ -4,6 +4,7 @@
 // colours by LOD, U shows unit labels, 0 frames the map again.
 
 const budgetBytes = Number(new URLSearchParams(location.search).get("budget_mb") ?? 32) * 1024 * 1024;
+const prefetchOn = new URLSearchParams(location.search).get("prefetch") !== "0";
 const canvas = document.getElementById("map");
 const ctx = canvas.getContext("2d");
 const hud = document.getElementById("hud");
@@ -12,7 +13,8 @@ const state = { tree: null, cx: 0, cy: 0, upp: 1, lodColours: false, labels: tru
 const cache = new Map(); // "node/lod" -> { geometry, bytes, used }
 const units = new Map(); // node -> units payload (JSON)
 const tables = new Map(); // node -> chain table (JSON): ids, left, right units
-const stats = { loads: 0, evictions: 0, resident: 0, peak: 0, errors: 0 };
+const stats = { loads: 0, evictions: 0, resident: 0, peak: 0, errors: 0, hits: 0, misses: 0, prefetches: 0 };
+let prefetching = Promise.resolve();
 let clock = 0;
 
 function parseGeometry(buffer) {
@@ -35,12 +37,23 @@ function evictFor(bytes, keep) {
   return stats.resident + bytes <= budgetBytes;
 }
 
-async function load(node, lod, keep) {
+// Load a payload into the cache, evicting what `keep` does not hold;
+// `prefetch` marks a load for the prefetch view (counted apart, and never
+// at the cost of what the front draws).
+async function load(node, lod, keep, prefetch = false) {
   const key = `${node}/${lod}`;
   if (cache.has(key)) {
     cache.get(key).used = ++clock;
+    if (!prefetch) stats.hits++;
     return;
   }
+  if (!prefetch) stats.misses++;
+  // Its size is known from the tree (/api/node's layout): a prefetch goes
+  // only into free room, never evicting anything, so that it cannot thrash
+  // under a budget that binds.
+  const n = state.tree.nodes[node];
+  const size = 8 + 4 * (n.chains + 1) + 8 * n.lods[lod].vertices;
+  if (prefetch && stats.resident + size > budgetBytes) return;
   const response = await fetch(`/api/node/${node}/${lod}`);
   if (!response.ok) {
     stats.errors++;
@@ -50,10 +63,11 @@ async function load(node, lod, keep) {
   if (cache.has(key) || !evictFor(buffer.byteLength, keep)) {
     return;
   }
-  cache.set(key, { geometry: parseGeometry(buffer), bytes: buffer.byteLength, used: ++clock });
+  cache.set(key, { geometry: parseGeometry(buffer), bytes: buffer.byteLength, used: prefetch ? 0 : ++clock });
   stats.resident += buffer.byteLength;
   stats.peak = Math.max(stats.peak, stats.resident);
   stats.loads++;
+  if (prefetch) stats.prefetches++;
 }
 
 async function loadUnits(node) {
@@ -132,6 +146,20 @@ async function fetchFront() {
   if (state.labels) await Promise.all(front.map(([n]) => loadUnits(n)));
   state.front = front;
   draw();
+  // Prefetch: the fronts of the four views half a screen away (east,
+  // west, north, south) at this scale and size, loaded after the front is
+  // drawn and only into room the current front does not need (prefetched
+  // payloads are the first evicted), so that a pan finds them resident.
+  const views = [[w / 2, 0], [-w / 2, 0], [0, h / 2], [0, -h / 2]].map(([dx, dy]) =>
+    `cx=${state.cx + dx * state.upp}&cy=${state.cy + dy * state.upp}&upp=${state.upp}&w=${w}&h=${h}`);
+  prefetching = (async () => {
+    for (const q of prefetchOn ? views : []) {
+      for (const [n, k] of (await (await fetch(`/api/front?${q}`)).json()).front) {
+        if (!keep.has(`${n}/${k}`)) await load(n, k, keep, true);
+        await loadTable(n);
+      }
+    }
+  })();
 }
 
 const lodPalette = ["#000000", "#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e", "#e6ab02", "#a6761d"];
@@ -200,7 +228,8 @@ function draw() {
   hud.textContent =
     `frame ${state.frameMs.toFixed(1)} ms   front ${state.front.length} nodes (LODs ${Math.min(...lods)}-${Math.max(...lods)})\n` +
     `resident ${(stats.resident / 1048576).toFixed(2)} of ${(budgetBytes / 1048576).toFixed(0)} MiB   ` +
-    `loads ${stats.loads}   evictions ${stats.evictions}   errors ${stats.errors}\n` +
+    `loads ${stats.loads} (${stats.prefetches} prefetched)   hits ${stats.hits}   misses ${stats.misses}   ` +
+    `evictions ${stats.evictions}   errors ${stats.errors}\n` +
     `L: colour by LOD (${state.lodColours ? "on" : "off"})   U: labels   0: frame the map` +
     (state.hover ? `\nunit ${state.hover.code}${state.hover.name ? " " + state.hover.name : ""}` : "") +
     (state.pinned ? `\n${state.pinned.item.kind} at LOD ${state.pinned.item.lod} (${state.pinned.item.level} ${state.pinned.item.node}): ` +
@@ -311,6 +340,7 @@ addEventListener("resize", () => { resize(); draw(); update(); });
 // For scripted use (tests, a camera path): fly to a view and wait for it;
 // the unit at a point of the page; fly to report item i.
 window.tigerlodHover = (clientX, clientY) => hoverAt(clientX, clientY);
+window.tigerlodIdle = async () => { await prefetching; return { ...stats }; };
 window.tigerlodPin = (i) => pin(state.violations[i]);
 window.tigerlodView = async (cx, cy, upp) => {
   state.cx = cx; state.cy = cy; state.upp = upp;

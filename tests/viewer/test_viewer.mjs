@@ -26,12 +26,12 @@ const state = tree.nodes.find((n) => n.code === "51");
 const county = [state.box[0], state.box[1], state.box[2], state.box[3]];
 const frameTimes = [];
 
-async function walk(budgetMb, label) {
+async function walk(budgetMb, label, prefetch = true) {
   const page = await browser.newPage({ viewport: { width: 900, height: 600 } });
   const errors = [];
   page.on("console", (m) => { if (m.type() === "error") errors.push(m.text()); });
   page.on("pageerror", (e) => errors.push(String(e)));
-  await page.goto(`${base}/?budget_mb=${budgetMb}`);
+  await page.goto(`${base}/?budget_mb=${budgetMb}${prefetch ? "" : "&prefetch=0"}`);
   await page.waitForFunction(() => window.tigerlodReady === true, null, { timeout: 30000 });
   const [w, h] = await page.evaluate(() => {
     const c = document.getElementById("map");
@@ -95,6 +95,16 @@ async function walk(budgetMb, label) {
       }
     }
     if (checked < 3) fail(`${label}: only ${checked} units in view to hover over`);
+    // Prefetching: once it is done, a pan by a quarter screen finds its front resident.
+    const before = await page.evaluate(() => window.tigerlodIdle());
+    if (before.prefetches === 0) fail(`${label}: nothing prefetched`);
+    const panned = await page.evaluate(([cx, cy, upp]) => window.tigerlodView(cx, cy, upp),
+                                       [end.cx + (w / 4) * end.upp, end.cy, end.upp]);
+    if (panned.misses !== before.misses) {
+      fail(`${label}: a pan after prefetching missed ${panned.misses - before.misses} payloads`);
+    }
+    console.log(`${label}: ${before.prefetches} payloads prefetched; a pan then ${panned.hits - before.hits} hits, ` +
+                `${panned.misses - before.misses} misses`);
     console.log(`${label}: hover named ${checked} units at their internal points`);
     // A report item on two chains of the state's county map at LOD 2.
     const t = await (await fetch(`${base}/api/table/${tree.nodes.indexOf(state)}`)).json();
@@ -130,6 +140,10 @@ const tight = Math.max(loose.peak / 10, 4096) / (1024 * 1024);
 const bound = await walk(tight, `${(tight * 1024).toFixed(0)} KiB`);
 console.log(`${(tight * 1024).toFixed(0)} KiB budget: ${bound.loads} loads, ${bound.evictions} evictions, peak ${bound.peak} bytes`);
 if (bound.evictions === 0) fail("under the binding budget the page never evicted");
+// Prefetching must not thrash under it: at most 1.5 times the loads without.
+const plain = await walk(tight, "no prefetch", false);
+console.log(`${(tight * 1024).toFixed(0)} KiB budget without prefetching: ${plain.loads} loads`);
+if (bound.loads > 1.5 * plain.loads) fail(`under the binding budget prefetching made ${bound.loads} loads, ${plain.loads} without`);
 frameTimes.sort((a, b) => a - b);
 console.log(`viewer frame times (ms): median ${frameTimes[frameTimes.length >> 1].toFixed(2)}, max ${frameTimes.at(-1).toFixed(2)} over ${frameTimes.length} redraws`);
 await browser.close();
