@@ -7,6 +7,7 @@
 #include "core/fs.hpp"
 #include "core/manifest.hpp"
 #include "core/memory.hpp"
+#include "core/progress.hpp"
 #include "formats/chains/chain_store.hpp"
 #include "stages/ingest/config.hpp"
 #include "stages/ingest/map_builder.hpp"
@@ -28,6 +29,7 @@
 #include <future>
 #include <map>
 #include <numeric>
+#include <optional>
 #include <span>
 #include <sstream>
 #include <thread>
@@ -200,6 +202,34 @@ std::vector<std::string> digests_of(const InputFiles& input_files)
     return out;
 }
 
+/// Ingest's progress (--progress): the files read, then the levels built
+/// (each region's and the coarse ones, as the build plans them), each a bar
+/// of its own, or JSON lines with unit "files", then "levels".
+class IngestProgress {
+  public:
+    explicit IngestProgress(ProgressMode mode) : m_mode(mode) {}
+    /// A callback for `files` files read, each with its points.
+    std::function<void(uint64_t)> reading(size_t files)
+    {
+        m_read.emplace(m_mode, "ingest", files, "files", "points");
+        return [this](uint64_t points) { m_read->advance(points); };
+    }
+    /// Makes `options` report the levels built.
+    void building(BuildOptions& options)
+    {
+        options.on_plan = [this](size_t levels) { m_build.emplace(m_mode, "ingest", levels, "levels", "chains"); };
+        options.on_level = [this](uint64_t chains) {
+            if (m_build) {
+                m_build->advance(chains);
+            }
+        };
+    }
+
+  private:
+    ProgressMode m_mode;
+    std::optional<Progress> m_read, m_build;
+};
+
 /// What the build gave, with the points read and when reading ended (the log's clock).
 struct Built {
     BuildResult result;
@@ -211,7 +241,8 @@ struct Built {
 /// several files (each read once and put aside on disk in `scratch`), else
 /// whole. Every store goes to `sink`.
 Built read_and_build(const IngestConfig& cfg, const Projection& projection, const BuildOptions& options,
-                     const StoreSink& sink, const fs::path& scratch, bool whole_map, const Log& log)
+                     const StoreSink& sink, const fs::path& scratch, bool whole_map, const Log& log,
+                     IngestProgress& progress)
 {
     Built built;
     auto& result = built.result;
@@ -229,9 +260,11 @@ Built read_and_build(const IngestConfig& cfg, const Projection& projection, cons
         fs::create_directories(aside);
         auto part_path = [&](size_t i) { return aside / (std::to_string(i) + ".raw"); };
         std::vector<PartSummary> parts(tiger ? cfg.dataset.faces.size() : cfg.dataset.inputs.size());
+        const auto read = progress.reading(parts.size());
         const auto put_aside = [&](size_t i, RawMap&& part) {
             parts[i] = summarize_part(part);
             write_raw(part, part_path(i));
+            read(parts[i].points_read);
         };
         if (tiger) {
             read_tiger_parts(cfg, threads, log, put_aside);
@@ -258,7 +291,7 @@ Built read_and_build(const IngestConfig& cfg, const Projection& projection, cons
         points_read = result.input_vertices;
         fs::remove_all(aside);
     } else {
-        RawMap raw = read_dataset(cfg, threads, log);
+        RawMap raw = read_dataset(cfg, threads, log, progress.reading(dataset_files(cfg)));
 #ifdef __GLIBC__
         // What the readers freed goes back to the system before the build's peak
         // (tract set: 125 -> 83 MB resident after reading, the peak 8-10 MB lower).
@@ -849,8 +882,9 @@ std::vector<size_t> parse_selection(const std::string& text, size_t nparts)
 /// taken before the read (so that a file changed while it was read does not
 /// match them). `rewritten` counts the part files written.
 std::vector<PartRead> read_parts(const IngestConfig& cfg, const fs::path& dir, unsigned threads, const Log& log,
-                                 std::span<const size_t> only, size_t& rewritten)
+                                 std::span<const size_t> only, size_t& rewritten, ProgressMode mode)
 {
+    Progress progress(mode, "ingest", only.size(), "files", "points");
     std::vector<PartRead> got(only.size());
     std::vector<size_t> slot(part_count(cfg), SIZE_MAX);
     for (size_t k = 0; k < only.size(); ++k) {
@@ -865,6 +899,7 @@ std::vector<PartRead> read_parts(const IngestConfig& cfg, const fs::path& dir, u
     const auto put_aside = [&](size_t i, RawMap&& part) {
         PartRead& p = got[slot[i]];
         p.summary = summarize_part(part);
+        progress.advance(p.summary.points_read);
         const std::string bytes = encode_raw(part);
         part = RawMap();
         p.sha256 = sha256_of(bytes);
@@ -1020,7 +1055,7 @@ int IngestStage::run_read(const StageContext& ctx, const Resolved& r)
     }
     const double t0 = ctx.log.elapsed_s();
     size_t rewritten = 0;
-    std::vector<PartRead> got = read_parts(cfg, dir, r.threads, ctx.log, only, rewritten);
+    std::vector<PartRead> got = read_parts(cfg, dir, r.threads, ctx.log, only, rewritten, ctx.progress);
     uint64_t points = 0;
     for (const auto& p : got) {
         points += p.summary.points_read;
@@ -1070,7 +1105,7 @@ int IngestStage::run_plan(const StageContext& ctx, const Resolved& r)
             }
         }
         if (!rest.empty()) {
-            std::vector<PartRead> here = read_parts(cfg, dir, r.threads, ctx.log, rest, rewritten);
+            std::vector<PartRead> here = read_parts(cfg, dir, r.threads, ctx.log, rest, rewritten, ctx.progress);
             for (auto& p : here) {
                 got[p.part] = std::move(p);
             }
@@ -1183,7 +1218,9 @@ int IngestStage::run_region(const StageContext& ctx, const Resolved& r)
         throw usage_error(spec_path.string() + ": planned with other options (" + spec.at("options").dump() +
                           "); run --plan again");
     }
-    const BuildOptions options = build_options(cfg, r.threads, m_max_problem_samples, ctx.log);
+    IngestProgress progress(ctx.progress);
+    BuildOptions options = build_options(cfg, r.threads, m_max_problem_samples, ctx.log);
+    progress.building(options);
     const InputFiles input_files = input_files_of(cfg);
     InPlaceStores out(m_output, reads_of(m_config, input_files, {dir}), false);
     const StoreSink sink = [&](const chains::ChainStore& s) { out.write(s); };
@@ -1196,7 +1233,7 @@ int IngestStage::run_region(const StageContext& ctx, const Resolved& r)
         if (spec.at("inputs") != json(digests_of(input_files))) {
             throw usage_error(spec_path.string() + ": the inputs changed since the plan; run --plan again");
         }
-        RawMap raw = read_dataset(cfg, r.threads, ctx.log);
+        RawMap raw = read_dataset(cfg, r.threads, ctx.log, progress.reading(dataset_files(cfg)));
         share.points_read = raw.points_read;
         share.share.result = build_map(std::move(raw), r.projection, options, sink);
     } else if (mode == "whole" || mode == "region") {
@@ -1240,6 +1277,9 @@ int IngestStage::run_region(const StageContext& ctx, const Resolved& r)
             }
             return decode_raw(std::as_bytes(std::span(bytes.data(), bytes.size())), file.string());
         };
+        if (!plan.whole) {                                                  // a whole plan's build_map calls it
+            options.on_plan(plan.meta.level_names.size() - plan.level - 1); // the region's finer levels
+        }
         if (plan.whole) {
             share.share.result = build_planned_whole(plan, load, r.projection, options, sink);
             share.points_read = share.share.result.input_vertices;
@@ -1309,7 +1349,10 @@ int IngestStage::run_finish(const StageContext& ctx, const Resolved& r)
         for (auto& s : shares) {
             parts.push_back(std::move(s.share));
         }
-        const BuildOptions options = build_options(cfg, r.threads, m_max_problem_samples, ctx.log);
+        IngestProgress progress(ctx.progress);
+        BuildOptions options = build_options(cfg, r.threads, m_max_problem_samples, ctx.log);
+        progress.building(options);
+        options.on_plan(plan.level + 1); // the coarse levels, down to the region level
         built.result = finish_planned(plan, std::move(parts), r.projection, options,
                                       [&](const chains::ChainStore& s) { out.write(s); });
         built.points_read = built.result.input_vertices;
@@ -1439,7 +1482,9 @@ int IngestStage::run(const StageContext& ctx)
         fs::create_directories(out.path() / l.name);
     }
     std::atomic<uint64_t> stores{0};
-    const BuildOptions options = build_options(cfg, threads, m_max_problem_samples, ctx.log);
+    IngestProgress progress(ctx.progress);
+    BuildOptions options = build_options(cfg, threads, m_max_problem_samples, ctx.log);
+    progress.building(options);
     const StoreSink sink = [&](const chains::ChainStore& s) {
         // Inside the output folder, renamed into place whole at the end.
         write_file(out.path() / s.level_name / (file_name(s.partition) + ".tlc"), chains::encode(s));
@@ -1448,7 +1493,8 @@ int IngestStage::run(const StageContext& ctx)
 
     const double t0 = ctx.log.elapsed_s();
     // Parts put aside go inside the output folder (removed before it is renamed into place).
-    const Built built = read_and_build(cfg, projection, options, sink, out.path() / ".parts", m_whole_map, ctx.log);
+    const Built built =
+        read_and_build(cfg, projection, options, sink, out.path() / ".parts", m_whole_map, ctx.log, progress);
     const double t_build = ctx.log.elapsed_s();
     write_file_atomic(out.path() / "ingest-report.json",
                       report_json(cfg, projection, built.result, stores.load()).dump(2) + "\n");

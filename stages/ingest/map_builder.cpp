@@ -325,6 +325,9 @@ void first_samples(std::vector<ProblemSample>& samples, size_t max)
 
 BuildResult build_map(RawMap raw, const Projection& projection, const BuildOptions& options, const StoreSink& sink)
 {
+    if (options.on_plan) {
+        options.on_plan(raw.level_names.size());
+    }
     return build(std::move(raw), projection, options, sink, nullptr, nullptr);
 }
 

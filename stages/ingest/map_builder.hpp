@@ -51,6 +51,12 @@ struct BuildOptions {
     bool merge_duplicate_codes = false;
     std::string code_field;   ///< dataset.code_field, for the message
     const Log* log = nullptr; ///< progress lines, if given
+    /// A stage's progress: `on_plan(n)` once a build knows it will build n
+    /// levels (over all its regions), then `on_level(chains)` as each is
+    /// written; from any thread. Called by build_map and build_by_regions;
+    /// a job building one region or the coarse levels calls on_plan itself.
+    std::function<void(size_t levels)> on_plan;
+    std::function<void(uint64_t chains)> on_level;
 };
 
 /// One data problem found (or repaired) by ingest.

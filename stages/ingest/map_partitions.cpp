@@ -153,6 +153,9 @@ class LevelBuild {
         for (uint32_t v : m_lev.junctions) {
             m_st.junctions += m_owner.vertex(v) ? 1 : 0;
         }
+        if (m_options.on_level) {
+            m_options.on_level(m_st.chains);
+        }
         log_progress(m_options, "level " + m_st.name + ": " + std::to_string(m_st.chains) + " chains in " +
                                     std::to_string(m_st.partitions) + " partitions");
         return m_st;

@@ -793,13 +793,22 @@ void check_each_store_once(const RegionPlan& plan, const std::vector<std::vector
     }
 }
 
+size_t planned_levels(const RegionPlan& plan)
+{
+    const size_t nlev = plan.meta.level_names.size();
+    return plan.whole ? nlev : plan.regions.size() * (nlev - plan.level - 1) + plan.level + 1;
+}
+
 BuildResult build_by_regions(const std::vector<PartSummary>& parts, const std::function<RawMap(size_t)>& load,
                              const std::vector<std::string>& level_names, const Projection& projection,
                              const BuildOptions& options, const StoreSink& sink)
 {
     const RegionPlan plan = plan_regions(parts, level_names, projection, options);
     if (plan.whole) {
-        return build_planned_whole(plan, load, projection, options, sink);
+        return build_planned_whole(plan, load, projection, options, sink); // build_map calls on_plan
+    }
+    if (options.on_plan) {
+        options.on_plan(planned_levels(plan));
     }
     // Every store once: a partition written twice has units under two codes
     // of the region level in different files.

@@ -130,6 +130,11 @@ BuildResult finish_planned(const RegionPlan& plan, std::vector<RegionShare> shar
 void check_each_store_once(const RegionPlan& plan, const std::vector<std::vector<std::string>>& written,
                            const std::vector<std::string>& level_names);
 
+/// The level builds a plan makes: every level for a whole plan; else each
+/// region's levels finer than the region level, then the coarse levels once
+/// (build_by_regions's BuildOptions::on_plan).
+size_t planned_levels(const RegionPlan& plan);
+
 /// Build a map from its parts, region by region when there are two regions or
 /// more, else whole: polygon parts each read from one file (file index 0 in
 /// it), or TIGER parts each from one county's FACES (file 0) and EDGES (file 1),

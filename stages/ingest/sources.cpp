@@ -1001,19 +1001,26 @@ void check_faces_close(const RawMap& raw, const std::string& edges_from)
     }
 }
 
-void read_tiger(const IngestConfig& cfg, RawMap& raw, const Log& log)
+void read_tiger(const IngestConfig& cfg, RawMap& raw, const Log& log, const std::function<void(uint64_t)>& on_file)
 {
     std::unordered_map<int64_t, uint32_t> face_unit;
     for (const auto& path : cfg.dataset.faces) {
         read_faces_file(cfg, path, raw, face_unit);
         log.info("read " + path.string() + ": " + std::to_string(raw.units.size()) + " faces so far");
+        if (on_file) {
+            on_file(0);
+        }
     }
     std::unordered_map<int64_t, uint32_t> seen_tlid;
     const std::string faces_from =
         cfg.dataset.faces.size() == 1 ? cfg.dataset.faces.front().filename().string() : "the FACES files given";
     for (const auto& path : cfg.dataset.edges) {
+        const uint64_t before = raw.points_read;
         read_edges_file(cfg, path, raw, face_unit, seen_tlid, false, faces_from);
         log.info("read " + path.string() + ": " + std::to_string(raw.polyline_count()) + " edges so far");
+        if (on_file) {
+            on_file(raw.points_read - before);
+        }
     }
     check_faces_close(raw, cfg.dataset.edges.size() == 1 ? cfg.dataset.edges.front().filename().string()
                                                          : "the EDGES files given");
@@ -1269,12 +1276,18 @@ void read_each(const std::vector<fs::path>& files, unsigned threads, const Log& 
 
 /// Read every file into `raw`, in file order.
 template <class F>
-void read_files(const std::vector<fs::path>& files, unsigned threads, RawMap& raw, const Log& log, F&& read_one)
+void read_files(const std::vector<fs::path>& files, unsigned threads, RawMap& raw, const Log& log, F&& read_one,
+                const std::function<void(uint64_t)>& on_file)
 {
     std::vector<RawMap> parts(files.size());
     read_each(
         files, threads, log, [&](size_t i, RawMap& part) { read_one(files[i], part); },
-        [&](size_t i, RawMap&& part) { parts[i] = std::move(part); });
+        [&](size_t i, RawMap&& part) {
+            if (on_file) {
+                on_file(part.points_read);
+            }
+            parts[i] = std::move(part);
+        });
     size_t points = raw.coords.size(), lines = raw.polyline_count();
     for (const auto& part : parts) {
         points += part.coords.size();
@@ -1288,26 +1301,35 @@ void read_files(const std::vector<fs::path>& files, unsigned threads, RawMap& ra
 
 } // namespace
 
-RawMap read_dataset(const IngestConfig& cfg, unsigned threads, const Log& log)
+RawMap read_dataset(const IngestConfig& cfg, unsigned threads, const Log& log,
+                    const std::function<void(uint64_t)>& on_file)
 {
     RawMap raw;
     switch (cfg.dataset.kind) {
     case DatasetSpec::Kind::tiger:
         raw = empty_map(cfg, RawMap::Kind::edges);
-        read_tiger(cfg, raw, log);
+        read_tiger(cfg, raw, log, on_file);
         break;
     case DatasetSpec::Kind::polygons:
         raw = empty_map(cfg, RawMap::Kind::polygon_rings);
-        read_files(cfg.dataset.inputs, threads, raw, log,
-                   [&](const fs::path& p, RawMap& part) { read_polygon_file(cfg, p, part); });
+        read_files(
+            cfg.dataset.inputs, threads, raw, log,
+            [&](const fs::path& p, RawMap& part) { read_polygon_file(cfg, p, part); }, on_file);
         break;
     case DatasetSpec::Kind::lines:
         raw = empty_map(cfg, RawMap::Kind::lines);
-        read_files(cfg.dataset.inputs, threads, raw, log,
-                   [&](const fs::path& p, RawMap& part) { read_line_file(cfg, p, part); });
+        read_files(
+            cfg.dataset.inputs, threads, raw, log,
+            [&](const fs::path& p, RawMap& part) { read_line_file(cfg, p, part); }, on_file);
         break;
     }
     return raw;
+}
+
+size_t dataset_files(const IngestConfig& cfg)
+{
+    return cfg.dataset.kind == DatasetSpec::Kind::tiger ? cfg.dataset.faces.size() + cfg.dataset.edges.size()
+                                                        : cfg.dataset.inputs.size();
 }
 
 void read_polygon_parts(const IngestConfig& cfg, unsigned threads, const Log& log,

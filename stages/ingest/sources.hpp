@@ -15,8 +15,12 @@ namespace tigerlod::ingest {
 
 /// Read the dataset of `cfg` into a RawMap, coordinates snapped to 1e-6
 /// degrees. Polygon and line files are read on up to `threads` threads; the
-/// result is the same for any thread count.
-RawMap read_dataset(const IngestConfig& cfg, unsigned threads, const Log& log);
+/// result is the same for any thread count. `on_file(points)`, if given, is
+/// called as each input file is read (dataset_files of them), from any thread.
+RawMap read_dataset(const IngestConfig& cfg, unsigned threads, const Log& log,
+                    const std::function<void(uint64_t points)>& on_file = {});
+/// The files read_dataset reads: every FACES and EDGES file, or every input.
+size_t dataset_files(const IngestConfig& cfg);
 
 /// Read a polygons dataset file by file on up to `threads` threads, handing
 /// each file's part (file index 0 in it) to `take` on the thread that read it,

@@ -1021,7 +1021,30 @@ TEST_F(Cli, ProgressAsJsonLinesForAnEngine)
 {
     make_tiger();
     const std::string in = (m_dir / "in").string();
-    ASSERT_EQ(run("ingest", tiger_config().string() + " " + in).code, 0);
+    // Ingest: its files read (FACES and EDGES), then its levels built, each
+    // phase rising to its total; every line one object.
+    const Result ingest = run("ingest", tiger_config().string() + " " + in + " --progress json");
+    ASSERT_EQ(ingest.code, 0) << ingest.err;
+    {
+        std::istringstream lines(ingest.err);
+        std::map<std::string, std::pair<size_t, size_t>> last; // unit -> (done, total)
+        std::vector<std::string> order;
+        for (std::string line; std::getline(lines, line);) {
+            const auto j = nlohmann::json::parse(line);
+            EXPECT_EQ(j.at("stage"), "ingest");
+            const std::string unit = j.at("unit");
+            if (order.empty() || order.back() != unit) {
+                order.push_back(unit);
+            }
+            auto& [done, total] = last[unit];
+            EXPECT_GT(j.at("done").get<size_t>(), done) << unit;
+            done = j.at("done").get<size_t>();
+            total = j.at("total").get<size_t>();
+        }
+        EXPECT_EQ(order, (std::vector<std::string>{"files", "levels"}));
+        EXPECT_EQ(last["files"], (std::pair<size_t, size_t>{2, 2}));  // one county's FACES and EDGES
+        EXPECT_EQ(last["levels"], (std::pair<size_t, size_t>{5, 5})); // state to block
+    }
     for (const std::string tool : {"color", "simplify"}) {
         SCOPED_TRACE(tool);
         const Result r = run(tool, in + " " + (m_dir / tool).string() + " --tolerances 8 --progress json");
