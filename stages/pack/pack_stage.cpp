@@ -225,6 +225,12 @@ int PackStage::run_partitions(const StageContext& ctx)
     options.threads =
         m_threads > 0 ? static_cast<unsigned>(m_threads) : std::max(1U, std::thread::hardware_concurrency());
     options.lods = parse_tolerances(m_tolerances);
+    Progress progress(ctx.progress, "pack", stores.size(), "stores");
+    options.on_level = [&](size_t done) {
+        for (size_t i = 0; i < done; ++i) {
+            progress.advance();
+        }
+    };
     std::map<std::string, uint32_t> content;
     const auto totals = write_parts(m_original, m_simplified, stores, plan, m_parts, options, &content);
     ctx.log.info("pack: " + std::to_string(stores.size()) + " parts written in " +
@@ -310,15 +316,13 @@ int PackStage::run(const StageContext& ctx)
     }
     // Every eps folder, checked against the ladder (simplify --finish removed
     // those of other tolerances; one lost since would give an LOD fewer).
-    std::optional<Progress> progress;
-    if (!m_finish) {
-        progress.emplace(ctx.progress, "pack", stores_of(m_original).size(), "stores");
-        options.on_level = [&](size_t stores) {
-            for (size_t i = 0; i < stores; ++i) {
-                progress->advance();
-            }
-        };
-    }
+    // Progress by stores: packed (a whole run), or their parts assembled (--finish).
+    Progress progress(ctx.progress, "pack", stores_of(m_original).size(), "stores");
+    options.on_level = [&](size_t stores) {
+        for (size_t i = 0; i < stores; ++i) {
+            progress.advance();
+        }
+    };
     const PackedTree tree = m_finish ? assemble_parts(m_original, m_simplified, m_parts, options)
                                      : build_tree(m_original, m_simplified, options);
     const std::vector<double> found(tree.skeleton.lod_eps_m.begin() + 1, tree.skeleton.lod_eps_m.end());

@@ -1087,6 +1087,9 @@ std::vector<LodTotals> write_parts(const fs::path& original, const fs::path& sim
             write_file_atomic_unsynced_folder(parts / level / (nb.partition + ".tlp"),
                                               encode_part(nb, ctx.lod_eps(), options.draco_speed, sources));
         });
+        if (options.on_level) {
+            options.on_level(nodes.size());
+        }
         sync_to_disk(parts / level);
         for (const auto& nb : nodes) {
             if (content) {
@@ -1145,6 +1148,9 @@ PackedTree assemble_parts(const fs::path& original, const fs::path& simplified, 
     return assemble(
         ctx, first.metric, parts,
         [&](size_t part, size_t k) {
+            if (k == 0 && options.on_level) {
+                options.on_level(1); // a store's part, taken into its tile
+            }
             const auto& h = heads[part];
             uint64_t at = h.payloads_at;
             for (size_t j = 0; j < k; ++j) {

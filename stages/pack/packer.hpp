@@ -26,7 +26,9 @@ struct PackOptions {
     /// every eps-<E>m folder of SIMPLIFIED.
     std::vector<double> lods;
     /// Called after each level is packed, with its number of stores (a
-    /// stage's progress); from the calling thread.
+    /// stage's progress; write_parts: the level's stores of the job;
+    /// assemble_parts: 1 as each store's part goes into its tile); from the
+    /// calling thread.
     std::function<void(size_t stores)> on_level;
 };
 

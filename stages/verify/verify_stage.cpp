@@ -836,6 +836,15 @@ int VerifyStage::run_partitions(const StageContext& ctx)
         simplify::tolerance_contract(packed.doc.at("simplify"), (fs::path(m_tree) / "manifest.json").string());
     options.user_points = options.tolerance.user_points;
     options.ground = options.tolerance.projection_scale;
+    // Progress by level and LOD, of the levels the job's stores are in (a
+    // level without one is not checked here).
+    std::set<std::string> levels;
+    for (const auto& s : selection.stores) {
+        levels.insert(s.substr(0, s.find('/')));
+    }
+    Progress progress(ctx.progress, "verify", levels.size() * tree->skeleton().lod_eps_m.size(), "level LODs",
+                      "segments");
+    options.on_level_lod = [&](uint64_t segments) { progress.advance(segments); };
     const Report r = verify_tree(*tree, m_original, options, &selection);
     json share = report_json(r, options, m_tree, m_original);
     share["schema"] = "tigerlod.verify-share/1";

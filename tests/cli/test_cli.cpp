@@ -906,9 +906,30 @@ TEST_F(Cli, PackByPartitionsWritesTheWholeRunsTree)
         expect_failure(run("pack", "--partitions 'tract/*'" + with), 1, "plan.json: not a tigerlod pack plan");
         std::ofstream(m_dir / "parts" / "plan.json") << text;
     }
-    ASSERT_EQ(
-        run("pack", "--partitions 'block/*,block_group/*' --report " + (m_dir / "share.json").string() + with).code, 0)
-        << slurp(m_dir / "stderr");
+    // The progress of a job and of --finish, as JSON lines: (done, total) of the last, in stores.
+    auto last_progress = [&](const Result& r) {
+        std::pair<size_t, size_t> last{0, 0};
+        std::istringstream lines(r.err);
+        for (std::string line; std::getline(lines, line);) {
+            const auto j = nlohmann::json::parse(line);
+            EXPECT_EQ(j.at("stage"), "pack");
+            EXPECT_EQ(j.at("unit"), "stores");
+            last = {j.at("done").get<size_t>(), j.at("total").get<size_t>()};
+        }
+        return last;
+    };
+    size_t fine = 0, all = 0;
+    for (const auto& e : fs::recursive_directory_iterator(m_dir / "in")) {
+        if (e.path().extension() == ".tlc") {
+            ++all;
+            const std::string level = e.path().parent_path().filename().string();
+            fine += level == "block" || level == "block_group" ? 1 : 0;
+        }
+    }
+    const Result job = run("pack", "--partitions 'block/*,block_group/*' --progress json --report " +
+                                       (m_dir / "share.json").string() + with);
+    ASSERT_EQ(job.code, 0) << job.err;
+    EXPECT_EQ(last_progress(job), (std::pair<size_t, size_t>{fine, fine}));
     EXPECT_FALSE(fs::exists(m_dir / "tree")) << "a job wrote into OUTPUT";
     EXPECT_NE(slurp(m_dir / "share.json").find("tigerlod.pack-share/1"), std::string::npos);
     // A store without its part is named by --finish, and nothing is written.
@@ -918,7 +939,9 @@ TEST_F(Cli, PackByPartitionsWritesTheWholeRunsTree)
     ASSERT_EQ(run("pack", "--partitions @" + (m_dir / "list").string() + with).code, 0) << slurp(m_dir / "stderr");
     // A part of a store ORIGINAL no longer has is removed by --finish.
     fs::copy_file(m_dir / "parts" / "tract" / "51063.tlp", m_dir / "parts" / "tract" / "51999.tlp");
-    ASSERT_EQ(run("pack", "--finish" + with).code, 0) << slurp(m_dir / "stderr");
+    const Result finish = run("pack", "--finish --progress json" + with);
+    ASSERT_EQ(finish.code, 0) << finish.err;
+    EXPECT_EQ(last_progress(finish), (std::pair<size_t, size_t>{all, all}));
     EXPECT_FALSE(fs::exists(m_dir / "parts" / "tract" / "51999.tlp"));
     size_t files = 0;
     for (const auto& e : fs::recursive_directory_iterator(m_dir / "whole")) {
@@ -974,8 +997,20 @@ TEST_F(Cli, VerifyByPartitionsMergesToTheWholeRunsReport)
     const std::string plan = " --plan " + parts + "/plan.json ";
     const std::string a = (m_dir / "a.json").string(), b = (m_dir / "b.json").string();
     const std::string tail = " " + tree + " " + in + " " + (m_dir / "unused").string();
-    ASSERT_EQ(run("verify", "--partitions 'block/*,block_group/*'" + plan + "--report " + a + tail).code, 0)
-        << slurp(m_dir / "stderr");
+    const Result job =
+        run("verify", "--partitions 'block/*,block_group/*'" + plan + "--progress json --report " + a + tail);
+    ASSERT_EQ(job.code, 0) << job.err;
+    {
+        // A job's progress: each LOD of the levels of its stores.
+        std::pair<size_t, size_t> last{0, 0};
+        std::istringstream lines(job.err);
+        for (std::string line; std::getline(lines, line);) {
+            const auto j = nlohmann::json::parse(line);
+            EXPECT_EQ(j.at("unit"), "level LODs");
+            last = {j.at("done").get<size_t>(), j.at("total").get<size_t>()};
+        }
+        EXPECT_EQ(last, (std::pair<size_t, size_t>{6, 6})); // blocks and block groups at LODs 0, 1 and 8 m
+    }
     ASSERT_EQ(run("verify", "--partitions 'county/*,state/*,tract/*'" + plan + "--report " + b + tail).code, 0)
         << slurp(m_dir / "stderr");
     EXPECT_FALSE(fs::exists(m_dir / "unused")) << "a job wrote OUTPUT";
