@@ -3,7 +3,14 @@ line per finished or failed job, `[done/total] stage level/group seconds`,
 and on a terminal a progress bar for the run (percent, jobs a minute, ETA)
 rewritten in place below them. TIGERLOD_PROGRESS=bar draws the bar on a
 pipe too; TIGERLOD_PROGRESS=json prints each event as one JSON object a
-line instead (for an engine above this one)."""
+line instead (for an engine above this one).
+
+The bar never goes back. Snakemake's total grows at each checkpoint (the
+plan and ingest's finish decide the jobs after them), so done / total can
+fall (75 % to 48 % when the stages' group jobs appear); the bar shows the
+largest fraction it has shown until done / total passes it again, and says
+`+` after the total while a checkpoint may still add jobs (until a job of
+the stages after ingest has been seen)."""
 import json
 import os
 import sys
@@ -12,7 +19,9 @@ import time
 _mode = os.environ.get("TIGERLOD_PROGRESS", "")
 _bar = _mode == "bar" or (_mode == "" and sys.stderr.isatty())
 _jobs = {}
-_state = {"done": 0, "total": 0, "t0": time.time(), "bar": False, "text": None}
+_state = {"done": 0, "total": 0, "t0": time.time(), "bar": False, "text": None, "shown": 0.0, "final": False}
+# Jobs of the stages after ingest's last checkpoint: once one is seen, the total is final.
+_AFTER_CHECKPOINTS = ("color", "simplify", "pack", "verify", "render", "frame")
 # Snakemake's own lines that this handler replaces or that say nothing to
 # an operator; everything else it says (errors above all) is passed on.
 _NOISE = ("Building DAG of jobs", "Using shell:", "Provided cores:", "Rules claiming more threads",
@@ -39,18 +48,27 @@ def _clear_bar():
         _state["bar"] = False
 
 
+def bar_fraction(done, total):
+    """The fraction the bar shows: done / total, never below what it showed before."""
+    if total > 0:
+        _state["shown"] = max(_state["shown"], min(1.0, done / total))
+    return _state["shown"]
+
+
 def _draw_bar():
     done, total = _state["done"], _state["total"]
     if not _bar or total == 0:
         return
+    fraction = bar_fraction(done, total)
     elapsed = time.time() - _state["t0"]
     rate = done / elapsed if elapsed > 0 else 0.0
     eta = (total - done) / rate if rate > 0 else 0.0
     width = 30
-    filled = int(width * done / total)
+    filled = int(width * fraction)
+    more = "" if _state["final"] else "+"
     sys.stderr.write(
-        f"\r[{'#' * filled}{'.' * (width - filled)}] {100.0 * done / total:5.1f}% {done}/{total} jobs, "
-        f"{60 * rate:.1f} jobs/min, ETA {int(eta) // 60}:{int(eta) % 60:02d} "
+        f"\r[{'#' * filled}{'.' * (width - filled)}] {100.0 * fraction:5.1f}% {done}/{total}{more} jobs, "
+        f"{60 * rate:.1f} jobs/min, ETA {int(eta) // 60}:{int(eta) % 60:02d}{more} "
     )
     sys.stderr.flush()
     _state["bar"] = True
@@ -85,6 +103,8 @@ def log_handler(msg):
         return
     if level == "job_info":
         _jobs[msg.get("jobid")] = (_name(msg), now)
+        if str(msg.get("name", "")).split("_")[0] in _AFTER_CHECKPOINTS:
+            _state["final"] = True
     elif level == "progress":
         _state["done"], _state["total"] = msg.get("done", 0), msg.get("total", 0)
         _draw_bar()

@@ -90,6 +90,16 @@ expect 2 "two-digit state code, not '4x'" "$repo/scripts/bench-workflow" "$repo/
 expect 2 "names no input file of state 99" "$repo/scripts/bench-workflow" "$repo/configs/tracts2010.yaml" 99
 expect 2 "none.yaml: no such config" "$repo/scripts/test-slurm" "$work/none.yaml"
 
+# The workflow's bar never goes back when a checkpoint adds jobs (75 % of 4
+# jobs, then 4 of 10): pipeline/progress.py shows the largest fraction so far.
+shown=$(cd "$repo/pipeline" && python3 -c "
+import progress
+print(' '.join(f'{progress.bar_fraction(d, t):.2f}' for d, t in [(1, 4), (3, 4), (4, 10), (7, 10), (9, 10), (10, 10)]))")
+if [ "$shown" != "0.25 0.75 0.75 0.75 0.90 1.00" ]; then
+  echo "FAIL: the workflow bar's fractions were '$shown' (want 0.25 0.75 0.75 0.75 0.90 1.00)"
+  failures=$((failures + 1))
+fi
+
 [ "$failures" = 0 ] || {
   echo "$failures failures"
   exit 1
