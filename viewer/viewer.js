@@ -340,7 +340,15 @@ addEventListener("resize", () => { resize(); draw(); update(); });
 // For scripted use (tests, a camera path): fly to a view and wait for it;
 // the unit at a point of the page; fly to report item i.
 window.tigerlodHover = (clientX, clientY) => hoverAt(clientX, clientY);
-window.tigerlodIdle = async () => { await prefetching; return { ...stats }; };
+window.tigerlodIdle = async () => {
+  // Until no front request is in flight and the latest prefetching is done.
+  for (;;) {
+    const p = pending, q = prefetching;
+    await p;
+    await q;
+    if (p === pending && q === prefetching && !pending) return { ...stats };
+  }
+};
 window.tigerlodPin = (i) => pin(state.violations[i]);
 window.tigerlodView = async (cx, cy, upp) => {
   state.cx = cx; state.cy = cy; state.upp = upp;
