@@ -252,9 +252,11 @@ std::vector<Key> stage_keys()
         entry("render.fps", Type::number,
               "frames a second the camera moves at (each frame starts on its slot; 0: back to back)", "30", {0, 1000},
               {}, "fps", "render"),
-        entry("render.disk_latency_ms", Type::number, "simulated disk: milliseconds a payload read waits (0: none)",
-              "0", {0, 1e4}, {}, "disk-latency-ms", "render"),
-        entry("render.disk_mbps", Type::number, "simulated disk: MB/s a payload is read at (0: no limit)", "0",
+        entry("render.disk_latency_ms", Type::number,
+              "simulated disk: milliseconds a payload read waits (0: none). On by default: the page cache of a "
+              "machine that just wrote the tree would hide its disk",
+              "5", {0, 1e4}, {}, "disk-latency-ms", "render"),
+        entry("render.disk_mbps", Type::number, "simulated disk: MB/s a payload is read at (0: no limit)", "50",
               {0, 1e6}, {}, "disk-mbps", "render"),
         entry("render.gl", Type::choice,
               "OpenGL backend: `auto` (a GPU through EGL where the machine has one, else OSMesa, as simplify "

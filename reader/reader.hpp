@@ -19,6 +19,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -128,6 +129,13 @@ struct StreamOptions {
     /// Hard limit on the bytes of decoded payloads held, plus the I/O thread's
     /// buffers while it decodes. Never exceeded.
     uint64_t budget_bytes = 64ULL << 20;
+    /// Load ahead what the next views are likely to need, into room the
+    /// front does not need (Section 6.2.2), soonest needed first: while the
+    /// camera moves, the fronts of the views its last motion leads to; while
+    /// it stands still, the paper's events (parent, children, coarser and
+    /// finer LODs, a wider view) by how far the view must zoom or pan before
+    /// Algorithm 6.1 picks them. The list is cut to what fits beside the
+    /// front, and a prefetch never evicts a payload the front or the list wants.
     bool prefetch = true;
     /// The prefetch view extends the view by this fraction of its size on each side.
     double prefetch_margin = 0.5;
@@ -142,7 +150,10 @@ struct Stats {
     uint64_t bytes_read = 0;
     uint64_t evictions = 0;
     uint64_t skipped = 0; ///< wanted payloads that did not fit in the budget
-    uint64_t errors = 0;  ///< payloads that failed to read or decode
+    /// Views whose prefetch list was cut to what fits beside the front: the
+    /// budget bound (with evictions and skipped, the sign that it did).
+    uint64_t prefetch_cuts = 0;
+    uint64_t errors = 0; ///< payloads that failed to read or decode
     uint64_t resident_bytes = 0;
     uint64_t peak_bytes = 0;      ///< largest resident + in-flight bytes seen
     double seconds_waiting = 0.0; ///< time callers spent in wait_front()
@@ -199,6 +210,17 @@ struct DrawChain {
 /// Items without geometry or chains draw nothing.
 std::vector<DrawChain> draw_list(const datatree::Skeleton& s, const std::vector<Drawable>& front);
 
+/// How a border of level `level` of a tree of `levels` levels is drawn:
+/// width in pixels and colour. The top level 3 px black, the next 2.4 px,
+/// then lighter and thinner down to 1 px light grey from the fifth on; a tree
+/// of one level (a line layer) 1 px dark grey. tigerlod-render draws with
+/// it, and tigerlod-serve hands it to the viewer, so both draw alike.
+struct LineStyle {
+    float width = 1;
+    uint8_t r = 0, g = 0, b = 0;
+};
+LineStyle line_style(uint32_t level, uint32_t levels) noexcept;
+
 /// The out-of-core streamer: a payload cache with a byte budget and an I/O
 /// thread that loads the front's missing payloads first, then prefetches.
 class Streamer {
@@ -209,7 +231,8 @@ class Streamer {
     Streamer& operator=(const Streamer&) = delete;
 
     /// Set the view: computes the front and the prefetch list and hands them
-    /// to the I/O thread. Never waits for the disk.
+    /// to the I/O thread. Never waits for the disk. Views come from one
+    /// thread: the prefetch list follows their motion.
     std::vector<FrontItem> set_view(const View& view);
     /// For each front item, what is resident now: its own LOD, else the
     /// nearest resident LOD of the node, else no geometry. Never waits for the disk.
@@ -261,6 +284,8 @@ class Streamer {
     size_t m_front_ranks = 0;        ///< m_wanted's first entries: the front and its tables
     std::vector<FrontItem> m_wanted; ///< front, then prefetch list, by priority
     std::map<FrontItem, size_t> m_rank;
+    size_t m_cursor = 0;             ///< m_wanted's entries before it are settled (resident, failed or skipped)
+    std::optional<View> m_last_view; ///< the view before, for the camera's motion (set_view's own)
     std::map<FrontItem, Entry> m_cache;
     std::map<FrontItem, std::string> m_failed;
     std::map<FrontItem, uint64_t> m_skipped; ///< item -> generation it was skipped in

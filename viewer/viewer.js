@@ -8,7 +8,7 @@ const prefetchOn = new URLSearchParams(location.search).get("prefetch") !== "0";
 const canvas = document.getElementById("map");
 const ctx = canvas.getContext("2d");
 const hud = document.getElementById("hud");
-const state = { tree: null, cx: 0, cy: 0, upp: 1, lodColours: false, labels: true, front: [], frameMs: 0,
+const state = { tree: null, cx: 0, cy: 0, upp: 1, lodColours: false, labels: true, front: [], draw: [], frameMs: 0,
                 hover: null, violations: [], pinned: null };
 const cache = new Map(); // "node/lod" -> { geometry, bytes, used }
 const units = new Map(); // node -> units payload (JSON)
@@ -139,12 +139,13 @@ async function fetchFront() {
   const w = canvas.width, h = canvas.height;
   const q = `cx=${state.cx}&cy=${state.cy}&upp=${state.upp}&w=${w}&h=${h}`;
   const response = await fetch(`/api/front?${q}`);
-  const front = (await response.json()).front;
+  const { front, draw: drawList } = await response.json();
   const keep = new Set(front.map(([n, k]) => `${n}/${k}`));
   await Promise.all(front.map(([n, k]) => load(n, k, keep)));
   await Promise.all(front.map(([n]) => loadTable(n)));
   if (state.labels) await Promise.all(front.map(([n]) => loadUnits(n)));
   state.front = front;
+  state.draw = drawList;
   draw();
   // Prefetch: the fronts of the four views half a screen away (east,
   // west, north, south) at this scale and size, loaded after the front is
@@ -170,21 +171,42 @@ function draw() {
   ctx.clearRect(0, 0, w, h);
   const sx = (x) => (x - state.cx) / state.upp + w / 2;
   const sy = (y) => h / 2 - (y - state.cy) / state.upp;
-  ctx.lineWidth = Math.max(1, devicePixelRatio);
-  for (const [node, lod] of state.front) {
-    const e = cache.get(`${node}/${lod}`);
-    if (!e) continue;
-    const { chains, offsets, xy } = e.geometry;
-    ctx.strokeStyle = state.lodColours ? lodPalette[lod % lodPalette.length] : "#333333";
+  // What the server's draw list says (reader::draw_list: each chain once,
+  // a border between levels by the finer node), border level by level from
+  // the finest up, each in its style (reader::line_style): as
+  // tigerlod-render draws the same view.
+  const styles = state.tree.styles;
+  let deepest = 0;
+  for (const d of state.draw) for (let i = 1; i < d.length; i += 2) deepest = Math.max(deepest, d[i]);
+  ctx.lineCap = "butt";
+  for (let level = deepest; level >= 0; level--) {
+    const style = styles[Math.min(level, styles.length - 1)];
+    ctx.lineWidth = style.width * devicePixelRatio;
+    const grey = `rgb(${style.rgb.join(",")})`;
+    ctx.strokeStyle = grey;
     ctx.beginPath();
-    for (let c = 0; c < chains; c++) {
-      for (let i = offsets[c]; i < offsets[c + 1]; i++) {
-        const x = sx(xy[2 * i]), y = sy(xy[2 * i + 1]);
-        if (i === offsets[c]) ctx.moveTo(x, y); else ctx.lineTo(x, y);
+    state.front.forEach(([node, lod], item) => {
+      const e = cache.get(`${node}/${lod}`);
+      const d = state.draw[item];
+      if (!e || !d) return;
+      const { offsets, xy } = e.geometry;
+      if (state.lodColours) {
+        ctx.stroke();
+        ctx.beginPath();
+        ctx.strokeStyle = lodPalette[lod % lodPalette.length];
       }
-    }
+      for (let j = 0; j < d.length; j += 2) {
+        if (d[j + 1] !== level) continue;
+        const c = d[j];
+        for (let i = offsets[c]; i < offsets[c + 1]; i++) {
+          const x = sx(xy[2 * i]), y = sy(xy[2 * i + 1]);
+          if (i === offsets[c]) ctx.moveTo(x, y); else ctx.lineTo(x, y);
+        }
+      }
+    });
     ctx.stroke();
   }
+  ctx.lineWidth = Math.max(1, devicePixelRatio);
   if (state.pinned?.geometry) {
     // The chains of the violation clicked, at its LOD, over the map.
     const { item, geometry, table } = state.pinned;
@@ -367,6 +389,7 @@ if (params.has("cx") && params.has("cy") && params.has("upp")) {
   state.upp = Number(params.get("upp"));
 }
 if (params.get("lod_colours") === "1") state.lodColours = true;
+if (params.get("labels") === "0") state.labels = false;
 if (state.tree.verify) {
   const report = await (await fetch("/api/verify")).json();
   state.violations = (report.items ?? []).filter((v) => Number.isFinite(v.x) && Number.isFinite(v.y));

@@ -189,7 +189,18 @@ std::string encode(const ChainStore& s)
     return std::move(out);
 }
 
-ChainStore decode(std::span<const std::byte> bytes, const std::string& name)
+namespace {
+
+/// A string index of a record, checked against the string table.
+void check_index(Reader& body, const ChainStore& s, uint32_t idx, const char* what)
+{
+    if (idx >= s.strings.size()) {
+        body.fail(std::string(what) + " string index " + std::to_string(idx) + " out of range");
+    }
+}
+
+/// The header: magic, version, flags, size and the trailer's CRC. Returns the minor version.
+uint16_t check_header(std::span<const std::byte> bytes, const std::string& name)
 {
     Reader r(bytes, name);
     if (bytes.size() < sizeof magic || std::memcmp(bytes.data(), magic, sizeof magic) != 0) {
@@ -225,12 +236,12 @@ ChainStore decode(std::span<const std::byte> bytes, const std::string& name)
     if (crc32(bytes.first(bytes.size() - 4)) != stored_crc) {
         throw format_error(name + ": checksum mismatch (corrupt file)");
     }
-    Reader body(bytes.first(bytes.size() - 4), name);
-    for (size_t i = 0; i < header_size; ++i) {
-        body.get<char>("header");
-    }
-    ChainStore s;
-    s.minor = minor;
+    return minor;
+}
+
+/// The level, partition, projection, halo and (1.1) tolerance and metric; then the string table.
+void read_meta(Reader& body, ChainStore& s)
+{
     s.level_index = body.get<uint32_t>("meta");
     s.level_count = body.get<uint32_t>("meta");
     if (s.level_index >= s.level_count) {
@@ -253,7 +264,7 @@ ChainStore decode(std::span<const std::byte> bytes, const std::string& name)
         *d = body.get<double>("meta");
     }
     s.halo_m = body.get<double>("meta");
-    if (minor >= 1) {
+    if (s.minor >= 1) {
         s.eps_m = body.get<double>("meta");
         s.metric = body.get<uint8_t>("meta");
         if (!(s.eps_m >= 0) || s.metric > 2) {
@@ -273,11 +284,11 @@ ChainStore decode(std::span<const std::byte> bytes, const std::string& name)
     if (!s.strings[0].empty()) {
         body.fail("string 0 must be empty");
     }
-    auto check_index = [&](uint32_t idx, const char* what) {
-        if (idx >= nstrings) {
-            body.fail(std::string(what) + " string index " + std::to_string(idx) + " out of range");
-        }
-    };
+}
+
+/// The chain records and their points.
+void read_chains(Reader& body, ChainStore& s)
+{
     const uint32_t nchains = body.get_count(chain_record_size, "chains");
     s.chains.reserve(nchains);
     for (uint32_t i = 0; i < nchains; ++i) {
@@ -288,9 +299,9 @@ ChainStore decode(std::span<const std::byte> bytes, const std::string& name)
         c.feature_class = body.get<uint32_t>("chain");
         c.flags = body.get<uint32_t>("chain");
         c.count = body.get<uint32_t>("chain");
-        check_index(c.left, "left");
-        check_index(c.right, "right");
-        check_index(c.feature_class, "feature class");
+        check_index(body, s, c.left, "left");
+        check_index(body, s, c.right, "right");
+        check_index(body, s, c.feature_class, "feature class");
         if ((c.flags & ~chain_known_flags) != 0) {
             body.fail("chain " + std::to_string(c.id) + ": unknown flags " + std::to_string(c.flags));
         }
@@ -308,6 +319,11 @@ ChainStore decode(std::span<const std::byte> bytes, const std::string& name)
         }
         s.chains.push_back(c);
     }
+}
+
+/// The junctions and the constraint points.
+void read_points(Reader& body, ChainStore& s)
+{
     const uint32_t njunctions = body.get_count(20, "junctions");
     s.junctions.reserve(njunctions);
     for (uint32_t i = 0; i < njunctions; ++i) {
@@ -326,37 +342,58 @@ ChainStore decode(std::span<const std::byte> bytes, const std::string& name)
         c.kind = body.get<uint32_t>("constraint point");
         c.p.x = body.get<int32_t>("constraint point");
         c.p.y = body.get<int32_t>("constraint point");
-        check_index(c.unit, "constraint unit");
-        if (c.kind > constraint_neighbour || (c.kind == constraint_neighbour && minor < 2)) {
+        check_index(body, s, c.unit, "constraint unit");
+        if (c.kind > constraint_neighbour || (c.kind == constraint_neighbour && s.minor < 2)) {
             body.fail("unknown constraint kind " + std::to_string(c.kind));
         }
         s.constraints.push_back(c);
     }
-    if (minor >= 3) {
-        const uint32_t nfields = body.get_count(5, "unit attributes");
-        for (uint32_t i = 0; i < nfields; ++i) {
-            AttributeField f;
-            f.name = body.get_str("unit attributes");
-            const auto type = body.get<uint8_t>("unit attributes");
-            if (type > static_cast<uint8_t>(AttributeType::real)) {
-                body.fail("unknown attribute type " + std::to_string(type));
-            }
-            f.type = static_cast<AttributeType>(type);
-            s.fields.push_back(std::move(f));
+}
+
+/// 1.3: the unit attributes section (the fields, then a record per own unit).
+void read_unit_attributes(Reader& body, ChainStore& s)
+{
+    const uint32_t nfields = body.get_count(5, "unit attributes");
+    for (uint32_t i = 0; i < nfields; ++i) {
+        AttributeField f;
+        f.name = body.get_str("unit attributes");
+        const auto type = body.get<uint8_t>("unit attributes");
+        if (type > static_cast<uint8_t>(AttributeType::real)) {
+            body.fail("unknown attribute type " + std::to_string(type));
         }
-        const uint32_t nunits = body.get_count(8 + 4 * size_t{nfields}, "unit records");
-        s.units.reserve(nunits);
-        for (uint32_t i = 0; i < nunits; ++i) {
-            UnitRecord u;
-            u.unit = body.get<uint32_t>("unit record");
-            check_index(u.unit, "unit record's unit");
-            u.name = body.get_str("unit record");
-            u.values.reserve(nfields);
-            for (uint32_t k = 0; k < nfields; ++k) {
-                u.values.push_back(body.get_str("unit record"));
-            }
-            s.units.push_back(std::move(u));
+        f.type = static_cast<AttributeType>(type);
+        s.fields.push_back(std::move(f));
+    }
+    const uint32_t nunits = body.get_count(8 + 4 * size_t{nfields}, "unit records");
+    s.units.reserve(nunits);
+    for (uint32_t i = 0; i < nunits; ++i) {
+        UnitRecord u;
+        u.unit = body.get<uint32_t>("unit record");
+        check_index(body, s, u.unit, "unit record's unit");
+        u.name = body.get_str("unit record");
+        u.values.reserve(nfields);
+        for (uint32_t k = 0; k < nfields; ++k) {
+            u.values.push_back(body.get_str("unit record"));
         }
+        s.units.push_back(std::move(u));
+    }
+}
+
+} // namespace
+
+ChainStore decode(std::span<const std::byte> bytes, const std::string& name)
+{
+    ChainStore s;
+    s.minor = check_header(bytes, name);
+    Reader body(bytes.first(bytes.size() - 4), name);
+    for (size_t i = 0; i < header_size; ++i) {
+        body.get<char>("header");
+    }
+    read_meta(body, s);
+    read_chains(body, s);
+    read_points(body, s);
+    if (s.minor >= 3) {
+        read_unit_attributes(body, s);
     }
     if (body.left() != 0) {
         body.fail(std::to_string(body.left()) + " unread bytes before the trailer");

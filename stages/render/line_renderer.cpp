@@ -38,17 +38,6 @@ void main()
 
 } // namespace
 
-Style style_of(uint32_t level, uint32_t levels) noexcept
-{
-    if (levels <= 1) {
-        return {1.0F, 60, 60, 60};
-    }
-    static constexpr Style styles[] = {
-        {3.0F, 0, 0, 0}, {2.4F, 30, 30, 30}, {1.4F, 110, 110, 110}, {1.0F, 150, 150, 150}, {1.0F, 185, 185, 185}};
-    constexpr uint32_t n = sizeof styles / sizeof styles[0];
-    return styles[std::min(level, n - 1)];
-}
-
 size_t LineRenderer::buffer_bytes() noexcept
 {
     return batch_vertices * sizeof(Vertex);
@@ -131,7 +120,7 @@ DrawStats LineRenderer::draw(const reader::View& view, const std::vector<reader:
                                         datatree::border_level_shift);
     }
     for (uint32_t level = deepest + 1; level-- > 0;) {
-        const Style style = style_of(level, levels);
+        const Style style = reader::line_style(level, levels);
         const float half = 0.5F * style.width;
         const double margin = style.width;
         for (const auto& dc : list) {

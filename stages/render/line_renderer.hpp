@@ -15,17 +15,8 @@
 
 namespace tigerlod::render {
 
-/// A line style: width in pixels and colour.
-struct Style {
-    float width = 1;
-    uint8_t r = 0, g = 0, b = 0;
-};
-
-/// The style of border level `level` of a tree of `levels` levels: the top
-/// level 3 px black, the next 2.4 px, then lighter and thinner down to 1 px
-/// light grey from the fifth on; a tree of one level (a line layer) 1 px
-/// dark grey.
-Style style_of(uint32_t level, uint32_t levels) noexcept;
+/// A line style (reader::line_style: the viewer draws with the same).
+using Style = reader::LineStyle;
 
 struct DrawStats {
     uint64_t chains = 0, vertices = 0, segments = 0; ///< drawn (segments: those in view)

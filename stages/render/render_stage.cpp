@@ -55,8 +55,11 @@ struct ModeRun {
     double load_s = 0;            ///< incore: loading everything first
     uint64_t peak_bytes = 0;      ///< every byte the reader held, at most (skeleton included)
     uint64_t duplicate_chains = 0;
-    uint64_t loads = 0, evictions = 0, errors = 0;
+    uint64_t loads = 0, prefetches = 0, evictions = 0, skipped = 0, prefetch_cuts = 0, errors = 0;
     std::vector<std::string> error_messages;
+    /// Out of core: the budget bound somewhere on the path (a payload
+    /// evicted or skipped, or the prefetch list cut to fit).
+    bool bound() const noexcept { return evictions + skipped + prefetch_cuts > 0; }
 };
 
 /// "0:3 2:10": how many front items are at each LOD (drawn LOD).
@@ -283,7 +286,10 @@ struct Run {
         const reader::Stats st = streamer.stats();
         m.peak_bytes = skeleton + st.peak_bytes;
         m.loads = st.loads;
+        m.prefetches = st.prefetches;
         m.evictions = st.evictions;
+        m.skipped = st.skipped;
+        m.prefetch_cuts = st.prefetch_cuts;
         m.errors = st.errors;
         m.error_messages = streamer.errors();
         return m;
@@ -333,15 +339,22 @@ json summary_of(const ModeRun& m, uint64_t budget)
     j["bytes_read"] = read;
     j["loads"] = m.loads;
     j["evictions"] = m.evictions;
+    if (m.mode != "incore") {
+        j["prefetches"] = m.prefetches;
+        j["skipped"] = m.skipped;
+        j["prefetch_cuts"] = m.prefetch_cuts;
+        j["budget_bound"] = m.bound();
+    }
     j["duplicate_chains"] = m.duplicate_chains;
     j["errors"] = m.errors;
     return j;
 }
 
-std::string csv_of(const ModeRun& m)
+std::string csv_of(const ModeRun& m, const std::vector<reader::View>& views)
 {
     std::ostringstream out;
-    out << "frame,ms,front_nodes,lods,chains,vertices,segments,resident_bytes,misses,bytes_read,complete,select_ms\n";
+    out << "frame,ms,front_nodes,lods,chains,vertices,segments,resident_bytes,misses,bytes_read,complete,select_ms,"
+           "center_x,center_y,units_per_pixel\n";
     for (size_t f = 0; f < m.rows.size(); ++f) {
         const auto& r = m.rows[f];
         char ms[32], select[32];
@@ -349,7 +362,11 @@ std::string csv_of(const ModeRun& m)
         std::snprintf(select, sizeof select, "%.3f", r.select_ms);
         out << f << "," << ms << "," << r.front_nodes << "," << r.lods << "," << r.chains << "," << r.vertices << ","
             << r.segments << "," << r.resident_bytes << "," << r.misses << "," << r.bytes_read << ","
-            << (r.complete ? 1 : 0) << "," << select << "\n";
+            << (r.complete ? 1 : 0) << "," << select;
+        char view[96];
+        std::snprintf(view, sizeof view, ",%.17g,%.17g,%.17g", views[f].center_x, views[f].center_y,
+                      views[f].units_per_pixel);
+        out << view << "\n";
     }
     return out.str();
 }
@@ -412,7 +429,8 @@ std::string RenderStage::help_notes() const
            "                             segments (drawn in view), resident_bytes (skeleton included), misses\n"
            "                             (front payloads and tables not resident when the view was set),\n"
            "                             bytes_read, complete (the whole front at its own LODs), select_ms (choosing\n"
-           "                             the front, and out of core what to load ahead, within ms)\n"
+           "                             the front, and out of core what to load ahead, within ms), center_x,\n"
+           "                             center_y, units_per_pixel (the view, grid units: tigerlod-serve's)\n"
            "  OUTPUT/summary.json        per mode: median, p95 and max frame time, frames over 2x the median,\n"
            "                             the median, p95 and max time choosing the front (select_*_ms),\n"
            "                             time to the first complete frame, peak bytes against the budget,\n"
@@ -479,7 +497,7 @@ int RenderStage::run(const StageContext& ctx)
             }
             throw input_error(msg);
         }
-        write_file(out.path() / ("frames-" + mode + ".csv"), csv_of(runs.back()));
+        write_file(out.path() / ("frames-" + mode + ".csv"), csv_of(runs.back(), views));
     }
 
     run.progress = nullptr; // the previews are not on the path
@@ -529,6 +547,9 @@ int RenderStage::run(const StageContext& ctx)
         modes.push_back(std::move(j));
     }
     summary["modes"] = modes;
+    if (incore != nullptr) { // the whole tree decoded, against the budget
+        summary["incore_bytes_vs_budget"] = double(incore->peak_bytes) / double(budget);
+    }
     write_file(out.path() / "summary.json", summary.dump(2) + "\n");
     out.commit();
 
@@ -546,6 +567,16 @@ int RenderStage::run(const StageContext& ctx)
                     vs ? std::to_string(j["frames_over_2x_incore"].get<int64_t>()).c_str() : "-",
                     j["first_complete_frame_s"].get<double>(), double(j["peak_bytes"].get<uint64_t>()) / (1 << 20),
                     static_cast<unsigned long long>(j["misses"].get<uint64_t>()));
+    }
+    for (const auto& m : runs) {
+        if (m.mode != "incore" && !m.bound()) {
+            std::printf("  %s: the budget did not bind (nothing evicted, skipped or left out of the prefetch list): "
+                        "this run measured no paging\n",
+                        m.mode.c_str());
+        }
+    }
+    if (incore != nullptr) {
+        std::printf("  the whole tree decoded takes %.1fx the budget\n", double(incore->peak_bytes) / double(budget));
     }
     std::printf("outputs in %s\n", m_output.c_str());
     return exit_ok;

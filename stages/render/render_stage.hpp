@@ -30,7 +30,7 @@ class RenderStage final : public Stage {
   private:
     std::string m_tree, m_output, m_path = "zoom", m_mode = "all", m_size = "1280x720", m_gl = "auto";
     int m_frames = 240, m_seed = 1, m_png_every = 0;
-    double m_budget_mb = 25, m_disk_latency_ms = 0, m_disk_mbps = 0, m_pixel_error = 1, m_fps = 30;
+    double m_budget_mb = 25, m_disk_latency_ms = 5, m_disk_mbps = 50, m_pixel_error = 1, m_fps = 30;
     bool m_overwrite = false;
     uint32_t m_width = 1280, m_height = 720;
 }; // class RenderStage

@@ -341,6 +341,13 @@ Response Site::api_tree() const
                          {"lods", lods}});
     }
     std::vector<double> projection(std::begin(sk.projection), std::end(sk.projection));
+    // How each border level is drawn (reader::line_style, as tigerlod-render draws it).
+    json styles = json::array();
+    const auto levels = static_cast<uint32_t>(sk.level_names.size());
+    for (uint32_t l = 0; l < std::max(levels, 1U); ++l) {
+        const auto st = reader::line_style(l, levels);
+        styles.push_back({{"width", st.width}, {"rgb", {st.r, st.g, st.b}}});
+    }
     return json_response(
         {{"format", "Data Tree " + std::to_string(datatree::major_version) + "." + std::to_string(sk.minor)},
          {"projection",
@@ -350,6 +357,7 @@ Response Site::api_tree() const
            {"lon0_lat0_stdlat1_stdlat2_k0_fe_fn_grid_a_f", projection}}},
          {"grid_m", sk.grid_m()},
          {"levels", sk.level_names},
+         {"styles", styles},
          {"lod_eps_m", sk.lod_eps_m},
          {"verify", !m_options.verify.empty()},
          {"frame", {m_frame.min_x, m_frame.min_y, m_frame.max_x, m_frame.max_y}},
@@ -371,11 +379,26 @@ Response Site::api_front(const Request& r) const
     }
     reader::View view{*cx, *cy, *upp, static_cast<uint32_t>(*w), static_cast<uint32_t>(*h)};
     reader::FrontOptions fo{*pixel_error, *node_fraction};
+    const auto& sk = m_tree->skeleton();
+    const auto front = reader::select_front(sk, view, fo);
+    // What to draw of it, once all of it is loaded (reader::draw_list, as
+    // tigerlod-render draws): per item, its chains to draw, each as its
+    // index and its border level (the style: /api/tree's `styles`).
+    static const auto no_geometry = std::make_shared<const datatree::Geometry>(); // draw_list reads none
+    std::vector<reader::Drawable> drawables;
+    drawables.reserve(front.size());
     json items = json::array();
-    for (const auto& it : reader::select_front(m_tree->skeleton(), view, fo)) {
+    for (const auto& it : front) {
         items.push_back({it.node, it.lod});
+        drawables.push_back({it, it.lod, no_geometry, chains_of(it.node)});
     }
-    return json_response({{"front", items}}, "");
+    std::vector<json> draw(front.size(), json::array());
+    for (const auto& dc : reader::draw_list(sk, drawables)) {
+        draw[dc.item].push_back(dc.chain);
+        draw[dc.item].push_back((drawables[dc.item].chains->flags[dc.chain] & datatree::border_level_mask) >>
+                                datatree::border_level_shift);
+    }
+    return json_response({{"front", items}, {"draw", draw}}, "");
 }
 
 Response Site::api_node(uint32_t node, uint32_t lod) const
@@ -394,6 +417,31 @@ Response Site::api_node(uint32_t node, uint32_t lod) const
                                          std::to_string(lod) + "\"");
     res.headers.emplace_back("Cache-Control", "no-cache");
     return res;
+}
+
+std::shared_ptr<const reader::NodeChains> Site::chains_of(uint32_t node) const
+{
+    {
+        std::lock_guard lock(m_mutex);
+        if (const auto it = m_chains.find(node); it != m_chains.end()) {
+            return it->second;
+        }
+    }
+    datatree::ChainTable t;
+    if (!m_tree->read_table(node, t).ok()) {
+        return nullptr; // drawn as nothing; /api/table/N says what is wrong
+    }
+    auto c = std::make_shared<const reader::NodeChains>(reader::node_chains(*m_tree, node, t));
+    std::lock_guard lock(m_mutex);
+    const uint64_t bytes = c->memory_bytes();
+    if (m_chains_bytes + bytes > m_options.cache_bytes / 4) {
+        m_chains.clear();
+        m_chains_bytes = 0;
+    }
+    if (bytes <= m_options.cache_bytes / 4 && m_chains.emplace(node, c).second) {
+        m_chains_bytes += bytes;
+    }
+    return c;
 }
 
 Response Site::api_table(uint32_t node) const

@@ -95,6 +95,11 @@ class Site {
                                std::pair<std::shared_ptr<const std::string>, std::list<std::string>::iterator>>
         m_cache;
     mutable uint64_t m_cached = 0;
+    /// Chain tables as the draw lists need them (reader::node_chains), at
+    /// most a quarter of cache_bytes: emptied when a new one would not fit.
+    std::shared_ptr<const reader::NodeChains> chains_of(uint32_t node) const;
+    mutable std::map<uint32_t, std::shared_ptr<const reader::NodeChains>> m_chains;
+    mutable uint64_t m_chains_bytes = 0;
 };
 
 } // namespace tigerlod::serve

@@ -567,6 +567,29 @@ TEST_F(Cli, LineAndPolygonLayersWithMissingFields)
                    1, "geometry type is Line String, a polygons dataset needs polygons");
 }
 
+// dataset.name_field and dataset.attributes: a field the layer lacks is bad
+// data (exit 1) naming the layer, the field and the key; on a lines dataset,
+// or a field named twice, the config is refused (exit 2) before any input is read.
+TEST_F(Cli, UnitNamesAndAttributesThatCannotBeHadAreRefused)
+{
+    make_tiger();
+    const std::string polygons = "dataset:\n  kind: polygons\n  inputs: [faces.zip]\n  code_field: TFID\n";
+    const std::string levels = "levels:\n  - {name: a, prefix: 2}\n";
+    expect_failure(run("ingest", config(polygons + "  name_field: NOPE\n" + levels).string() + " " + out()), 1,
+                   "layer 'faces': no field 'NOPE' (dataset.name_field)");
+    expect_failure(
+        run("ingest", config(polygons + "  attributes: [STATEFP20, NOPE2]\n" + levels).string() + " " + out()), 1,
+        "layer 'faces': no field 'NOPE2' (dataset.attributes)");
+    expect_failure(
+        run("ingest",
+            config("dataset:\n  kind: lines\n  inputs: [edges.zip]\n  name_field: FULLNAME\n").string() + " " + out()),
+        2, "'dataset.name_field' and 'dataset.attributes' apply to units: polygons and tiger datasets");
+    expect_failure(
+        run("ingest", config(polygons + "  name_field: TFID\n  attributes: [TFID]\n" + levels).string() + " " + out()),
+        2, "'dataset.attributes' names the name_field 'TFID' again");
+    EXPECT_FALSE(fs::exists(out()));
+}
+
 TEST_F(Cli, FieldsOfAWrongTypeAreRefusedNotReadAsZero)
 {
     // Read as they are, a TLID stored as text or a TFID as a date come out

@@ -157,11 +157,20 @@ void expect_budget_and_once(const fs::path& out, uint64_t budget)
         EXPECT_TRUE(m["within_budget"].get<bool>()) << mode << ": peak " << m["peak_bytes"];
         EXPECT_LE(m["peak_bytes"].get<uint64_t>(), budget) << mode;
         EXPECT_LE(m["select_p95_ms"].get<double>(), m["select_max_ms"].get<double>()) << mode;
+        // Whether the budget bound: it evicted, skipped or cut the prefetch list.
+        EXPECT_EQ(m["budget_bound"].get<bool>(),
+                  m["evictions"].get<uint64_t>() + m["skipped"].get<uint64_t>() + m["prefetch_cuts"].get<uint64_t>() >
+                      0)
+            << mode;
+        if (mode == "ooc-noprefetch") {
+            EXPECT_EQ(m["prefetch_cuts"], 0) << mode;
+            EXPECT_EQ(m["prefetches"], 0) << mode;
+        }
         std::istringstream csv(slurp(out / ("frames-" + mode + ".csv")));
         std::string line;
         std::getline(csv, line);
         EXPECT_EQ(line, "frame,ms,front_nodes,lods,chains,vertices,segments,resident_bytes,misses,bytes_read,complete,"
-                        "select_ms");
+                        "select_ms,center_x,center_y,units_per_pixel");
         size_t rows = 0;
         for (; std::getline(csv, line); ++rows) {
             std::vector<std::string> f;
@@ -169,7 +178,8 @@ void expect_budget_and_once(const fs::path& out, uint64_t budget)
             for (std::string c; std::getline(cells, c, ',');) {
                 f.push_back(c);
             }
-            ASSERT_EQ(f.size(), 12U) << line;
+            ASSERT_EQ(f.size(), 15U) << line;
+            EXPECT_GT(std::stod(f[14]), 0.0) << line; // the view's scale
             EXPECT_LE(std::stoull(f[7]), budget) << mode << " frame " << f[0];
             // Choosing the front is part of the frame's time.
             EXPECT_LE(std::stod(f[11]), std::stod(f[1])) << mode << " frame " << f[0];

@@ -8,8 +8,11 @@
 // The keys L and U work. At the last view, hovering over each unit's
 // internal point names that unit. A report item (written into the report
 // the server was given) shows as a marker; pinning it flies there and names
-// its chains' units as the chain table has them. Prints the viewer's frame
-// times and leaves screenshots of three views in WORK.
+// its chains' units as the chain table has them. At three views of
+// tigerlod-render's zoom path (WORK/render: its PNGs and the views in its
+// CSV) the page draws what tigerlod-render drew: the ink of each within 2
+// pixels of the other's, but for a bound. Prints the viewer's frame times
+// and leaves screenshots of the views in WORK.
 import fs from "node:fs";
 import path from "node:path";
 
@@ -135,6 +138,93 @@ async function walk(budgetMb, label, prefetch = true) {
   await page.close();
   return last;
 }
+
+// The page against tigerlod-render at the same views: their lines are
+// drawn by different rasterizers (canvas 2D antialiased strokes, GL quads),
+// so pixels are compared as ink (darker than 235 of 255), and a pixel of
+// ink counts as matched when the other image has ink within 2 pixels. Both
+// ways at most 2 % unmatched, and the masses of ink (darkness summed) within
+// 10 % of each other: the same widths and greys by border level (the
+// page drawing every chain in one style, as it did before it took
+// tigerlod-render's, was 46 % and 25 % under).
+async function compareWithRender() {
+  const page = await browser.newPage({ viewport: { width: 900, height: 600 }, deviceScaleFactor: 1 });
+  const errors = [];
+  page.on("pageerror", (e) => errors.push(String(e)));
+  await page.goto(`${base}/?prefetch=0&labels=0`);
+  await page.waitForFunction(() => window.tigerlodReady === true, null, { timeout: 30000 });
+  const csv = fs.readFileSync(path.join(work, "render", "frames-ooc-noprefetch.csv"), "utf8").trim().split("\n");
+  const head = csv[0].split(",");
+  const col = (name) => head.indexOf(name);
+  for (const f of [0, 10, 20]) {
+    const row = csv[1 + f].split(",");
+    const [cx, cy, upp] = ["center_x", "center_y", "units_per_pixel"].map((n) => Number(row[col(n)]));
+    await page.evaluate(([x, y, u]) => window.tigerlodView(x, y, u), [cx, cy, upp]);
+    const png = fs.readFileSync(path.join(work, "render", "frames", `ooc-noprefetch-${String(f).padStart(5, "0")}.png`));
+    const r = await page.evaluate(async (dataUrl) => {
+      const c = document.getElementById("map");
+      const w = c.width, h = c.height;
+      const img = new Image();
+      img.src = dataUrl;
+      await img.decode();
+      const o = new OffscreenCanvas(w, h);
+      const octx = o.getContext("2d");
+      octx.fillStyle = "#ffffff";
+      octx.fillRect(0, 0, w, h);
+      octx.drawImage(img, 0, 0);
+      const want = octx.getImageData(0, 0, w, h).data;
+      const got = c.getContext("2d").getImageData(0, 0, w, h).data;
+      // Ink: luminance below 235; the page's canvas is composited on white.
+      // Its mass: the darkness summed (255 - luminance, over 255), which an
+      // antialiased line spreads over more pixels but keeps.
+      const inkOf = (d, premul) => {
+        const ink = new Uint8Array(w * h);
+        let mass = 0;
+        for (let i = 0; i < w * h; i++) {
+          const a = premul ? d[4 * i + 3] / 255 : 1;
+          const lum = (0.299 * d[4 * i] + 0.587 * d[4 * i + 1] + 0.114 * d[4 * i + 2]) * a + 255 * (1 - a);
+          ink[i] = lum < 235 ? 1 : 0;
+          mass += (255 - lum) / 255;
+        }
+        return { ink, mass };
+      };
+      const A = inkOf(want, false), B = inkOf(got, true);
+      const a = A.ink, b = B.ink;
+      const near = (ink, x, y) => {
+        for (let dy = -2; dy <= 2; dy++) {
+          for (let dx = -2; dx <= 2; dx++) {
+            const X = x + dx, Y = y + dy;
+            if (X >= 0 && Y >= 0 && X < w && Y < h && ink[Y * w + X]) return true;
+          }
+        }
+        return false;
+      };
+      let inkA = 0, inkB = 0, missA = 0, missB = 0;
+      for (let y = 0; y < h; y++) {
+        for (let x = 0; x < w; x++) {
+          const i = y * w + x;
+          if (a[i]) { inkA++; if (!near(b, x, y)) missA++; }
+          if (b[i]) { inkB++; if (!near(a, x, y)) missB++; }
+        }
+      }
+      return { w, h, inkA, inkB, missA, missB, massA: A.mass, massB: B.mass };
+    }, `data:image/png;base64,${png.toString("base64")}`);
+    await page.screenshot({ path: path.join(work, `view-render-${f}.png`) });
+    const lost = r.missA / Math.max(1, r.inkA), extra = r.missB / Math.max(1, r.inkB);
+    console.log(`render frame ${f}: ${r.w}x${r.h}, ink ${r.inkA} pixels, mass ${r.massA.toFixed(0)} (render) / ` +
+                `${r.inkB} pixels, mass ${r.massB.toFixed(0)} (page); ` +
+                `render's ink the page lacks ${(100 * lost).toFixed(2)} %, the page's the render lacks ${(100 * extra).toFixed(2)} %`);
+    if (r.w !== 900 || r.h !== 600) fail(`render frame ${f}: the page's canvas is ${r.w}x${r.h}, not 900x600`);
+    if (r.inkA < 1000) fail(`render frame ${f}: tigerlod-render drew almost nothing (${r.inkA} pixels of ink)`);
+    if (lost > 0.02 || extra > 0.02) fail(`render frame ${f}: the page and tigerlod-render differ (${(100 * lost).toFixed(2)} %, ${(100 * extra).toFixed(2)} %)`);
+    if (r.massB < 0.9 * r.massA || r.massB > 1.1 * r.massA) {
+      fail(`render frame ${f}: ink mass ${r.massB.toFixed(0)} in the page, ${r.massA.toFixed(0)} in the render`);
+    }
+  }
+  if (errors.length > 0) fail(`render comparison: page errors: ${errors.join("; ")}`);
+  await page.close();
+}
+await compareWithRender();
 
 const loose = await walk(32, "32 MiB");
 console.log(`32 MiB budget: ${loose.loads} loads, ${loose.evictions} evictions, peak ${loose.peak} bytes`);

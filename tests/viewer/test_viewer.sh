@@ -49,6 +49,9 @@ YAML
 "$bin/tigerlod-simplify" --shortcut-test exact --tolerances 250,500,1000,2000 orig simp >simp.log 2>&1 ||
   { cat simp.log; exit 1; }
 "$bin/tigerlod-pack" orig simp tree >pack.log 2>&1 || { cat pack.log; exit 1; }
+# tigerlod-render's PNGs of views on its zoom path, to hold the page's drawing against.
+"$bin/tigerlod-render" --mode ooc-noprefetch --path zoom --frames 40 --png-every 10 --size 900x600 --fps 0 \
+  --disk-latency-ms 0 --disk-mbps 0 tree render >render.log 2>&1 || { cat render.log; exit 1; }
 echo '{"items": []}' >report.json # test_viewer.mjs writes its own items (the server reads it per request)
 "$bin/tigerlod-serve" --port 0 --viewer "$repo/viewer" --verify report.json tree >serve.out 2>&1 &
 server=$!
@@ -61,8 +64,9 @@ done
 [ -n "$port" ] || { echo "FAIL: tigerlod-serve did not start: $(cat serve.out)"; exit 1; }
 status=0
 node "$repo/tests/viewer/test_viewer.mjs" "$pw" "$chromium" "http://127.0.0.1:$port" "$work" || status=$?
-# TIGERLOD_VIEWER_SHOTS=DIR keeps the screenshots of three views there.
+# TIGERLOD_VIEWER_SHOTS=DIR keeps the screenshots of the views there, and
+# tigerlod-render's PNGs the page was held against.
 if [ -n "${TIGERLOD_VIEWER_SHOTS:-}" ]; then
-  mkdir -p "$TIGERLOD_VIEWER_SHOTS" && cp view-*.png "$TIGERLOD_VIEWER_SHOTS"/ 2>/dev/null || true
+  mkdir -p "$TIGERLOD_VIEWER_SHOTS" && cp view-*.png render/frames/*.png "$TIGERLOD_VIEWER_SHOTS"/ 2>/dev/null || true
 fi
 exit "$status"

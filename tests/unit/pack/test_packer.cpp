@@ -41,6 +41,23 @@ struct Store {
     }
 };
 
+/// Each store as an original (DIR/orig) and as its one simplification at
+/// 10 m (DIR/simp/eps-10m), canonical, as ingest and simplify write them;
+/// `level_count` 0 keeps each store's own.
+void write_stores(const fs::path& dir, const std::vector<Store>& stores, uint32_t level_count = 0)
+{
+    for (const auto& st : stores) {
+        ChainStore s = st.s;
+        s.level_count = level_count > 0 ? level_count : s.level_count;
+        s.canonicalize();
+        fs::create_directories(dir / "orig" / s.level_name);
+        chains::write(dir / "orig" / s.level_name / (s.partition + ".tlc"), s);
+        s.eps_m = 10;
+        fs::create_directories(dir / "simp" / "eps-10m" / s.level_name);
+        chains::write(dir / "simp" / "eps-10m" / s.level_name / (s.partition + ".tlc"), s);
+    }
+}
+
 } // namespace
 
 // Two states side by side (S1 west of x = 200, S2 east), S1 of counties
@@ -105,15 +122,7 @@ TEST(Pack, EachChainCarriesItsBorderLevel)
         .chain(112, "21a", "12a", {{200, 0}, {200, 100}}, true)
         .unit("21a", {300, 50})
         .unit("12a", {150, 50}, chains::constraint_neighbour);
-    for (auto& st : stores) {
-        ChainStore s = st.s;
-        s.canonicalize();
-        fs::create_directories(dir / "orig" / s.level_name);
-        chains::write(dir / "orig" / s.level_name / (s.partition + ".tlc"), s);
-        s.eps_m = 10;
-        fs::create_directories(dir / "simp" / "eps-10m" / s.level_name);
-        chains::write(dir / "simp" / "eps-10m" / s.level_name / (s.partition + ".tlc"), s);
-    }
+    write_stores(dir, stores);
     const pack::PackedTree tree = pack::build_tree(dir / "orig", dir / "simp", {});
     fs::remove_all(dir);
     const auto& sk = tree.skeleton;
@@ -165,16 +174,7 @@ TEST(Pack, TheMainExtentLeavesAFarUnitOut)
             stores.emplace_back(1, "place", code);
             stores.back().chain(1000 + i, code + "a", "", square(c)).unit(code + "a", c);
         }
-        for (auto& st : stores) {
-            ChainStore s = st.s;
-            s.level_count = 2;
-            s.canonicalize();
-            fs::create_directories(dir / "orig" / s.level_name);
-            chains::write(dir / "orig" / s.level_name / (s.partition + ".tlc"), s);
-            s.eps_m = 10;
-            fs::create_directories(dir / "simp" / "eps-10m" / s.level_name);
-            chains::write(dir / "simp" / "eps-10m" / s.level_name / (s.partition + ".tlc"), s);
-        }
+        write_stores(dir, stores, 2);
         pack::write_tree(dir / "tree", pack::build_tree(dir / "orig", dir / "simp", {}), "{}\n");
         std::string error;
         const auto tree = reader::Tree::open(dir / "tree", error);
