@@ -605,7 +605,7 @@ std::vector<Candidate> sorted(const std::map<FrontItem, double>& best)
 /// The prefetch candidates of a front, each once at its lowest score, in
 /// order of score (ties by item).
 /// - While the camera moves, the fronts of the views ahead (the last
-///   motion kept up for 1, 2, 4, 8 and 16 views): an item's score is the
+///   motion kept up for 1, 2 and 4 views: `lookahead`): an item's score is the
 ///   first of those it is in. Zooms, pans and the LOD and node switches
 ///   they bring are all Algorithm 6.1's own on those views, so what is
 ///   loaded is what those views will draw, not what this view's neighbours

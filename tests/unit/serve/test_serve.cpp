@@ -181,12 +181,37 @@ TEST_F(Serve, TheFrontIsTheReadersAndBadViewsAre400)
                             {"w", "800"},
                             {"h", "600"}});
         ASSERT_EQ(r.status, 200) << r.body;
-        const auto got = json::parse(r.body).at("front");
+        const auto body = json::parse(r.body);
+        const auto got = body.at("front");
         ASSERT_EQ(got.size(), want.size()) << upp;
         for (size_t i = 0; i < want.size(); ++i) {
             EXPECT_EQ(got[i][0].get<uint32_t>(), want[i].node);
             EXPECT_EQ(got[i][1].get<uint32_t>(), want[i].lod);
         }
+        // What to draw: reader::draw_list of the whole front loaded, each
+        // chain with its border level, in the front's order.
+        std::vector<reader::Drawable> front;
+        for (const auto& f : want) {
+            datatree::ChainTable t;
+            ASSERT_TRUE(tree->read_table(f.node, t).ok());
+            front.push_back({f, f.lod, std::make_shared<const datatree::Geometry>(),
+                             std::make_shared<const reader::NodeChains>(reader::node_chains(*tree, f.node, t))});
+        }
+        std::vector<std::vector<uint32_t>> draw(want.size());
+        for (const auto& dc : reader::draw_list(tree->skeleton(), front)) {
+            draw[dc.item].push_back(dc.chain);
+            draw[dc.item].push_back(front[dc.item].chains->flags[dc.chain] >> datatree::border_level_shift & 0xFFU);
+        }
+        EXPECT_EQ(body.at("draw").get<std::vector<std::vector<uint32_t>>>(), draw) << upp;
+        EXPECT_FALSE(draw.empty() || draw.front().empty()) << upp;
+    }
+    // Each border level's style, as tigerlod-render draws it.
+    const auto styles = json::parse(get(s, "/api/tree", {}).body).at("styles");
+    ASSERT_EQ(styles.size(), std::max<size_t>(1, tree->skeleton().level_names.size()));
+    for (uint32_t l = 0; l < styles.size(); ++l) {
+        const auto st = reader::line_style(l, uint32_t(tree->skeleton().level_names.size()));
+        EXPECT_EQ(styles[l].at("width").get<float>(), st.width);
+        EXPECT_EQ(styles[l].at("rgb"), json({st.r, st.g, st.b}));
     }
     const std::map<std::string, std::string> good{{"cx", "0"}, {"cy", "0"}, {"upp", "1"}, {"w", "8"}, {"h", "8"}};
     EXPECT_EQ(get(s, "/api/front", good).status, 200);
