@@ -171,7 +171,9 @@ TEST_F(Serve, TheFrontIsTheReadersAndBadViewsAre400)
     const auto s = site();
     const auto& root = tree->skeleton().nodes.front().box;
     const double cx = (double(root.min_x) + root.max_x) / 2, cy = (double(root.min_y) + root.max_y) / 2;
-    for (const double upp : {1e6, 1e4, 100.0, 1.0}) {
+    const double whole = (double(root.max_x) - root.min_x) / 800; // the root across the view
+    size_t views_drawn = 0;
+    for (const double upp : {1e6, 1e4, 100.0, 1.0, 2 * whole, whole / 4, whole / 16, whole / 64}) {
         const reader::View view{cx, cy, upp, 800, 600};
         const auto want = reader::select_front(tree->skeleton(), view);
         const auto r = get(s, "/api/front",
@@ -203,8 +205,9 @@ TEST_F(Serve, TheFrontIsTheReadersAndBadViewsAre400)
             draw[dc.item].push_back(front[dc.item].chains->flags[dc.chain] >> datatree::border_level_shift & 0xFFU);
         }
         EXPECT_EQ(body.at("draw").get<std::vector<std::vector<uint32_t>>>(), draw) << upp;
-        EXPECT_FALSE(draw.empty() || draw.front().empty()) << upp;
+        views_drawn += std::any_of(draw.begin(), draw.end(), [](const auto& d) { return !d.empty(); }) ? 1 : 0;
     }
+    EXPECT_GE(views_drawn, 2U); // the whole tree; nearer in, the centre may fall between chains
     // Each border level's style, as tigerlod-render draws it.
     const auto styles = json::parse(get(s, "/api/tree", {}).body).at("styles");
     ASSERT_EQ(styles.size(), std::max<size_t>(1, tree->skeleton().level_names.size()));
