@@ -584,11 +584,21 @@ Motion motion_of(const std::optional<View>& last, const View& view)
 }
 
 /// The views the prefetch list looks ahead to while the camera moves: the
-/// last motion kept up for this many views. Further ahead loads what a turn
-/// of the camera leaves unused: on the reader test's zoom-pan-zoom path under
-/// a budget that binds, 1.14x the loads without prefetching looking 4 views
-/// ahead, 1.39x at 8 and 1.68x at 16, for the same misses (22-23 of 99).
-constexpr int lookahead[] = {1, 2, 4};
+/// last motion kept up for this many views. Always the first three; the
+/// further ones only where the disk needs the time (see prefetch_candidates):
+/// looking far ahead always loads what a turn of the camera leaves unused (on
+/// the reader test's zoom-pan-zoom path under a budget that binds, 1.14x the
+/// loads without prefetching looking 4 views ahead, 1.39x at 8 and 1.68x at
+/// 16, for the same misses).
+constexpr int lookahead[] = {1, 2, 4, 8, 16, 32};
+constexpr size_t always_ahead = 3;
+
+/// What prefetch_candidates knows of the disk and the caller's pace.
+struct Pace {
+    double load_seconds = 0; ///< the mean time a load takes lately (0: none yet)
+    double view_seconds = 0; ///< between the last views (0: not known)
+    int max_views = 32;      ///< StreamOptions::max_lookahead_views
+};
 
 /// Candidates by score, ties by item.
 std::vector<Candidate> sorted(const std::map<FrontItem, double>& best)
@@ -619,7 +629,7 @@ std::vector<Candidate> sorted(const std::map<FrontItem, double>& best)
 ///   view widened by `margin` of its size on each side (visibility events).
 std::vector<Candidate> prefetch_candidates(const datatree::Skeleton& s, const View& view,
                                            const std::vector<FrontItem>& front, const FrontOptions& options,
-                                           double margin, const Motion& motion)
+                                           double margin, const Motion& motion, const Pace& pace)
 {
     std::map<FrontItem, double> best;
     const std::set<FrontItem> in_front(front.begin(), front.end());
@@ -633,13 +643,36 @@ std::vector<Candidate> prefetch_candidates(const datatree::Skeleton& s, const Vi
         }
     };
     if (motion.moving) {
-        for (const int t : lookahead) {
+        // The views ahead. Past the first three, the view t ahead is looked
+        // at only when what the views up to it bring into the front (each
+        // item a load at the disk's recent time, resident or not, so that
+        // the horizon holds while they come) would take longer than the
+        // views there would be left to load it in had the list stopped one
+        // step nearer (t / 2 views). So a switch that brings many nodes at
+        // once (state to county) is loaded early enough, and the list looks
+        // no further than the disk needs. With a fast disk, the first three alone.
+        std::map<FrontItem, double> ahead_items;
+        double loads = 0; // the loads the views ahead need, so far
+        size_t last = always_ahead;
+        for (size_t k = 0; k < std::size(lookahead) && (k < always_ahead || lookahead[k] <= pace.max_views); ++k) {
+            const int t = lookahead[k];
             View ahead = view;
             ahead.units_per_pixel *= std::exp2(motion.zoom * t);
             ahead.center_x += motion.dx * t;
             ahead.center_y += motion.dy * t;
             for (const auto& f : select_front(s, ahead, options)) {
-                want(f, t);
+                if (!in_front.contains(f) && ahead_items.emplace(f, t).second) {
+                    loads += 1; // resident or not: what the views bring, so the horizon holds while they come
+                }
+            }
+            if (k >= always_ahead && pace.view_seconds > 0 &&
+                loads * pace.load_seconds > lookahead[k - 1] * pace.view_seconds) {
+                last = k + 1;
+            }
+        }
+        for (const auto& [item, t] : ahead_items) {
+            if (t <= lookahead[last - 1]) {
+                want(item, t);
             }
         }
         // The events too would load what the turns of a path leave unused
@@ -726,7 +759,17 @@ std::vector<FrontItem> Streamer::set_view(const View& view)
         const uint64_t room = m_options.budget_bytes > front_bytes ? m_options.budget_bytes - front_bytes : 0;
         uint64_t used = 0;
         const Motion motion = motion_of(m_last_view, view);
-        for (const auto& c : prefetch_candidates(s, view, front, m_options.front, m_options.prefetch_margin, motion)) {
+        Pace pace;
+        pace.max_views = m_options.max_lookahead_views;
+        const auto now = std::chrono::steady_clock::now();
+        {
+            std::lock_guard lock(m_mutex);
+            pace.load_seconds = m_load_seconds;
+            pace.view_seconds = m_last_view ? std::chrono::duration<double>(now - m_last_time).count() : 0.0;
+        }
+        m_last_time = now;
+        for (const auto& c :
+             prefetch_candidates(s, view, front, m_options.front, m_options.prefetch_margin, motion, pace)) {
             const bool table = !tabled.contains(c.item.node);
             const uint64_t bytes = charge(c.item) + (table ? charge({c.item.node, table_lod}) : 0);
             if (used + bytes > room) {
@@ -940,6 +983,7 @@ void Streamer::run()
         m_in_flight += cost;
         m_stats.peak_bytes = std::max(m_stats.peak_bytes, m_stats.resident_bytes + m_in_flight);
         lock.unlock();
+        const auto t_load = std::chrono::steady_clock::now();
         std::shared_ptr<datatree::Geometry> geometry;
         std::shared_ptr<NodeChains> chains;
         Status st;
@@ -957,7 +1001,10 @@ void Streamer::run()
             st = m_tree->read_geometry(item.node, item.lod, *geometry);
             size = node.lods[item.lod].payload.size;
         }
+        const double load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_load).count();
         lock.lock();
+        // The mean time a load takes, lately (the lookahead's estimate of the disk).
+        m_load_seconds = m_load_seconds == 0 ? load_s : 0.8 * m_load_seconds + 0.2 * load_s;
         m_in_flight -= cost;
         if (!st.ok()) {
             m_failed.emplace(item, st.error);

@@ -137,6 +137,10 @@ struct StreamOptions {
     /// Algorithm 6.1 picks them. The list is cut to what fits beside the
     /// front, and a prefetch never evicts a payload the front or the list wants.
     bool prefetch = true;
+    /// While the camera moves, the furthest view ahead the prefetch list may
+    /// look to (1, 2 and 4 always; 8, 16 and 32 only when the disk, at its
+    /// recent pace, needs that long to load what the views up to there need).
+    int max_lookahead_views = 32;
     /// The prefetch view extends the view by this fraction of its size on each side.
     double prefetch_margin = 0.5;
     FrontOptions front;
@@ -286,6 +290,8 @@ class Streamer {
     std::map<FrontItem, size_t> m_rank;
     size_t m_cursor = 0;             ///< m_wanted's entries before it are settled (resident, failed or skipped)
     std::optional<View> m_last_view; ///< the view before, for the camera's motion (set_view's own)
+    std::chrono::steady_clock::time_point m_last_time; ///< when it was set (set_view's own)
+    double m_load_seconds = 0;                         ///< the mean time a load took lately
     std::map<FrontItem, Entry> m_cache;
     std::map<FrontItem, std::string> m_failed;
     std::map<FrontItem, uint64_t> m_skipped; ///< item -> generation it was skipped in
