@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstring>
 #include <fcntl.h>
+#include <functional>
 #include <limits>
 #include <optional>
 #include <set>
@@ -598,6 +599,13 @@ struct Pace {
     double load_seconds = 0; ///< the mean time a load takes lately (0: none yet)
     double view_seconds = 0; ///< between the last views (0: not known)
     int max_views = 32;      ///< StreamOptions::max_lookahead_views
+    /// The budget's room beside the front; a payload's bytes. The list looks
+    /// past 4 views only while what those views bring fits in half the
+    /// room: under a budget that binds, the front would evict it before it
+    /// is drawn (on the 100 M nation at 10 MiB, 591 evictions against 297,
+    /// and a worse p95 than no prefetching).
+    uint64_t room = 0;
+    std::function<uint64_t(FrontItem)> bytes;
 };
 
 /// Candidates by score, ties by item.
@@ -652,7 +660,8 @@ std::vector<Candidate> prefetch_candidates(const datatree::Skeleton& s, const Vi
         // once (state to county) is loaded early enough, and the list looks
         // no further than the disk needs. With a fast disk, the first three alone.
         std::map<FrontItem, double> ahead_items;
-        double loads = 0; // the loads the views ahead need, so far
+        double loads = 0;    // the loads the views ahead need, so far
+        uint64_t weight = 0; // and their bytes
         size_t last = always_ahead;
         for (size_t k = 0; k < std::size(lookahead) && (k < always_ahead || lookahead[k] <= pace.max_views); ++k) {
             const int t = lookahead[k];
@@ -663,7 +672,11 @@ std::vector<Candidate> prefetch_candidates(const datatree::Skeleton& s, const Vi
             for (const auto& f : select_front(s, ahead, options)) {
                 if (!in_front.contains(f) && ahead_items.emplace(f, t).second) {
                     loads += 1; // resident or not: what the views bring, so the horizon holds while they come
+                    weight += pace.bytes(f);
                 }
+            }
+            if (k >= always_ahead && 2 * weight > pace.room) {
+                break;
             }
             if (k >= always_ahead && pace.view_seconds > 0 &&
                 loads * pace.load_seconds > lookahead[k - 1] * pace.view_seconds) {
@@ -761,6 +774,8 @@ std::vector<FrontItem> Streamer::set_view(const View& view)
         const Motion motion = motion_of(m_last_view, view);
         Pace pace;
         pace.max_views = m_options.max_lookahead_views;
+        pace.room = room;
+        pace.bytes = [this](FrontItem it) { return uint64_t{charge(it)}; };
         const auto now = std::chrono::steady_clock::now();
         {
             std::lock_guard lock(m_mutex);
