@@ -181,8 +181,12 @@ std::vector<Key> stage_keys()
               "which shortcuts a chain may take: `voronoi` those inside its own eps-Voronoi region, drawn with "
               "OpenGL (the paper), then the exact rules; `exact` the exact rules alone, on the CPU, with no OpenGL "
               "and no colouring: every shortcut that keeps the map planar and the points on their side, at every "
-              "LOD and across partitions (fewer vertices, faster; `simplification/README.md`)",
-              "`voronoi`", {}, {"voronoi", "exact"}, "shortcut-test", "simplify"),
+              "LOD and across partitions (fewer vertices; `simplification/README.md`); `auto` `voronoi` where a GPU "
+              "draws it through EGL (or `--colors` is given), `exact` elsewhere, where the raster would run on "
+              "llvmpipe at 2-4x the exact rules' time for the same guarantee. `--verbose` and the report "
+              "(`shortcut_test`, `shortcut_test_choice`) say which ran and why; the pipeline decides once, on the "
+              "machine that runs Snakemake, for every job",
+              "`auto`", {}, {"auto", "voronoi", "exact"}, "shortcut-test", "simplify"),
         entry("simplify.compliance", Type::choice,
               "how the shortcuts' compliance is read back: `ssbo` sets a flag per shortcut in a storage buffer in one "
               "pass, `readback` is the paper's unique-colour loop (Algorithm 5.1); the same result",

@@ -266,14 +266,14 @@ bool Context::gpu_device_node()
     return false;
 }
 
-std::unique_ptr<Context> Context::create_auto(std::string& why)
+std::unique_ptr<Context> Context::create_gpu(std::string& why)
 {
     // EGL only where a GPU's device node exists: elsewhere it could only
     // find Mesa's software device, the same llvmpipe as OSMesa, so it is
     // not even opened (no libEGL loaded on a machine without a GPU).
     if (!gpu_device_node()) {
         why = "no GPU device node (/dev/nvidiactl, /dev/dri/renderD*)";
-        return create(Backend::osmesa);
+        return nullptr;
     }
     try {
         auto egl = create(Backend::egl);
@@ -284,6 +284,14 @@ std::unique_ptr<Context> Context::create_auto(std::string& why)
         why = "EGL found only a software renderer";
     } catch (const environment_error& e) {
         why = std::string("EGL failed: ") + e.what();
+    }
+    return nullptr;
+}
+
+std::unique_ptr<Context> Context::create_auto(std::string& why)
+{
+    if (auto gpu = create_gpu(why)) {
+        return gpu;
     }
     return create(Backend::osmesa);
 }

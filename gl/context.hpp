@@ -33,6 +33,10 @@ class Context {
     /// else, or if EGL fails, an OSMesa context. `why` says what was chosen
     /// and why. Throws as create(osmesa) does.
     static std::unique_ptr<Context> create_auto(std::string& why);
+    /// create_auto's GPU alone: an EGL context on a GPU, or null where the
+    /// machine has none (no device node, EGL failing, or EGL finding only a
+    /// software renderer); `why` says which.
+    static std::unique_ptr<Context> create_gpu(std::string& why);
     /// Whether the machine has a GPU's device node: /dev/nvidiactl, or a
     /// render node /dev/dri/renderD*.
     static bool gpu_device_node();

@@ -3,7 +3,8 @@
 CONFIG CODES: first the config is checked as the stages read it (a key
 given twice, a document that is not a mapping: one line and exit 2); then
 the outputs of the jobs a region rebuild forces, one a line:
-the color job (the simplify job where simplify.shortcut_test is exact) of
+the color job (the simplify job where simplify.shortcut_test is or takes
+exact: pipeline/shortcut_test.py) of
 every group of stores holding a store whose partition
 begins with one of the codes (its own stores and those below) or is part of
 one (the stores of its county and state, which hold its boundaries), and
@@ -25,6 +26,8 @@ import re
 import sys
 
 import yaml
+
+from shortcut_test import resolve as resolve_shortcut_test
 
 
 class ConfigError(Exception):
@@ -114,7 +117,7 @@ def main():
     # The first job of a group: its colouring, or its simplify where
     # simplify.shortcut_test is exact (no colouring).
     simplify = cfg.get("simplify") if isinstance(cfg.get("simplify"), dict) else {}
-    first = "simplify" if simplify.get("shortcut_test") == "exact" else "color"
+    first = "simplify" if resolve_shortcut_test(simplify)[0] == "exact" else "color"
     forced = []
     for region in regions:
         own = [g for g in groups if any(p.startswith(region) or region.startswith(p) for p in g["partitions"])]

@@ -109,6 +109,14 @@ int SimplifyStage::run(const StageContext& ctx)
         o.user_points = read_points(m_points);
         points_sha256 = sha256_file(m_points);
     }
+    // --shortcut-test auto: the raster where a GPU draws it, the exact
+    // rules elsewhere (the same guarantee; on llvmpipe the raster takes 2-4x
+    // their time: BENCHMARKS.md). What ran goes into the manifest and report.
+    std::unique_ptr<gl::Context> context;
+    m_test = resolve_shortcut_test(context);
+    if (m_shortcut_test == "auto") {
+        ctx.log.info("simplify: --shortcut-test auto: " + m_test.name + " (" + m_test.why + ")");
+    }
     StageOutput out(m_common, reads, name);
     const std::string manifest = manifest_text(manifest_json(ingest, colored, points_sha256));
     if (m_common.finish) {
@@ -130,21 +138,23 @@ int SimplifyStage::run(const StageContext& ctx)
     // 5.2-5.3 s without). So with more than one store and a worker per core,
     // llvmpipe draws on the GL thread itself, unless the user set LP_NUM_THREADS.
     // Results do not depend on it (the same pixels either way).
-    const bool raster_test = m_shortcut_test == "voronoi";
+    const bool raster_test = m_test.name == "voronoi";
     const bool llvmpipe_inline = raster_test && stores.size() > 1 && o.threads >= std::thread::hardware_concurrency() &&
-                                 std::getenv("LP_NUM_THREADS") == nullptr;
+                                 std::getenv("LP_NUM_THREADS") == nullptr && !context;
     if (llvmpipe_inline) {
         ::setenv("LP_NUM_THREADS", "0", 0);
     }
-    // --shortcut-test exact draws nothing: no OpenGL context is made.
-    std::unique_ptr<gl::Context> context;
+    // The exact rules draw nothing: no OpenGL context is made.
     std::optional<Raster> raster;
-    std::string gl_name = "none (--shortcut-test exact)";
+    std::string gl_name = m_shortcut_test == "auto" ? "none (--shortcut-test auto took exact: " + m_test.why + ")"
+                                                    : "none (--shortcut-test exact)";
     if (raster_test) {
-        std::string why;
-        context = m_gl == "auto" ? gl::Context::create_auto(why) : gl::Context::create(*gl::parse_backend(m_gl));
-        if (!why.empty()) {
-            ctx.log.info("simplify: --gl auto: " + why);
+        if (!context) {
+            std::string why;
+            context = m_gl == "auto" ? gl::Context::create_auto(why) : gl::Context::create(*gl::parse_backend(m_gl));
+            if (!why.empty()) {
+                ctx.log.info("simplify: --gl auto: " + why);
+            }
         }
         RasterOptions ropt;
         ropt.metric = o.metric;
@@ -165,6 +175,22 @@ int SimplifyStage::run(const StageContext& ctx)
     log_removed_leftovers(ctx.log, out.removed_leftovers());
     print_summary(stores.size(), gl_name, totals, seconds);
     return exit_ok;
+}
+
+SimplifyStage::ShortcutTest SimplifyStage::resolve_shortcut_test(std::unique_ptr<gl::Context>& gpu) const
+{
+    if (m_shortcut_test != "auto") {
+        return {m_shortcut_test, "given"};
+    }
+    if (!m_colors.empty()) {
+        return {"voronoi", "--colors gives the raster its classes"};
+    }
+    std::string why;
+    gpu = gl::Context::create_gpu(why);
+    if (gpu) {
+        return {"voronoi", why + ": the eps-Voronoi raster on it"};
+    }
+    return {"exact", why + ": the exact rules on the CPU, where the raster would run on llvmpipe"};
 }
 
 std::vector<ToleranceStats> SimplifyStage::simplify_one(const StoreFile& sf, const SimplifyOptions& so, Raster* raster,
@@ -284,7 +310,8 @@ json SimplifyStage::report_json(size_t stores, const std::string& gl, const std:
                          {"max_reach", o.max_reach},
                          {"point_constraints", o.point_constraints},
                          {"user_points", o.user_points.size()},
-                         {"shortcut_test", m_shortcut_test},
+                         {"shortcut_test", m_test.name},
+                         {"shortcut_test_choice", m_shortcut_test == "auto" ? "auto: " + m_test.why : "given"},
                          {"lazy", o.lazy},
                          {"compliance", m_compliance},
                          {"pixel_fraction", o.color.pixel_fraction},
@@ -354,7 +381,7 @@ json SimplifyStage::manifest_json(const Manifest& ingest, const std::optional<Ma
     options["max_reach"] = o.max_reach;
     options["point_constraints"] = o.point_constraints;
     options["points"] = {{"file", m_points}, {"sha256", points_sha256}, {"lonlat", std::move(lonlat)}};
-    options["shortcut_test"] = m_shortcut_test;
+    options["shortcut_test"] = m_test.name;
     options["lazy"] = o.lazy;
     options["compliance"] = m_compliance;
     options["window_pixels"] = m_window_pixels;

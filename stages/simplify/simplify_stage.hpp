@@ -1,13 +1,16 @@
 #pragma once
 /// @file simplify_stage.hpp
 /// tigerlod-simplify: every chain store of an ingest output at every
-/// tolerance of the ladder, on OpenGL.
+/// tolerance of the ladder: the eps-Voronoi raster on OpenGL where a GPU draws
+/// it, the exact rules on the CPU elsewhere (`--shortcut-test auto`).
 
 #include "core/stage.hpp"
+#include "gl/context.hpp"
 #include "simplification/simplifier.hpp"
 #include "simplification/stage_options.hpp"
 #include "simplification/stage_output.hpp"
 
+#include <memory>
 #include <optional>
 
 namespace tigerlod::simplify {
@@ -16,7 +19,8 @@ class SimplifyStage final : public Stage {
   public:
     static constexpr const char* name = "simplify";
     static constexpr const char* description =
-        "Simplify chain stores at a ladder of tolerances with the eps-Voronoi diagram drawn by OpenGL:\n"
+        "Simplify chain stores at a ladder of tolerances, with the eps-Voronoi diagram drawn by OpenGL where a\n"
+        "GPU draws it and the exact rules elsewhere:\n"
         "every chain stays within eps of its original, no two chains cross, every constraint point keeps its side.";
     void add_args(ArgSet& args) override;
     void initialize() override;
@@ -46,9 +50,18 @@ class SimplifyStage final : public Stage {
     void print_summary(size_t stores, const std::string& gl, const std::vector<ToleranceStats>& totals,
                        double seconds) const;
 
+    /// The shortcut test a run makes, and why: --shortcut-test itself, or
+    /// what `auto` took (voronoi with --colors, or where a GPU draws it
+    /// through EGL, whose context `gpu` then holds; exact elsewhere).
+    struct ShortcutTest {
+        std::string name, why;
+    };
+    ShortcutTest resolve_shortcut_test(std::unique_ptr<gl::Context>& gpu) const;
+
     CommonOptions m_common;
     std::string m_points;
-    std::string m_shortcut_test = "voronoi";
+    std::string m_shortcut_test = "auto";
+    ShortcutTest m_test; ///< what run() resolved m_shortcut_test to
     std::string m_compliance = "ssbo";
     std::string m_gl = "auto";
     std::string m_colors;

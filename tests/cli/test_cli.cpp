@@ -776,13 +776,40 @@ TEST_F(Cli, SimplifyWithTheExactRulesAloneDrawsNothingAndVerifiesClean)
     ASSERT_EQ(e.code, 0) << e.err;
     EXPECT_TRUE(e.err.empty()) << e.err;
     EXPECT_NE(e.out.find("on none (--shortcut-test exact)"), std::string::npos) << e.out;
-    const Result v = run("simplify", in + " " + voronoi + " --tolerances 1,8 --threads 1");
+    const Result v = run("simplify", in + " " + voronoi + " --tolerances 1,8 --shortcut-test voronoi --threads 1");
     ASSERT_EQ(v.code, 0) << v.err;
     const json re = json::parse(slurp(m_dir / "exact" / "simplify-report.json"));
     const json rv = json::parse(slurp(m_dir / "voronoi" / "simplify-report.json"));
     EXPECT_EQ(re["gl"], "none (--shortcut-test exact)");
     EXPECT_EQ(re["options"]["shortcut_test"], "exact");
+    EXPECT_EQ(re["options"]["shortcut_test_choice"], "given");
     EXPECT_EQ(rv["options"]["shortcut_test"], "voronoi");
+    EXPECT_NE(rv["gl"].get<std::string>().find("OpenGL"), std::string::npos) << rv["gl"];
+    // The default, auto: the raster where a GPU draws it, the exact rules
+    // elsewhere; --verbose, the report and the manifest say which and why.
+    const bool gpu = tigerlod::gl::Context::gpu_device_node();
+    const Result au = run("simplify", in + " " + (m_dir / "auto").string() + " --tolerances 1,8 --threads 1 --verbose");
+    ASSERT_EQ(au.code, 0) << au.err;
+    const json ra = json::parse(slurp(m_dir / "auto" / "simplify-report.json"));
+    const std::string took = ra["options"]["shortcut_test"];
+    EXPECT_EQ(json::parse(slurp(m_dir / "auto" / "manifest.json"))["options"]["shortcut_test"], took);
+    EXPECT_EQ(ra["options"]["shortcut_test_choice"].get<std::string>().rfind("auto: ", 0), 0U) << ra["options"];
+    EXPECT_NE(au.err.find("simplify: --shortcut-test auto: " + took + " ("), std::string::npos) << au.err;
+    if (!gpu) {
+        EXPECT_EQ(took, "exact") << "no GPU device node here, so the raster would run on llvmpipe";
+        EXPECT_EQ(ra["gl"].get<std::string>().rfind("none (--shortcut-test auto took exact: no GPU device node", 0), 0U)
+            << ra["gl"];
+        EXPECT_EQ(ra["tolerances"][0]["drawn_segments"], 0);
+    }
+    // With --colors, auto makes the raster test those colours ask for.
+    ASSERT_EQ(run("color", in + " " + (m_dir / "colors18").string() + " --tolerances 1,8").code, 0);
+    ASSERT_EQ(run("simplify", in + " " + (m_dir / "autocolors").string() + " --tolerances 1,8 --threads 1 --colors " +
+                                  (m_dir / "colors18").string())
+                  .code,
+              0);
+    const json rc = json::parse(slurp(m_dir / "autocolors" / "simplify-report.json"));
+    EXPECT_EQ(rc["options"]["shortcut_test"], "voronoi");
+    EXPECT_EQ(rc["options"]["shortcut_test_choice"], "auto: --colors gives the raster its classes");
     EXPECT_EQ(json::parse(slurp(m_dir / "exact" / "manifest.json"))["options"]["shortcut_test"], "exact");
     for (size_t t = 0; t < 2; ++t) {
         const json& a = re["tolerances"][t];
@@ -805,6 +832,8 @@ TEST_F(Cli, SimplifyWithTheExactRulesAloneDrawsNothingAndVerifiesClean)
             const auto rel = fs::relative(f.path(), m_dir / "exact");
             EXPECT_EQ(slurp(f.path()), slurp(m_dir / "exact2" / rel)) << rel;
             EXPECT_EQ(slurp(f.path()), slurp(m_dir / "voronoi" / rel)) << rel;
+            EXPECT_EQ(slurp(f.path()), slurp(m_dir / "auto" / rel)) << rel;
+            EXPECT_EQ(slurp(f.path()), slurp(m_dir / "autocolors" / rel)) << rel;
             ++stores;
         }
     }
@@ -815,7 +844,7 @@ TEST_F(Cli, SimplifyWithTheExactRulesAloneDrawsNothingAndVerifiesClean)
     EXPECT_EQ(vf.code, 0) << vf.out << vf.err;
     // The test is a choice of two, and the colours are the raster's.
     expect_failure(run("simplify", in + " " + (m_dir / "bad").string() + " --shortcut-test exactly"), 2,
-                   "must be voronoi or exact");
+                   "must be auto, voronoi or exact");
     ASSERT_EQ(run("color", in + " " + (m_dir / "colors").string() + " --tolerances 8").code, 0);
     expect_failure(run("simplify", in + " " + (m_dir / "bad").string() + " --tolerances 8 --shortcut-test exact " +
                                        "--colors " + (m_dir / "colors").string()),
@@ -1177,7 +1206,8 @@ TEST_F(Cli, SimplifyGivesTheSameStoresOnEglAndWithASmallFramebuffer)
     make_tiger();
     ASSERT_EQ(run("ingest", tiger_config().string() + " " + (m_dir / "in").string()).code, 0);
     const std::string in = (m_dir / "in").string();
-    const Result base = run("simplify", in + " " + (m_dir / "base").string() + " --tolerances 1,8");
+    const Result base =
+        run("simplify", in + " " + (m_dir / "base").string() + " --tolerances 1,8 --shortcut-test voronoi");
     ASSERT_EQ(base.code, 0) << base.err;
     auto expect_same_stores = [&](const fs::path& dir) {
         size_t stores = 0;
@@ -1191,20 +1221,21 @@ TEST_F(Cli, SimplifyGivesTheSameStoresOnEglAndWithASmallFramebuffer)
         EXPECT_GT(stores, 0U);
     };
     // Every tile in a framebuffer of 64 pixels when its box fits, else in the large one.
-    const Result small =
-        run("simplify", in + " " + (m_dir / "small").string() + " --tolerances 1,8 --window-pixels 64");
+    const Result small = run("simplify", in + " " + (m_dir / "small").string() +
+                                             " --tolerances 1,8 --shortcut-test voronoi --window-pixels 64");
     ASSERT_EQ(small.code, 0) << small.err;
     expect_same_stores(m_dir / "small");
     // The default, --gl auto: a GPU where the machine has a GPU's device
     // node, else OSMesa without opening EGL; the same stores as OSMesa named.
-    const Result osmesa =
-        run("simplify", in + " " + (m_dir / "osmesa").string() + " --tolerances 1,8 --gl osmesa --verbose");
+    const Result osmesa = run("simplify", in + " " + (m_dir / "osmesa").string() +
+                                              " --tolerances 1,8 --shortcut-test voronoi --gl osmesa --verbose");
     ASSERT_EQ(osmesa.code, 0) << osmesa.err;
     EXPECT_NE(osmesa.out.find("(osmesa)"), std::string::npos) << osmesa.out;
     EXPECT_EQ(osmesa.err.find("--gl auto"), std::string::npos) << osmesa.err;
     expect_same_stores(m_dir / "osmesa");
     const bool gpu_node = tigerlod::gl::Context::gpu_device_node();
-    const Result autod = run("simplify", in + " " + (m_dir / "auto").string() + " --tolerances 1,8 --verbose");
+    const Result autod =
+        run("simplify", in + " " + (m_dir / "auto").string() + " --tolerances 1,8 --shortcut-test voronoi --verbose");
     ASSERT_EQ(autod.code, 0) << autod.err;
     expect_same_stores(m_dir / "auto");
     if (!gpu_node) {
@@ -1216,7 +1247,8 @@ TEST_F(Cli, SimplifyGivesTheSameStoresOnEglAndWithASmallFramebuffer)
     }
     // The EGL backend: on a GPU's driver in production; here Mesa's
     // device or surfaceless platform, where one is installed.
-    const Result egl = run("simplify", in + " " + (m_dir / "egl").string() + " --tolerances 1,8 --gl egl");
+    const Result egl =
+        run("simplify", in + " " + (m_dir / "egl").string() + " --tolerances 1,8 --shortcut-test voronoi --gl egl");
     if (egl.code == 3) {
         GTEST_SKIP() << "no EGL context on this machine (exit 3): " << egl.err;
     }
@@ -1248,7 +1280,8 @@ TEST_F(Cli, ColorAndSimplifyRejectBadInput)
         expect_failure(run(tool, in + " --class-scale S1400"), 2, "expected CLASS=FACTOR");
         expect_failure(run(tool, (m_dir / "nothing").string() + " " + (m_dir / "res").string()), 2, "not a folder");
         // Three chains meet at every junction: two classes cannot separate them.
-        const Result over = run(tool, in + " --max-classes 2");
+        const Result over =
+            run(tool, in + " --max-classes 2" + (std::string(tool) == "simplify" ? " --shortcut-test voronoi" : ""));
         expect_failure(over, 1, "needs more than 2 stencil classes");
         // The tile is placed on the map too: its centre in lon/lat, on the hand-made map.
         double lon = 0, lat = 0;

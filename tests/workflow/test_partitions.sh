@@ -67,7 +67,7 @@ levels:
   - {name: county, prefix: 5}
   - {name: tract, prefix: 11}
 ingest: {halo_m: 200}
-simplify: {tolerances_m: [1, 16]}
+simplify: {tolerances_m: [1, 16], shortcut_test: voronoi}
 workflow: {job_mb: 0.001}
 render: {frames: 6}
 EOF

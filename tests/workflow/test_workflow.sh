@@ -28,7 +28,11 @@ fail() {
   echo "FAIL: $*"
   failures=$((failures + 1))
 }
-sed "s#\.\./\.\./shared#$repo/../shared#; s/^name: floyd/name: wf/" "$repo/configs/floyd.yaml" >wf.yaml
+# The eps-Voronoi test by name (the default, auto, takes the exact rules
+# where there is no GPU), so the color jobs run; 2c takes the exact rules.
+sed "s#\.\./\.\./shared#$repo/../shared#; s/^name: floyd/name: wf/; s/^  tolerances_m: .*/&\n  shortcut_test: voronoi/" \
+  "$repo/configs/floyd.yaml" >wf.yaml
+grep -q '^  shortcut_test: voronoi$' wf.yaml || fail "the test's config does not name the eps-Voronoi test"
 
 # 1. Killed with SIGKILL in the middle (simplify running): Snakemake's lock
 # and incomplete markers stay. Before, every rerun failed until a person
@@ -81,7 +85,7 @@ PY
 # exact rules alone: no color job runs, the tree verifies clean, and a
 # region rebuild forces the groups' simplify jobs (there are no colour jobs).
 rm -rf out/wf/jobs/color
-sed -i 's/tolerances_m: \[2, 8, 32\]/tolerances_m: [2, 8, 32]\n  shortcut_test: exact/' wf.yaml
+sed -i 's/shortcut_test: voronoi/shortcut_test: exact/' wf.yaml
 "$repo/scripts/workflow" wf.yaml >run5.out 2>&1 || fail "a rerun with the exact rules failed: $(cat run5.out)"
 [ "$(stat -c %Y out/wf/ingest/manifest.json)" = "$before" ] || fail "the exact rules reran ingest"
 [ -e out/wf/jobs/color ] && fail "color jobs ran for the exact rules"
@@ -98,6 +102,22 @@ PY
 python3 "$repo/pipeline/regions.py" wf.yaml 51063 >forced.out 2>/dev/null || fail "regions.py failed"
 grep -q '^out/wf/jobs/simplify/' forced.out || fail "a region rebuild forces no simplify job: $(cat forced.out)"
 grep -q '/jobs/color/' forced.out && fail "a region rebuild forces color jobs that do not exist: $(cat forced.out)"
+
+# 2d. simplify.shortcut_test left out: auto, decided once by the pipeline
+# for every job and said on its output; the tree says which test ran.
+sed -i '/^  shortcut_test: exact$/d' wf.yaml
+if [ -e /dev/nvidiactl ] || compgen -G '/dev/dri/renderD*' >/dev/null; then want=voronoi; else want=exact; fi
+"$repo/scripts/workflow" wf.yaml >run5b.out 2>&1 || fail "a rerun with shortcut_test auto failed: $(cat run5b.out)"
+grep -q "pipeline: simplify.shortcut_test $want (auto: " run5b.out ||
+  fail "the pipeline did not say that auto took $want: $(head -5 run5b.out)"
+python3 - out/wf/tree/manifest.json out/wf/reports/simplify-report.json "$want" <<'PY' ||
+import json, sys
+tree = json.load(open(sys.argv[1]))["simplify"]
+simp = json.load(open(sys.argv[2]))
+assert tree["shortcut_test"] == sys.argv[3], tree
+assert simp["options"]["shortcut_test"] == sys.argv[3], simp["options"]
+PY
+  fail "the tree made under shortcut_test auto does not say $want ran"
 
 # 3. A failing stage: its message on the terminal, not only in its log.
 sed "s/^name: wf/name: bad/; s#tl_2020_51063_faces.zip#tl_2020_51063_edges.zip#" wf.yaml >bad.yaml
