@@ -168,6 +168,12 @@ std::vector<Key> stage_keys()
               "no-projection-scale", both, false),
         entry("simplify.max_reach", Type::integer, "longest shortcut in vertices (0: no cap)", "0", integer(0), {},
               "max-reach", "simplify"),
+        entry("simplify.end_sample", Type::integer,
+              "where the tolerance is coarse for a chain's spacing (the hull scan's test), shortcuts start and end "
+              "only at the vertices a greedy fit of the chain within eps / R keeps (0: at every vertex): every "
+              "rule still tests each one, so the guarantee is the same, with a few vertices more than the minimum "
+              "for far less work (`simplification/README.md`, \"Ends at a greedy fit's vertices\")",
+              "256", integer(0, 65536), {}, "end-sample", "simplify"),
         entry("simplify.point_constraints", Type::boolean, "the units' internal points and user points may change side",
               "`true`", {}, {}, "no-point-constraints", "simplify", false),
         entry("simplify.points", Type::path,

@@ -552,7 +552,7 @@ Candidates proximate_shortcuts(std::span<const GridPoint> pts, const Tolerance& 
 }
 
 Candidates proximate_shortcuts_from(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach,
-                                    uint32_t first, uint32_t last, ScanKernel kernel)
+                                    uint32_t first, uint32_t last, ScanKernel kernel, uint32_t end_sample)
 {
     Candidates out;
     // The L2 disc that holds the metric's ball: a vertex must be within this
@@ -574,7 +574,10 @@ Candidates proximate_shortcuts_from(std::span<const GridPoint> pts, const Tolera
     const bool exact_in_doubles =
         l2 && box.max_x - box.min_x < exact_limit && box.max_y - box.min_y < exact_limit && reps2 < int128{1} << 52;
     if (in_int64 && (kernel == ScanKernel::hulls || (kernel == ScanKernel::fastest && hull_scan_pays(pts, reps2)))) {
-        scan_hulls(pts, tol, max_reach, reps2, first, last, out);
+        const std::vector<uint8_t> ends = end_sample > 0 && kernel == ScanKernel::fastest
+                                              ? greedy_fit_vertices(pts, std::sqrt(double(reps2)) / double(end_sample))
+                                              : std::vector<uint8_t>{};
+        scan_hulls(pts, tol, max_reach, reps2, first, last, out, ends);
         return out;
     }
     const bool scalar_int64 =

@@ -119,8 +119,18 @@ Candidates proximate_shortcuts(std::span<const GridPoint> pts, const Tolerance& 
 /// start's scan depends on no other, so the pieces of a long chain can run on
 /// threads of their own, and appended in order (Candidates::append) and
 /// finished they are proximate_shortcuts' result, byte for byte.
+///
+/// With `end_sample` R > 0, a chain the hull scan takes (`fastest`, the
+/// tolerance coarse for its spacing) has its shortcuts start and end only
+/// at the vertices a greedy fit within eps / R keeps (hull_scan.hpp,
+/// greedy_fit_vertices): a subset of its proximate shortcuts that holds the
+/// original edges, so every rule tests them as before and the output keeps
+/// every guarantee, with a few vertices more than the minimum where the
+/// fewest-vertex path would have turned between the fit's vertices
+/// (simplification/README.md, "Ends at a greedy fit's vertices").
 Candidates proximate_shortcuts_from(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach,
-                                    uint32_t first, uint32_t last, ScanKernel kernel = ScanKernel::fastest);
+                                    uint32_t first, uint32_t last, ScanKernel kernel = ScanKernel::fastest,
+                                    uint32_t end_sample = 0);
 
 /// Point constraints (Algorithm 5.2, exact): the ids of the shortcuts whose
 /// region between them and the original subchain holds one of `points`

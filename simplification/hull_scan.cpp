@@ -177,6 +177,17 @@ class HullScan {
 
     HullScanCounts counts() const noexcept { return m_counts; }
 
+    /// Shortcuts from j end only at flagged vertices when m_ends is set
+    /// (m_before[k]: the flagged vertices before k).
+    void restrict_ends(std::span<const uint8_t> ends)
+    {
+        m_ends = ends;
+        m_before.assign(ends.size() + 1, 0);
+        for (size_t k = 0; k < ends.size(); ++k) {
+            m_before[k + 1] = m_before[k] + (ends[k] ? 1U : 0U);
+        }
+    }
+
     void start(uint32_t j, uint32_t last, Candidates& out)
     {
         m_j = j;
@@ -199,11 +210,13 @@ class HullScan {
             bool done = false;
             for (; level >= 1 && !done; --level) {
                 const uint32_t m = pos >> level;
-                const bool proven = m_tree.usable(level, m, m_reps2) && certify(level, m);
-                if (proven || outside(level, m)) {
-                    const uint32_t size = uint32_t{1} << level;
+                const uint32_t size = uint32_t{1} << level;
+                // With ends restricted, a block holding none is only crossed.
+                const bool none = !m_ends.empty() && m_before[pos + size] == m_before[pos];
+                const bool proven = !none && m_tree.usable(level, m, m_reps2) && certify(level, m);
+                if (none || proven || outside(level, m)) {
                     if (proven) {
-                        out.add_run(j, pos, pos + size - 1);
+                        add_ends(j, pos, pos + size - 1, out);
                         m_counts.block_ends += size;
                     } else {
                         m_counts.outside_ends += size;
@@ -217,7 +230,7 @@ class HullScan {
             }
             if (!done) {
                 ++m_counts.single_ends;
-                if (single(pos)) {
+                if ((m_ends.empty() || m_ends[pos]) && single(pos)) {
                     out.add(j, pos);
                 }
                 if (!add(0, pos++)) {
@@ -228,6 +241,25 @@ class HullScan {
     }
 
   private:
+    /// Shortcuts j -> lo, ..., j -> hi, less those to vertices not flagged.
+    void add_ends(uint32_t j, uint32_t lo, uint32_t hi, Candidates& out) const
+    {
+        if (m_ends.empty()) {
+            out.add_run(j, lo, hi);
+            return;
+        }
+        for (uint32_t k = lo; k <= hi; ++k) {
+            if (m_ends[k]) {
+                uint32_t e = k;
+                while (e < hi && m_ends[e + 1]) {
+                    ++e;
+                }
+                out.add_run(j, k, e);
+                k = e;
+            }
+        }
+    }
+
     struct Unit {
         int level = 0;
         uint32_t m = 0;    ///< the block (level >= 1) or the vertex (level 0)
@@ -453,6 +485,8 @@ class HullScan {
     std::vector<Unit> m_units;
     size_t m_prune_at = 16; ///< units let go (those too near) when this many
     HullScanCounts m_counts;
+    std::span<const uint8_t> m_ends;
+    std::vector<uint32_t> m_before;
 };
 
 } // namespace
@@ -474,17 +508,70 @@ bool hull_scan_pays(std::span<const GridPoint> pts, int128 reps2) noexcept
 }
 
 HullScanCounts scan_hulls(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach, int128 reps2,
-                          uint32_t starts_lo, uint32_t starts_hi, Candidates& out)
+                          uint32_t starts_lo, uint32_t starts_hi, Candidates& out, std::span<const uint8_t> ends)
 {
     const auto n = static_cast<uint32_t>(pts.size());
     const auto r2 = static_cast<int64_t>(reps2); // under 2^62: checked by the caller
     const BlockHulls tree(pts, r2);
     HullScan scan(pts, tol, r2, tree);
+    if (!ends.empty()) {
+        scan.restrict_ends(ends);
+    }
     for (uint32_t j = starts_lo; j + 2 < n && j < starts_hi; ++j) {
+        if (!ends.empty() && !ends[j]) {
+            continue;
+        }
         const auto last = static_cast<uint32_t>(max_reach ? std::min<uint64_t>(n - 1, uint64_t{j} + max_reach) : n - 1);
         scan.start(j, last, out);
     }
     return scan.counts();
+}
+
+std::vector<uint8_t> greedy_fit_vertices(std::span<const GridPoint> pts, double d)
+{
+    const size_t n = pts.size();
+    std::vector<uint8_t> keep(n, 0);
+    if (n == 0) {
+        return keep;
+    }
+    keep[0] = keep[n - 1] = 1;
+    constexpr double pi = 3.14159265358979323846;
+    size_t a = 0;
+    while (a + 1 < n) {
+        // Directions as angles relative to the first vertex farther than d
+        // from a; the wedge [lo, hi] holds those within d of every vertex.
+        bool have = false;
+        double base = 0, lo = -pi, hi = pi;
+        size_t k = a + 1;
+        for (; k < n; ++k) {
+            const double qx = double(pts[k].x) - double(pts[a].x), qy = double(pts[k].y) - double(pts[a].y);
+            const double r = std::hypot(qx, qy);
+            if (r <= d) {
+                continue;
+            }
+            double t = std::atan2(qy, qx);
+            if (!have) {
+                have = true;
+                base = t;
+            }
+            t -= base;
+            t = t > pi ? t - 2 * pi : t < -pi ? t + 2 * pi : t;
+            const double w = std::asin(d / r);
+            lo = std::max(lo, t - w);
+            hi = std::min(hi, t + w);
+            if (lo > hi) {
+                break;
+            }
+        }
+        if (k >= n) {
+            break;
+        }
+        // pts[k] emptied the wedge: the fit from a ends at k - 1 (at least
+        // one vertex on, so the fit advances).
+        a = std::max(a + 1, k - 1);
+        keep[a] = 1;
+    }
+    return keep;
 }
 
 } // namespace tigerlod::simplify::detail

@@ -11,6 +11,7 @@
 
 #include <cstdint>
 #include <span>
+#include <vector>
 
 namespace tigerlod::simplify::detail {
 
@@ -35,7 +36,21 @@ struct HullScanCounts {
 /// of the chain must be under 2^31 and `reps2` under 2^62 (squared lengths
 /// in int64); what is computed in doubles is decided with margins far above
 /// its rounding, as in the scalar scan.
+/// With `ends` non-empty (one flag per vertex), only the shortcuts between
+/// two flagged vertices: a start or an end not flagged is crossed (the
+/// wedge narrows by it) without being decided, so a block of ends none of
+/// which is flagged costs one narrowing by its hull. The result is then
+/// exactly the unrestricted one less the shortcuts with an end not flagged.
 HullScanCounts scan_hulls(std::span<const GridPoint> pts, const Tolerance& tol, uint32_t max_reach, int128 reps2,
-                          uint32_t starts_lo, uint32_t starts_hi, Candidates& out);
+                          uint32_t starts_lo, uint32_t starts_hi, Candidates& out, std::span<const uint8_t> ends = {});
+
+/// The vertices a greedy fit of the chain within `d` grid units keeps
+/// (flags, one per vertex), the chain's two ends always: from each kept
+/// vertex a, the fit goes on while some ray from a passes within d of
+/// every vertex since (the wedge of such directions is not empty), and
+/// keeps the last vertex before it empties. O(n). A heuristic set of the
+/// chain alone (a neighbouring partition could compute it too); where
+/// shortcuts end only at its vertices, each shortcut still takes every rule.
+std::vector<uint8_t> greedy_fit_vertices(std::span<const GridPoint> pts, double d);
 
 } // namespace tigerlod::simplify::detail

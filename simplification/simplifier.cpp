@@ -350,7 +350,7 @@ class StoreSimplifier {
         parallel_each(pieces.size(), m_opt.threads, [&](size_t i) {
             const Piece& p = pieces[i];
             found[i] = proximate_shortcuts_from(points_of(m_work[p.work]), m_work[p.work].tol, m_opt.max_reach, p.first,
-                                                p.last);
+                                                p.last, ScanKernel::fastest, m_opt.end_sample);
         });
         for (size_t i = 0; i < pieces.size(); ++i) {
             Work& w = m_work[pieces[i].work];
@@ -387,7 +387,7 @@ class StoreSimplifier {
             reach = std::min<uint64_t>(reach, m_opt.max_reach);
         }
         w.cand = proximate_shortcuts_from(pts, w.tol, static_cast<uint32_t>(std::min<uint64_t>(reach, UINT32_MAX)), 0,
-                                          static_cast<uint32_t>(n));
+                                          static_cast<uint32_t>(n), ScanKernel::fastest, m_opt.end_sample);
         ++m_st.reach_capped_chains;
     }
 

@@ -33,6 +33,10 @@ struct SimplifyOptions {
     std::map<std::string, double> class_scale; ///< eps multiplier by feature class
     bool projection_scale = true;              ///< eps in ground metres through the local projection scale
     uint32_t max_reach = 0;                    ///< cap on a shortcut's reach in vertices (0: none)
+    /// Where the tolerance is coarse for a chain's spacing, shortcuts end
+    /// only at the vertices a greedy fit within eps / end_sample keeps
+    /// (candidates.hpp; 0: at every vertex).
+    uint32_t end_sample = 0;
     /// The most proximate shortcuts a chain may have: a chain of n vertices
     /// with more (a coast of millions of vertices at kilometres) is scanned
     /// again with its reach capped at max(2, this / n), so that it has at

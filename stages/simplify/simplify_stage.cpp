@@ -40,6 +40,7 @@ void SimplifyStage::add_args(ArgSet& args)
     m_common.add(args);
     args.group("Simplification");
     config::add_option(args, "simplify.max_reach", &m_max_reach);
+    config::add_option(args, "simplify.end_sample", &m_end_sample);
     config::add_option(args, "simplify.point_constraints", &m_no_point_constraints);
     config::add_option(args, "simplify.points", &m_points);
     args.add("lazy", &m_lazy, "the default, said explicitly: see --exhaustive");
@@ -57,6 +58,7 @@ void SimplifyStage::initialize()
     m_common.initialize(name);
     auto& o = m_common.options;
     o.max_reach = static_cast<uint32_t>(m_max_reach);
+    o.end_sample = static_cast<uint32_t>(m_end_sample);
     o.point_constraints = !m_no_point_constraints;
     if (m_lazy && m_exhaustive) {
         throw usage_error("simplify: options '--lazy' and '--exhaustive' exclude each other");
@@ -308,6 +310,7 @@ json SimplifyStage::report_json(size_t stores, const std::string& gl, const std:
                          {"projection_scale", o.projection_scale},
                          {"class_scale", o.class_scale},
                          {"max_reach", o.max_reach},
+                         {"end_sample", o.end_sample},
                          {"point_constraints", o.point_constraints},
                          {"user_points", o.user_points.size()},
                          {"shortcut_test", m_test.name},
@@ -379,6 +382,7 @@ json SimplifyStage::manifest_json(const Manifest& ingest, const std::optional<Ma
         lonlat.push_back({p.lon, p.lat});
     }
     options["max_reach"] = o.max_reach;
+    options["end_sample"] = o.end_sample;
     options["point_constraints"] = o.point_constraints;
     options["points"] = {{"file", m_points}, {"sha256", points_sha256}, {"lonlat", std::move(lonlat)}};
     options["shortcut_test"] = m_test.name;

@@ -69,6 +69,7 @@ class SimplifyStage final : public Stage {
     bool m_exhaustive = false;
     bool m_no_point_constraints = false;
     int m_max_reach = 0;
+    int m_end_sample = 256;
     int m_window_pixels = 1024;
 }; // class SimplifyStage
 

@@ -436,7 +436,7 @@ TEST(Candidates, TheHullScanFindsWhatTestingEachShortcutFinds)
 {
     std::mt19937 rng(31);
     detail::HullScanCounts counts;
-    size_t compared = 0;
+    size_t compared = 0, restricted_compared = 0;
     for (int trial = 0; trial < 400; ++trial) {
         Pts pts;
         const int n = trial < 30 ? trial + 1 : 30 + static_cast<int>(rng() % (trial % 10 == 0 ? 1500 : 250));
@@ -493,11 +493,70 @@ TEST(Candidates, TheHullScanFindsWhatTestingEachShortcutFinds)
             ASSERT_EQ(hulls.list(), brute_force_shortcuts(pts, tol, reach)) << "trial " << trial;
         }
         compared += scalar.size();
+        // Ends restricted to a set (random, or a greedy fit's): exactly the
+        // unrestricted shortcuts between two of its vertices.
+        std::vector<uint8_t> ends(pts.size());
+        if (trial % 2 == 0) {
+            ends = detail::greedy_fit_vertices(pts, std::sqrt(double(tol.threshold)) / double(1 + trial % 16));
+        } else {
+            for (auto& e : ends) {
+                e = rng() % 3 == 0 ? 1 : 0;
+            }
+        }
+        Candidates restricted;
+        detail::scan_hulls(pts, tol, reach, tol.threshold, 0, static_cast<uint32_t>(pts.size()), restricted, ends);
+        restricted.finish(static_cast<uint32_t>(pts.size()));
+        std::vector<Shortcut> between;
+        for (const Shortcut& sc : scalar.list()) {
+            if (ends[sc.from] && ends[sc.to]) {
+                between.push_back(sc);
+            }
+        }
+        ASSERT_EQ(restricted.list(), between) << "trial " << trial;
+        restricted_compared += between.size();
     }
     EXPECT_GT(compared, 1000000U);
+    EXPECT_GT(restricted_compared, 10000U);
     EXPECT_GT(counts.block_ends, counts.single_ends);
     EXPECT_GT(counts.outside_ends, 10000U);
     EXPECT_GT(counts.single_ends, 10000U);
+}
+
+// The greedy fit keeps both ends and, between two kept vertices a and b, a
+// ray from a within d of every vertex before b; on a straight line it keeps
+// only the ends, on a zigzag wider than d every vertex.
+TEST(Candidates, TheGreedyFitKeepsTheEndsAndFitsWithinItsDistance)
+{
+    Pts line, zig;
+    for (int i = 0; i < 100; ++i) {
+        line.push_back({i * 10, 0});
+        zig.push_back({i * 10, (i % 2) * 50});
+    }
+    const auto l = detail::greedy_fit_vertices(line, 1.0);
+    EXPECT_EQ(std::count(l.begin(), l.end(), 1), 2);
+    EXPECT_TRUE(l.front() && l.back());
+    const auto z = detail::greedy_fit_vertices(zig, 5.0);
+    EXPECT_EQ(std::count(z.begin(), z.end(), 1), 100);
+    EXPECT_TRUE(detail::greedy_fit_vertices(Pts{}, 1.0).empty());
+    EXPECT_EQ(detail::greedy_fit_vertices(Pts{{3, 4}}, 1.0), std::vector<uint8_t>{1});
+    // A square ring: its four corners and the closing vertex.
+    Pts ring;
+    for (int i = 0; i < 40; ++i) {
+        const int k = i % 10 * 10;
+        ring.push_back(i < 10   ? GridPoint{k, 0}
+                       : i < 20 ? GridPoint{100, k}
+                       : i < 30 ? GridPoint{100 - k, 100}
+                                : GridPoint{0, 100 - k});
+    }
+    ring.push_back(ring.front());
+    const auto r = detail::greedy_fit_vertices(ring, 1.0);
+    std::vector<uint32_t> kept;
+    for (uint32_t i = 0; i < r.size(); ++i) {
+        if (r[i]) {
+            kept.push_back(i);
+        }
+    }
+    EXPECT_EQ(kept, (std::vector<uint32_t>{0, 10, 20, 30, 40}));
 }
 
 // A block whose every vertex is deep in the wedge but lies nearer the start

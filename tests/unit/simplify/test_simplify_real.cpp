@@ -111,14 +111,34 @@ TEST(SimplifyReal, FloydAtFourTolerancesIsExactlyValid)
 #else
     const std::vector<double> ladder = {1.0, 4.0, 16.0, 64.0};
 #endif
-    for (Raster* engine : {&raster, static_cast<Raster*>(nullptr)}) {
-        SCOPED_TRACE(engine ? "eps-Voronoi test" : "exact rules alone");
-        for (const double eps_m : ladder) {
+    // Third, the exact rules with ends at a greedy fit within eps / 2 where
+    // the hull scan takes a chain (simplify.end_sample 2, far sparser than
+    // the default's 256): a subset of the shortcuts, the same guarantees.
+    struct Pass {
+        Raster* engine;
+        uint32_t end_sample;
+    };
+    for (const Pass pass : {Pass{&raster, 0}, Pass{nullptr, 0}, Pass{nullptr, 2}}) {
+        Raster* engine = pass.engine;
+        opt.end_sample = pass.end_sample;
+        SCOPED_TRACE(engine ? "eps-Voronoi test" : pass.end_sample ? "ends at a greedy fit" : "exact rules alone");
+        // The greedy fit's ends bite where the hull scan takes chains: at
+        // the coarse tolerances the store's halo allows.
+        const std::vector<double> coarse = {250.0, 500.0};
+        for (const double eps_m : pass.end_sample ? coarse : ladder) {
             std::map<uint32_t, ChainStore> level_maps; // all partitions of a level together
-            size_t in_vertices = 0, out_vertices = 0, violations = 0;
+            size_t in_vertices = 0, out_vertices = 0, violations = 0, candidates = 0, all_candidates = 0;
             for (const auto& store : stores) {
                 ToleranceStats st;
                 const auto simp = simplify_store(store, eps_m, opt, engine, nullptr, st);
+                candidates += st.candidates;
+                if (pass.end_sample) {
+                    SimplifyOptions every = opt;
+                    every.end_sample = 0;
+                    ToleranceStats all;
+                    simplify_store(store, eps_m, every, nullptr, nullptr, all);
+                    all_candidates += all.candidates;
+                }
                 in_vertices += st.input_vertices;
                 out_vertices += st.output_vertices;
                 violations += eps_violations(store, simp, opt, eps_m);
@@ -155,6 +175,10 @@ TEST(SimplifyReal, FloydAtFourTolerancesIsExactlyValid)
             }
             if (engine) {
                 voronoi_vertices[eps_m] = out_vertices;
+            } else if (pass.end_sample) {
+                EXPECT_LT(candidates, all_candidates) << "eps " << eps_m << ": the fit's ends did not bite";
+                std::printf("eps %g m: %zu vertices, %zu of %zu candidates with ends at a greedy fit within eps / %u\n",
+                            eps_m, out_vertices, candidates, all_candidates, pass.end_sample);
             } else {
                 EXPECT_LE(out_vertices, voronoi_vertices.at(eps_m)) << "eps " << eps_m;
                 std::printf("eps %g m: %zu vertices with the eps-Voronoi test, %zu with the exact rules alone\n", eps_m,
