@@ -529,37 +529,28 @@ HullScanCounts scan_hulls(std::span<const GridPoint> pts, const Tolerance& tol, 
 
 std::vector<uint8_t> greedy_fit_vertices(std::span<const GridPoint> pts, double d)
 {
+    // Only IEEE operations that are correctly rounded (+, -, x, sqrt; no
+    // libm trigonometry, no fused multiply-adds): the same set on every
+    // machine, as the stores must be.
     const size_t n = pts.size();
     std::vector<uint8_t> keep(n, 0);
     if (n == 0) {
         return keep;
     }
     keep[0] = keep[n - 1] = 1;
-    constexpr double pi = 3.14159265358979323846;
+    const double d2 = d * d;
     size_t a = 0;
     while (a + 1 < n) {
-        // Directions as angles relative to the first vertex farther than d
-        // from a; the wedge [lo, hi] holds those within d of every vertex.
-        bool have = false;
-        double base = 0, lo = -pi, hi = pi;
+        // The directions from a that pass within d of every vertex since.
+        Wedge wedge;
         size_t k = a + 1;
         for (; k < n; ++k) {
             const double qx = double(pts[k].x) - double(pts[a].x), qy = double(pts[k].y) - double(pts[a].y);
-            const double r = std::hypot(qx, qy);
-            if (r <= d) {
+            const double r2 = qx * qx + qy * qy;
+            if (r2 <= d2) {
                 continue;
             }
-            double t = std::atan2(qy, qx);
-            if (!have) {
-                have = true;
-                base = t;
-            }
-            t -= base;
-            t = t > pi ? t - 2 * pi : t < -pi ? t + 2 * pi : t;
-            const double w = std::asin(d / r);
-            lo = std::max(lo, t - w);
-            hi = std::min(hi, t + w);
-            if (lo > hi) {
+            if (!wedge.narrow(arc_around(qx, qy, d, std::sqrt(r2 - d2)))) {
                 break;
             }
         }
