@@ -55,8 +55,9 @@ class MinTree {
 
 } // namespace
 
-void fewest_edges_path(const Candidates& cand, std::span<const uint8_t> state, size_t n, bool ring,
-                       std::vector<uint32_t>& path, std::vector<uint32_t>& path_cand, RunReading reading)
+void fewest_edges_path(const Candidates& cand, std::span<uint8_t> state, size_t n, bool ring,
+                       std::vector<uint32_t>& path, std::vector<uint32_t>& path_cand, RunReading reading,
+                       const LazyRule* rule)
 {
     // Layer r holds the fewest edges to n-1 using at least r of them. An
     // open chain needs no layer beyond 0: every path from 0 to n-1 > 0 has
@@ -105,19 +106,58 @@ void fewest_edges_path(const Candidates& cand, std::span<const uint8_t> state, s
     for (uint32_t r = 0; r < best_in.size(); ++r) {
         best_in[r].set(static_cast<uint32_t>(n - 1), f[at(r, n - 1)]);
     }
+    // Pieces of a run still to read (tree): a shortcut the rule refuses
+    // splits its piece in two, the farther read first.
+    std::vector<std::pair<uint32_t, uint32_t>> pieces;
     for (size_t vv = n - 1; vv-- > 0;) {
         const auto v = static_cast<uint32_t>(vv);
         const auto runs = cand.runs_from(v);
+        // Whether shortcut `id` from v to `to` may be taken; the rule decides
+        // one not yet decided (refused here and in later layers alike).
+        auto usable = [&](uint32_t id, uint32_t to) {
+            uint8_t& s = state[id];
+            if (s == 0 && rule) {
+                s = rule->allows(v, to) ? rule->passed : rule->refused;
+            }
+            return s < first_banned_state;
+        };
         for (uint32_t r = 0; r <= R; ++r) {
             const uint32_t rr = r > 0 ? r - 1 : 0;
             uint32_t best = inf, bk = 0, bc = UINT32_MAX;
             // Candidates from v, farthest first; ties keep the farthest.
             auto take = [&](uint32_t lo, uint32_t hi, uint32_t id_lo) {
-                const auto [fk, k] = best_in[rr].min(lo, hi);
-                if (fk + 1 < best) {
-                    best = fk + 1;
-                    bk = k;
-                    bc = id_lo + (k - lo);
+                if (!rule) {
+                    const auto [fk, k] = best_in[rr].min(lo, hi);
+                    if (fk + 1 < best) {
+                        best = fk + 1;
+                        bk = k;
+                        bc = id_lo + (k - lo);
+                    }
+                    return;
+                }
+                pieces.assign(1, {lo, hi});
+                while (!pieces.empty()) {
+                    const auto [l, h] = pieces.back();
+                    pieces.pop_back();
+                    const auto [fk, k] = best_in[rr].min(l, h);
+                    if (fk + 1 >= best) {
+                        continue; // nothing in the piece is better
+                    }
+                    const uint32_t id = id_lo + (k - lo);
+                    if (usable(id, k)) {
+                        best = fk + 1;
+                        bk = k;
+                        bc = id;
+                        continue;
+                    }
+                    // The minimum is the farthest of its value: beyond it all
+                    // are worse, before it as good or worse; both are read.
+                    if (k > l) {
+                        pieces.emplace_back(l, k - 1);
+                    }
+                    if (k < h) {
+                        pieces.emplace_back(k + 1, h);
+                    }
                 }
             };
             for (size_t q = runs.size(); q-- > 0;) {
@@ -125,7 +165,7 @@ void fewest_edges_path(const Candidates& cand, std::span<const uint8_t> state, s
                 const uint32_t id0 = cand.run_id(cand.first_run(v) + q);
                 if (!by_tree) {
                     for (uint32_t k = run.hi + 1; k-- > run.lo;) {
-                        if (f[at(rr, k)] + 1 < best && state[id0 + (k - run.lo)] < first_banned_state) {
+                        if (f[at(rr, k)] + 1 < best && usable(id0 + (k - run.lo), k)) {
                             best = f[at(rr, k)] + 1;
                             bk = k;
                             bc = id0 + (k - run.lo);

@@ -17,6 +17,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <map>
 #include <random>
 #include <stdexcept>
@@ -246,6 +247,85 @@ TEST(FewestEdges, TheTreeFindsThePathOneByOneReadingFinds)
     EXPECT_GT(long_runs, 1000U);
     EXPECT_GT(banned_in_runs, 10000U);
     EXPECT_GT(compared, 3000U);
+}
+
+// A rule asked inside the search (LazyRule) gives the path found when it is
+// asked about every shortcut first, with either reading of the runs: each
+// shortcut asked once, only those still undecided, and fewer than all.
+TEST(FewestEdges, ARuleAskedLazilyFindsThePathOfTheRuleAskedFirst)
+{
+    std::mt19937 rng(31);
+    size_t asked_in_all = 0, undecided_in_all = 0, refused_in_all = 0;
+    for (int trial = 0; trial < 200; ++trial) {
+        Pts pts;
+        const int n = 3 + static_cast<int>(rng() % 300);
+        std::uniform_int_distribution<int> wiggle(-30, 30);
+        for (int k = 0; k < n; ++k) {
+            pts.push_back({100 * k + wiggle(rng), trial % 2 == 0 ? wiggle(rng) : (k % 5) * 40});
+        }
+        const bool ring = trial % 4 == 0;
+        if (ring) {
+            pts.push_back({pts.back().x, pts.back().y + 5000});
+            pts.push_back(pts.front());
+        }
+        const auto cand = proximate_shortcuts(pts, Tolerance(double(40 + trial % 5 * 80), Metric::l2), 0);
+        // The rule: a hash of the ends, refusing about 3 in 4 (as the region rule does at coarse tolerances).
+        const uint32_t salt = static_cast<uint32_t>(rng());
+        auto allows = [salt](uint32_t from, uint32_t to) {
+            uint32_t h = (from * 2654435761U) ^ (to * 40503U) ^ salt;
+            h ^= h >> 13;
+            h *= 0x5bd1e995U;
+            return (h >> 15) % 4 == 0;
+        };
+        std::vector<uint8_t> start(cand.size(), 0);
+        for (auto& st : start) {
+            st = rng() % 10 == 0 ? static_cast<uint8_t>(first_banned_state + 1) : uint8_t{0};
+        }
+        // Asked first: every undecided shortcut gets its answer.
+        std::vector<uint8_t> decided = start;
+        for (size_t r = 0; r < cand.runs().size(); ++r) {
+            const auto& run = cand.runs()[r];
+            for (uint32_t k = run.lo; k <= run.hi; ++k) {
+                uint8_t& st = decided[cand.run_id(r) + (k - run.lo)];
+                if (st == 0) {
+                    st = allows(run.from, k) ? 1 : first_banned_state;
+                    ++undecided_in_all;
+                }
+            }
+        }
+        std::vector<uint32_t> want, want_cand;
+        fewest_edges_path(cand, decided, pts.size(), ring, want, want_cand);
+        for (const RunReading reading : {RunReading::one_by_one, RunReading::tree}) {
+            std::vector<uint8_t> lazy = start;
+            std::map<std::pair<uint32_t, uint32_t>, int> asked;
+            const LazyRule rule{[&](uint32_t from, uint32_t to) {
+                                    ++asked[{from, to}];
+                                    return allows(from, to);
+                                },
+                                1, first_banned_state};
+            std::vector<uint32_t> got, got_cand;
+            fewest_edges_path(cand, lazy, pts.size(), ring, got, got_cand, reading, &rule);
+            ASSERT_EQ(got, want) << "trial " << trial;
+            ASSERT_EQ(got_cand, want_cand) << "trial " << trial;
+            for (const auto& [ends, times] : asked) {
+                ASSERT_EQ(times, 1) << "asked twice: " << ends.first << " -> " << ends.second;
+            }
+            for (size_t id = 0; id < lazy.size(); ++id) {
+                if (start[id] != 0) {
+                    ASSERT_EQ(lazy[id], start[id]) << "a decided shortcut keeps its state";
+                } else if (lazy[id] != 0) {
+                    ASSERT_EQ(lazy[id], decided[id]) << "the answer recorded";
+                    refused_in_all += lazy[id] >= first_banned_state;
+                }
+            }
+            ASSERT_EQ(static_cast<size_t>(std::count_if(lazy.begin(), lazy.end(), [](uint8_t s) { return s != 0; })),
+                      asked.size() + static_cast<size_t>(
+                                         std::count_if(start.begin(), start.end(), [](uint8_t s) { return s != 0; })));
+            asked_in_all += asked.size();
+        }
+    }
+    EXPECT_GT(refused_in_all, 1000U);
+    EXPECT_LT(asked_in_all, undecided_in_all) << "the search asks about fewer shortcuts than there are";
 }
 
 // A long chain's starts are scanned in pieces on threads of their own
